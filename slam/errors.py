@@ -1,0 +1,27 @@
+"""Errors of the ``slam`` package: the ``linefit`` hierarchy plus what only ``slam`` raises."""
+
+from __future__ import annotations
+
+from linefit.errors import ConfigError, DegenerateGeometryError, InputError, LineslamError
+
+__all__ = [
+    "ConfigError",
+    "DatasetError",
+    "DegenerateGeometryError",
+    "EstimationError",
+    "InputError",
+    "LineslamError",
+    "LogFormatError",
+]
+
+
+class LogFormatError(InputError):
+    """A log, trajectory or relations file is malformed; the message names file and line."""
+
+
+class DatasetError(LineslamError):
+    """A registered dataset is unknown, missing, or fails its checksum."""
+
+
+class EstimationError(LineslamError):
+    """An estimator could not produce a result (e.g. an indeterminate system)."""
