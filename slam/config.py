@@ -1,0 +1,58 @@
+"""The configuration of a whole run: one frozen dataclass with one table per component.
+
+``config.toml`` in every results folder is this dataclass dumped to TOML; ``--config FILE``
+loads it back.  Each component owns its own table (``[linefit]``, ``[map]``, ``[slam]``, ...);
+missing tables take their defaults, unknown keys are an error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from linefit.config import LineFitConfig, SensorNoiseConfig
+from linefit.errors import ConfigError
+from linefit.tomlconfig import dump_toml, load_toml
+
+__all__ = ["RunConfig"]
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything a ``lineslam`` command needs to reproduce its results.
+
+    Attributes
+    ----------
+    seed : int
+        Seed of every random choice of the run.
+    linefit : LineFitConfig
+        Per-scan line extraction.
+    """
+
+    seed: int = 0
+    linefit: LineFitConfig = field(default_factory=LineFitConfig)
+
+    def __post_init__(self) -> None:
+        if self.seed < 0:
+            raise ConfigError(f"seed must be >= 0, got {self.seed}")
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> RunConfig:
+        """Load a run configuration written by :meth:`to_toml` (or by hand)."""
+        return load_toml(cls, path)
+
+    def to_toml(self, path: str | Path) -> None:
+        """Write the full configuration (every value, defaults included) to ``path``."""
+        dump_toml(self, path, header="lineslam run configuration; reload with --config")
+
+    def with_sensor_noise(
+        self, sigma_d: float | None = None, sigma_phi: float | None = None
+    ) -> RunConfig:
+        """Return a copy with the sensor noise (``--sigma-d``, ``--sigma-phi``) overridden."""
+        noise = self.linefit.noise
+        noise = SensorNoiseConfig(
+            sigma_range_m=noise.sigma_range_m if sigma_d is None else sigma_d,
+            sigma_bearing_rad=noise.sigma_bearing_rad if sigma_phi is None else sigma_phi,
+            sigma_range_per_m=noise.sigma_range_per_m,
+        )
+        return replace(self, linefit=replace(self.linefit, noise=noise))
