@@ -75,6 +75,9 @@ class AssociationConfig:
         world (pose uncertainty), so that a loop closure after drift can still overlap.
     max_range_m : float
         Landmarks whose extent is farther than this from the laser are not candidates.
+    max_candidates : int
+        At most this many candidates (the nearest) per scan: bounds the size of the joint
+        covariance that is computed.
     jcbb_max_nodes : int
         Node budget of the JCBB search (best hypothesis so far when exhausted).
     cross_covariances : bool
@@ -88,6 +91,7 @@ class AssociationConfig:
     overlap_margin_m: float = 0.5
     overlap_sigma_factor: float = 3.0
     max_range_m: float = 30.0
+    max_candidates: int = 40
     jcbb_max_nodes: int = 2000
     cross_covariances: bool = True
 
@@ -104,6 +108,8 @@ class AssociationConfig:
                 raise ConfigError(f"{name} must be a finite number >= 0, got {v!r}")
         if not self.max_range_m > 0.0:
             raise ConfigError(f"max_range_m must be > 0, got {self.max_range_m!r}")
+        if self.max_candidates < 1:
+            raise ConfigError("max_candidates must be >= 1")
         if self.jcbb_max_nodes < 1:
             raise ConfigError("jcbb_max_nodes must be >= 1")
 
@@ -222,12 +228,18 @@ class AssociationResult:
     complete: bool = True
 
 
+def _origins(anchors: FloatArray | None, n: int) -> FloatArray:
+    return np.zeros((n, 2)) if anchors is None else np.asarray(anchors, dtype=float).reshape(n, 2)
+
+
 def candidate_landmarks(
     pose_world_laser: FloatArray,
     landmarks_r_alpha: FloatArray,
     extents: FloatArray,
     max_range_m: float,
     alive: BoolArray | None = None,
+    anchors: FloatArray | None = None,
+    max_candidates: int | None = None,
 ) -> IntArray:
     """Landmarks whose extent comes within ``max_range_m`` of the laser (vectorised).
 
@@ -236,14 +248,19 @@ def candidate_landmarks(
     pose_world_laser : ndarray, shape (3,)
     landmarks_r_alpha : ndarray, shape (M, 2)
     extents : ndarray, shape (M, 2)
-        ``(s_min, s_max)`` along each landmark's tangent ``(−sin α, cos α)``; NaN: unknown
-        (never a candidate).
+        ``(s_min, s_max)`` along each landmark's tangent ``t = (−sin α, cos α)``, measured from
+        the landmark's origin point (``s = (p − o)·t``); NaN: unknown (never a candidate).
     max_range_m : float
     alive : ndarray of bool, shape (M,), optional
+    anchors : ndarray, shape (M, 2), optional
+        Origin point of each landmark's ``s`` (default: the world origin).
+    max_candidates : int, optional
+        Keep only this many, the nearest.
 
     Returns
     -------
     ndarray of int
+        Sorted indices.
     """
     lm = np.asarray(landmarks_r_alpha, dtype=float)
     ext = np.asarray(extents, dtype=float)
@@ -253,17 +270,23 @@ def candidate_landmarks(
     n = np.stack([np.cos(lm[:, 1]), np.sin(lm[:, 1])], -1)
     t = np.stack([-n[:, 1], n[:, 0]], -1)
     dist_normal = np.abs(n @ p - lm[:, 0])
-    s_p = t @ p
+    s_p = np.sum(t * (p[None, :] - _origins(anchors, lm.shape[0])), axis=1)
     s_clamped = np.clip(s_p, ext[:, 0], ext[:, 1])
     dist = np.hypot(dist_normal, s_p - s_clamped)
     ok = np.isfinite(ext).all(axis=1) & (dist <= max_range_m)
     if alive is not None:
         ok &= np.asarray(alive, dtype=bool)
-    return np.flatnonzero(ok)
+    idx = np.flatnonzero(ok)
+    if max_candidates is not None and idx.shape[0] > max_candidates:
+        idx = np.sort(idx[np.argsort(dist[idx], kind="stable")[:max_candidates]])
+    return idx
 
 
 def segment_gaps(
-    endpoints_world: FloatArray, landmarks_r_alpha: FloatArray, extents: FloatArray
+    endpoints_world: FloatArray,
+    landmarks_r_alpha: FloatArray,
+    extents: FloatArray,
+    anchors: FloatArray | None = None,
 ) -> FloatArray:
     """Gap (m) along each landmark between its extent and each measured segment.
 
@@ -273,7 +296,9 @@ def segment_gaps(
         Measured segments' end points in the world.
     landmarks_r_alpha : ndarray, shape (C, 2)
     extents : ndarray, shape (C, 2)
-        ``(s_min, s_max)`` along each landmark's tangent.
+        ``(s_min, s_max)`` along each landmark's tangent (see :func:`candidate_landmarks`).
+    anchors : ndarray, shape (C, 2), optional
+        Origin of each landmark's ``s`` (default: the world origin).
 
     Returns
     -------
@@ -282,7 +307,9 @@ def segment_gaps(
     """
     a = np.asarray(landmarks_r_alpha, dtype=float)[:, 1]
     t = np.stack([-np.sin(a), np.cos(a)], -1)  # (C, 2)
+    o = _origins(anchors, a.shape[0])
     s = np.einsum("kpd,cd->kcp", np.asarray(endpoints_world, dtype=float), t)  # (K, C, 2)
+    s = s - np.sum(o * t, axis=1)[None, :, None]
     lo, hi = s.min(axis=-1), s.max(axis=-1)
     ext = np.asarray(extents, dtype=float)
     return np.asarray(
@@ -299,6 +326,7 @@ def build_problem(
     landmarks_r_alpha: FloatArray,
     extents: FloatArray,
     config: AssociationConfig,
+    anchors: FloatArray | None = None,
 ) -> AssociationProblem:
     """Innovations, Jacobians and the overlap test for ``K`` lines against ``C`` candidates.
 
@@ -315,7 +343,10 @@ def build_problem(
         Joint covariance of the pose (right tangent space) and the candidates.
     landmarks_r_alpha : ndarray, shape (C, 2)
     extents : ndarray, shape (C, 2)
+        Each candidate's extent along its line (see :func:`candidate_landmarks`).
     config : AssociationConfig
+    anchors : ndarray, shape (C, 2), optional
+        Origin of each candidate's extent coordinate (default: the world origin).
 
     Returns
     -------
@@ -343,7 +374,7 @@ def build_problem(
     pts = np.concatenate([ep, np.zeros((K, 2, 1))], axis=-1)
     ep_world = pose_compose(np.broadcast_to(pose, pts.shape), pts)[..., :2]
     if C:
-        gaps = segment_gaps(ep_world, lm, extents)
+        gaps = segment_gaps(ep_world, lm, extents, anchors)
         var_xy = float(np.max(np.linalg.eigvalsh(P[:2, :2])))
         reach2 = np.max(np.sum(ep**2, axis=-1), axis=-1)  # (K,)
         sigma = np.sqrt(max(var_xy, 0.0) + reach2 * max(P[2, 2], 0.0))

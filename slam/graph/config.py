@@ -272,6 +272,8 @@ class SlamConfig:
     pose_covariances : {"keyframes", "none"}
         Compute the marginal covariance of every keyframe pose for the result (non-keyframe
         scans get their keyframe's covariance compounded with the odometry noise).
+    map_segment_gap_m : float
+        In the output map, observed pieces of a line closer than this are one segment.
     """
 
     backend: Literal["batch", "isam2"] = "isam2"
@@ -287,6 +289,7 @@ class SlamConfig:
     min_line_points: int = 5
     min_line_length_m: float = 0.1
     pose_covariances: Literal["keyframes", "none"] = "keyframes"
+    map_segment_gap_m: float = 0.3
 
     def __post_init__(self) -> None:
         _require(
@@ -304,6 +307,7 @@ class SlamConfig:
             self.pose_covariances in ("keyframes", "none"),
             "pose_covariances must be keyframes or none",
         )
+        _nonneg("map_segment_gap_m", self.map_segment_gap_m)
 
     @property
     def prior_cov(self) -> FloatArray:

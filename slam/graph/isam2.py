@@ -329,9 +329,9 @@ class Isam2Solver:
             runs += 1
             self.read_all(graph)
             moved = float(np.max(np.abs(graph.poses - before), initial=0.0))
-            if int(result.getVariablesRelinearized()) == 0 and not self._theta_changed:
-                if moved < 1e-9 or not self._pending:
-                    break
+            settled = int(result.getVariablesRelinearized()) == 0 and not self._theta_changed
+            if settled and (moved < 1e-9 or not self._pending):
+                break
         self.read_all(graph)
         return runs
 

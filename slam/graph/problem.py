@@ -106,6 +106,7 @@ class LineGraph:
         self._f_cov = GrowableArray((2, 2))
         self._f_sqrt_info = GrowableArray((2, 2))
         self._f_endpoints = GrowableArray((2, 2))
+        self._f_endpoint_var = GrowableArray((2,))
         # odometry factors
         self._o_first = GrowableArray((), dtype=np.intp)
         self._o_second = GrowableArray((), dtype=np.intp)
@@ -204,6 +205,11 @@ class LineGraph:
         return self._f_endpoints.data
 
     @property
+    def factor_endpoint_var(self) -> FloatArray:
+        """Variances (m²) of the measured end points along the line, ``(F, 2)``."""
+        return self._f_endpoint_var.data
+
+    @property
     def odometry_first(self) -> IntArray:
         """First pose of each odometry factor, ``(E,)``."""
         return self._o_first.data
@@ -283,6 +289,7 @@ class LineGraph:
         z: FloatArray,
         cov: FloatArray,
         endpoints_laser: FloatArray,
+        endpoint_var: FloatArray | None = None,
     ) -> IntArray:
         """Add line factors from pose ``pose`` to ``landmarks`` (``(k,)``); return indices.
 
@@ -297,6 +304,8 @@ class LineGraph:
             Their covariances (positive definite, else DegenerateGeometryError).
         endpoints_laser : ndarray, shape (k, 2, 2)
             Measured segments' extreme end points (laser frame).
+        endpoint_var : ndarray, shape (k, 2), optional
+            Their variances along the line (m²); default 0.
         """
         lm = np.asarray(landmarks, dtype=np.intp).reshape(-1)
         k = lm.shape[0]
@@ -314,6 +323,8 @@ class LineGraph:
         self._f_z.append(z_arr)
         self._f_cov.append(c)
         self._f_sqrt_info.append(W)
+        ev = np.zeros((k, 2)) if endpoint_var is None else np.asarray(endpoint_var, dtype=float)
+        self._f_endpoint_var.append(ev.reshape(k, 2))
         return self._f_endpoints.append(np.asarray(endpoints_laser, dtype=float).reshape(k, 2, 2))
 
     def merge_landmarks(self, keep: int, drop: int, value: FloatArray | None = None) -> IntArray:
@@ -362,27 +373,37 @@ class LineGraph:
         pts = np.concatenate([ep, np.zeros((*ep.shape[:-1], 1))], axis=-1)
         return pose_compose(np.broadcast_to(poses[:, None, :], pts.shape), pts)[..., :2]
 
-    def landmark_extents(self) -> FloatArray:
-        """Extent ``(s_min, s_max)`` of each landmark along its current line, ``(M, 2)``.
+    def factor_extents(self, factors: IntArray | None = None) -> FloatArray:
+        """Interval ``(s_min, s_max)`` of each factor's measured segment along its landmark.
 
-        ``s`` is the coordinate (from the world origin's foot point) along the tangent
-        ``(−sin α, cos α)`` of the landmark's current estimate; the extent covers the
-        projections of every measured end point (current pose estimate).  Landmarks without
-        factors get ``(nan, nan)``.
+        ``s = (p − c)·t`` is the coordinate of a world point ``p`` along the tangent
+        ``t = (−sin α, cos α)`` of the landmark's current estimate, measured from its anchor
+        ``c`` (so that small rotations of the landmark barely move it); the end points are
+        moved into the world with the current pose estimate.  Shape ``(F, 2)``.
+        """
+        f = np.arange(self.n_line_factors) if factors is None else np.asarray(factors)
+        pts = self.world_endpoints(f)
+        lm = self.factor_landmark[f]
+        a = self.landmarks[lm, 1]  # φ = α
+        t = np.stack([-np.sin(a), np.cos(a)], -1)
+        s = np.einsum("fkd,fd->fk", pts - self.anchors[lm][:, None, :], t)
+        return np.stack([s.min(axis=1), s.max(axis=1)], axis=-1)
+
+    def landmark_extents(self) -> FloatArray:
+        """Extent ``(s_min, s_max)`` of each landmark (see :meth:`factor_extents`), ``(M, 2)``.
+
+        The union of its factors' intervals; landmarks without factors get ``(nan, nan)``.
         """
         M = self.n_landmarks
         out = np.full((M, 2), np.nan)
         if self.n_line_factors == 0:
             return out
-        pts = self.world_endpoints()
+        s = self.factor_extents()
         lm = self.factor_landmark
-        a = self.landmarks[lm, 1]  # φ = α
-        t = np.stack([-np.sin(a), np.cos(a)], -1)
-        s = np.einsum("fkd,fd->fk", pts, t)
         lo = np.full(M, np.inf)
         hi = np.full(M, -np.inf)
-        np.minimum.at(lo, lm, s.min(axis=1))
-        np.maximum.at(hi, lm, s.max(axis=1))
+        np.minimum.at(lo, lm, s[:, 0])
+        np.maximum.at(hi, lm, s[:, 1])
         seen = np.isfinite(lo)
         out[seen, 0] = lo[seen]
         out[seen, 1] = hi[seen]
