@@ -13,6 +13,7 @@ from pathlib import Path
 from linefit.config import LineFitConfig, SensorNoiseConfig
 from linefit.errors import ConfigError
 from linefit.tomlconfig import dump_toml, load_toml
+from slam.graph.config import SlamConfig
 
 __all__ = ["RunConfig"]
 
@@ -27,10 +28,14 @@ class RunConfig:
         Seed of every random choice of the run.
     linefit : LineFitConfig
         Per-scan line extraction.
+    slam : SlamConfig
+        Factor-graph SLAM (``lineslam slam``): back-end, motion noise, keyframes,
+        association, fusion, solver.
     """
 
     seed: int = 0
     linefit: LineFitConfig = field(default_factory=LineFitConfig)
+    slam: SlamConfig = field(default_factory=SlamConfig)
 
     def __post_init__(self) -> None:
         if self.seed < 0:

@@ -63,7 +63,10 @@ def corridor_loop(length: float = 16.0, width: float = 8.0, half_width: float = 
 
 def straight_corridor(length: float = 30.0, half_width: float = 1.0) -> World:
     """Two long parallel walls: position along the corridor is unobservable from lines."""
-    walls = [[[-5.0, -half_width], [length, -half_width]], [[-5.0, half_width], [length, half_width]]]
+    walls = [
+        [[-5.0, -half_width], [length, -half_width]],
+        [[-5.0, half_width], [length, half_width]],
+    ]
     return World(np.array(walls), np.array([[0.0, 1.0], [0.0, -1.0]]))
 
 
