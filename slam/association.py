@@ -27,6 +27,7 @@ numpy and :mod:`slam.lines` only: no gtsam, so that the EKF can use it unchanged
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -47,6 +48,7 @@ __all__ = [
     "jcbb",
     "landmarks_compatible",
     "nearest_neighbour",
+    "overlap_mask",
     "segment_gaps",
 ]
 
@@ -113,11 +115,21 @@ class AssociationConfig:
             raise ConfigError("jcbb_max_nodes must be >= 1")
 
 
-def _chi2_ppf(probability: float, dof: FloatArray | int) -> Any:
-    """χ² quantile ``2·P⁻¹(dof/2, p)`` (scipy.special: scipy.stats takes 1.5 s to import)."""
-    from scipy.special import gammaincinv
+@functools.lru_cache(maxsize=4096)
+def _chi2_quantile(probability: float, dof: int) -> float:
+    if dof == 2:
+        return float(-2.0 * math.log1p(-probability))  # closed form for 2 dof
+    from scipy.special import gammaincinv  # scipy.stats would take 1.5 s to import
 
-    return 2.0 * gammaincinv(np.asarray(dof, dtype=float) / 2.0, probability)
+    return float(2.0 * gammaincinv(dof / 2.0, probability))
+
+
+def _chi2_ppf(probability: float, dof: FloatArray | int) -> Any:
+    """χ² quantile(s) for integer degrees of freedom (cached)."""
+    d = np.asarray(dof)
+    if d.ndim == 0:
+        return _chi2_quantile(float(probability), int(d))
+    return np.array([_chi2_quantile(float(probability), int(k)) for k in d])
 
 
 def _mahalanobis2_2x2(nu: FloatArray, S: FloatArray) -> FloatArray:
@@ -375,22 +387,48 @@ def build_problem(
     H_l = np.array(np.broadcast_to(H_l, (K, C, 2, 2)))
     H_x[..., 0, :] *= sign[..., None]
     H_l[..., 0, :] *= sign[..., None]
-    # overlap along the landmark, margin widened by the end points' world uncertainty
-    ep = np.asarray(endpoints_laser, dtype=float).reshape(K, 2, 2)
-    pts = np.concatenate([ep, np.zeros((K, 2, 1))], axis=-1)
-    ep_world = pose_compose(np.broadcast_to(pose, pts.shape), pts)[..., :2]
-    if C:
-        gaps = segment_gaps(ep_world, lm, extents, anchors)
-        var_xy = float(np.max(np.linalg.eigvalsh(P[:2, :2])))
-        reach2 = np.max(np.sum(ep**2, axis=-1), axis=-1)  # (K,)
-        sigma = np.sqrt(max(var_xy, 0.0) + reach2 * max(P[2, 2], 0.0))
-        margin = config.overlap_margin_m + config.overlap_sigma_factor * sigma
-        allowed = gaps <= margin[:, None]
-    else:
-        allowed = np.zeros((K, 0), dtype=bool)
+    allowed = overlap_mask(endpoints_laser, pose, P[:3, :3], lm, extents, config, anchors)
     return AssociationProblem(
         nu=-res, H_x=H_x, H_l=H_l, R=np.asarray(R, dtype=float), P=P, allowed=allowed
     )
+
+
+def overlap_mask(
+    endpoints_laser: FloatArray,
+    pose_world_laser: FloatArray,
+    P_pose: FloatArray,
+    landmarks_r_alpha: FloatArray,
+    extents: FloatArray,
+    config: AssociationConfig,
+    anchors: FloatArray | None = None,
+) -> BoolArray:
+    """Pairs whose measured segment comes within the margin of the landmark's extent.
+
+    The margin is ``overlap_margin_m`` plus ``overlap_sigma_factor`` standard deviations of the
+    segment's end points in the world (from the pose covariance ``P_pose``, right tangent
+    space: ``√(λ_max(P_xy) + d²·P_θθ)`` with ``d`` the end point's distance from the laser).
+    Needs only the pose covariance, so it can thin the candidates before their joint
+    covariance is computed.
+
+    Returns
+    -------
+    ndarray of bool, shape (K, C)
+    """
+    ep = np.asarray(endpoints_laser, dtype=float).reshape(-1, 2, 2)
+    K = ep.shape[0]
+    lm = np.asarray(landmarks_r_alpha, dtype=float).reshape(-1, 2)
+    if K == 0 or lm.shape[0] == 0:
+        return np.zeros((K, lm.shape[0]), dtype=bool)
+    pose = np.asarray(pose_world_laser, dtype=float).reshape(3)
+    Pp = np.asarray(P_pose, dtype=float)
+    pts = np.concatenate([ep, np.zeros((K, 2, 1))], axis=-1)
+    ep_world = pose_compose(np.broadcast_to(pose, pts.shape), pts)[..., :2]
+    gaps = segment_gaps(ep_world, lm, extents, anchors)
+    var_xy = float(np.max(np.linalg.eigvalsh(0.5 * (Pp[:2, :2] + Pp[:2, :2].T))))
+    reach2 = np.max(np.sum(ep**2, axis=-1), axis=-1)  # (K,)
+    sigma = np.sqrt(max(var_xy, 0.0) + reach2 * max(Pp[2, 2], 0.0))
+    margin = config.overlap_margin_m + config.overlap_sigma_factor * sigma
+    return np.asarray(gaps <= margin[:, None])
 
 
 def _block_diagonal(P: FloatArray, C: int) -> FloatArray:
@@ -402,8 +440,12 @@ def _block_diagonal(P: FloatArray, C: int) -> FloatArray:
     return out
 
 
-def nearest_neighbour(problem: AssociationProblem, gate_probability: float) -> IntArray:
+def nearest_neighbour(
+    problem: AssociationProblem, gate_probability: float, d2: FloatArray | None = None
+) -> IntArray:
     """Greedy nearest neighbour in order of ``D²``; each landmark used at most once.
+
+    ``d2`` may pass :meth:`AssociationProblem.individual_d2` when already computed.
 
     Returns
     -------
@@ -415,7 +457,7 @@ def nearest_neighbour(problem: AssociationProblem, gate_probability: float) -> I
     if K == 0 or problem.n_candidates == 0:
         return out
     gate = float(_chi2_ppf(gate_probability, 2))
-    d2 = problem.individual_d2()
+    d2 = problem.individual_d2() if d2 is None else d2
     ks, cs = np.nonzero(d2 <= gate)
     used: set[int] = set()
     for i in np.argsort(d2[ks, cs], kind="stable"):
@@ -431,6 +473,7 @@ def jcbb(
     gate_probability: float,
     joint_probability: float,
     max_nodes: int = 2000,
+    d2: FloatArray | None = None,
 ) -> tuple[IntArray, bool]:
     """Joint compatibility branch and bound (Neira & Tardós 2001).
 
@@ -451,7 +494,7 @@ def jcbb(
     if K == 0 or problem.n_candidates == 0:
         return best, True
     gate = float(_chi2_ppf(gate_probability, 2))
-    d2 = problem.individual_d2()
+    d2 = problem.individual_d2() if d2 is None else d2
     cand = [
         [int(c) for c in np.argsort(d2[k], kind="stable") if d2[k, c] <= gate] for k in range(K)
     ]
@@ -503,9 +546,10 @@ def associate(problem: AssociationProblem, config: AssociationConfig) -> Associa
     gate = float(_chi2_ppf(config.gate_probability, 2))
     n_compat = np.sum(d2 <= gate, axis=1).astype(np.intp)
     if config.method == "nn":
-        return AssociationResult(nearest_neighbour(problem, config.gate_probability), d2, n_compat)
+        nn = nearest_neighbour(problem, config.gate_probability, d2)
+        return AssociationResult(nn, d2, n_compat)
     assignment, complete = jcbb(
-        problem, config.gate_probability, config.joint_probability, config.jcbb_max_nodes
+        problem, config.gate_probability, config.joint_probability, config.jcbb_max_nodes, d2
     )
     return AssociationResult(assignment, d2, n_compat, complete)
 

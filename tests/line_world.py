@@ -53,12 +53,38 @@ def box(x0: float, y0: float, x1: float, y1: float, inward: bool) -> tuple[list,
     return walls, normals
 
 
-def corridor_loop(length: float = 16.0, width: float = 8.0, half_width: float = 1.0) -> World:
+def split_walls(walls: list, normals: list, piece: float, door: float) -> tuple[list, list]:
+    """Cut walls into pieces of about ``piece`` metres separated by ``door``-wide gaps."""
+    out_w, out_n = [], []
+    for (p, q), n in zip(walls, normals, strict=True):
+        p, q = np.asarray(p, float), np.asarray(q, float)
+        length = np.linalg.norm(q - p)
+        k = max(1, int(round((length + door) / (piece + door))))
+        seg = (length - (k - 1) * door) / k
+        d = (q - p) / length
+        for j in range(k):
+            a = p + d * j * (seg + door)
+            out_w.append([a, a + d * seg])
+            out_n.append(n)
+    return out_w, out_n
+
+
+def corridor_loop(
+    length: float = 16.0,
+    width: float = 8.0,
+    half_width: float = 1.0,
+    piece: float | None = None,
+    door: float = 1.0,
+) -> World:
     """A rectangular corridor loop around a block; the centre line is the rectangle
-    ``[0, length] × [0, width]``."""
+    ``[0, length] × [0, width]``.  With ``piece``, walls are cut into pieces with doors between
+    them, so that landmarks are local and returning to the start is a real loop closure."""
     w1, n1 = box(-half_width, -half_width, length + half_width, width + half_width, True)
     w2, n2 = box(half_width, half_width, length - half_width, width - half_width, False)
-    return World(np.array(w1 + w2, dtype=float), np.array(n1 + n2, dtype=float))
+    walls, normals = w1 + w2, n1 + n2
+    if piece is not None:
+        walls, normals = split_walls(walls, normals, piece, door)
+    return World(np.array(walls, dtype=float), np.array(normals, dtype=float))
 
 
 def straight_corridor(length: float = 30.0, half_width: float = 1.0) -> World:

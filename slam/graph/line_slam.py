@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 
 from linefit.config import LineFitConfig
 from linefit.line import Line
-from slam.association import associate, build_problem, candidate_landmarks
+from slam.association import associate, build_problem, candidate_landmarks, overlap_mask
 from slam.errors import InputError
 from slam.geometry import line_to_parent, pose_between, pose_compose, pose_inverse
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
@@ -312,6 +312,19 @@ class LineSlam:
                 anchors=g.anchors,
                 max_candidates=cfg.association.max_candidates,
             )
+            if cand.size:
+                # thin the candidates by segment overlap (needs only the pose covariance)
+                P_pose = self._predicted_covariance(prev, cand[:0], delta, Q)
+                near = overlap_mask(
+                    ep,
+                    x_pred,
+                    P_pose,
+                    la[cand],
+                    self._extents[cand],
+                    cfg.association,
+                    g.anchors[cand],
+                ).any(axis=0)
+                cand = cand[near]
             if cand.size:
                 P = self._predicted_covariance(prev, cand, delta, Q)
                 problem = build_problem(
