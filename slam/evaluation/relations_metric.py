@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import EvaluationError
+from slam.evaluation.timestamps import match_timestamps
 from slam.geometry import pose_between
 from slam.io.relations import Relations
 from slam.io.trajectory import Trajectory
@@ -117,28 +118,6 @@ class RelationsMetric:
             f"Abs rotational error {self.abs_rot_deg} deg\n"
             f"Sqr rotational error {self.sqr_rot_deg2} deg^2\n"
         )
-
-
-def match_timestamps(
-    query: FloatArray, timestamps: FloatArray, tolerance_s: float
-) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """Index of the trajectory time stamp nearest to each query, and whether it is within tolerance.
-
-    Works for time stamps in any order (Intel's go backwards); no interpolation.
-    """
-    t = np.asarray(timestamps, dtype=np.float64)
-    q = np.asarray(query, dtype=np.float64)
-    if t.size == 0:
-        return np.zeros(q.shape, np.int64), np.zeros(q.shape, bool)
-    order = np.argsort(t, kind="stable")
-    sorted_t = t[order]
-    pos = np.searchsorted(sorted_t, q)
-    lo = np.clip(pos - 1, 0, t.size - 1)
-    hi = np.clip(pos, 0, t.size - 1)
-    pick_hi = np.abs(sorted_t[hi] - q) < np.abs(sorted_t[lo] - q)
-    nearest = np.where(pick_hi, hi, lo)
-    found = np.abs(sorted_t[nearest] - q) <= tolerance_s
-    return order[nearest].astype(np.int64), found
 
 
 def _rot_z(angle: FloatArray) -> FloatArray:
