@@ -235,14 +235,15 @@ def _check_tail(tokens: list[str], start: int, kind: str, n_fields_min: int) -> 
 
 
 def _check_ranges(ranges: FloatArray, kind: str) -> None:
-    ok = ranges >= 0.0  # False for NaN and negatives; +inf (no return) passes
-    if not ok.all():
-        i = int(np.flatnonzero(~ok)[0])
+    # min() is NaN if any reading is NaN, and NaN >= 0 is False; +inf (no return) passes
+    if ranges.size and not ranges.min() >= 0.0:
+        i = int(np.flatnonzero(~(ranges >= 0.0))[0])
         raise _LineError(f"{kind}: range reading {i} is {ranges[i]!r} (must be >= 0 m, not NaN)")
 
 
 def _check_finite(values: FloatArray, kind: str, what: str) -> None:
-    if not np.isfinite(values).all():
+    total = float(np.add.reduce(values))  # NaN or ±inf if any value is (or on overflow)
+    if not math.isfinite(total) and not np.isfinite(values).all():
         raise _LineError(f"{kind}: {what} must be finite, got {values.tolist()}")
 
 
@@ -332,9 +333,15 @@ def _parse_odom(tokens: list[str]) -> tuple[FloatArray, float, float, float]:
     if len(tokens) < 8:
         raise _LineError(f"ODOM needs at least 8 fields, found {len(tokens)} (truncated line?)")
     _check_tail(tokens, 8, "ODOM", 8)
-    values = _floats(tokens[1:8], "ODOM")
-    _check_finite(values, "ODOM", "x y theta tv rv accel ipc_timestamp")
-    return values[0:3], float(values[3]), float(values[4]), float(values[6])
+    try:
+        x, y, theta, tv, rv, accel, stamp = map(float, tokens[1:8])
+    except ValueError:
+        raise _LineError(_bad_token(tokens[1:8], "ODOM")) from None
+    if not math.isfinite(x + y + theta + tv + rv + accel + stamp):
+        values = [x, y, theta, tv, rv, accel, stamp]
+        if not all(map(math.isfinite, values)):
+            raise _LineError(f"ODOM: x y theta tv rv accel ipc_timestamp must be finite: {values}")
+    return np.array([x, y, theta]), tv, rv, stamp
 
 
 def _sniff_laser_type(path: str | Path) -> str | None:
