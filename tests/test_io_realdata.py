@@ -54,9 +54,6 @@ BASELINE = {
 
 @pytest.fixture(scope="module", params=sorted(FACTS))
 def log_pass(request, shared_data):
-    import os
-
-    os.environ.setdefault("LINESLAM_DATA", str(shared_data))
     log = resolve_log(request.param, root=shared_data)
     stats = CarmenStats()
     stamps, poses, beams, max_ranges = [], [], set(), set()
