@@ -258,3 +258,13 @@ def test_fuzzed_lines_give_a_clear_error_or_a_counted_skip(tmp_path, mutation):
     stats = CarmenStats()
     lenient = list(iter_scans(path, lenient=True, stats=stats))
     assert len(lenient) + stats.malformed + stats.unknown + stats.other_laser == 2
+
+
+def test_bad_arguments_are_config_errors(tmp_path):
+    from slam.errors import ConfigError
+
+    path = write(tmp_path, [GOOD])
+    with pytest.raises(ConfigError, match="laser must be"):
+        list(iter_scans(path, laser="SONAR"))
+    with pytest.raises(ConfigError, match="frame must be"):
+        scan_trajectory(path, frame="world")

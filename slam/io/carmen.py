@@ -69,7 +69,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.errors import LogFormatError
+from slam.errors import ConfigError, LogFormatError
 from slam.io._text import iter_text_lines
 from slam.io.laser import DEFAULT_MAX_RANGE_M, LaserGeometry, beam_bearings, guess_laser_geometry
 from slam.io.trajectory import Trajectory
@@ -396,7 +396,9 @@ class CarmenReader:
         laser: str = "auto",
     ) -> None:
         if laser != "auto" and laser not in LASER_MESSAGES:
-            raise LogFormatError(f"unknown laser message type {laser!r}", str(path))
+            raise ConfigError(
+                f"laser must be 'auto' or one of {', '.join(LASER_MESSAGES)}, got {laser!r}"
+            )
         self.path = Path(path)
         self.lenient = lenient
         self._geometry = geometry
@@ -552,7 +554,7 @@ def scan_trajectory(path: str | Path, *, frame: str = "base", lenient: bool = Fa
     trajectory that the datasets README evaluates against the relations.
     """
     if frame not in ("base", "laser"):
-        raise LogFormatError(f"frame must be 'base' or 'laser', got {frame!r}", str(path))
+        raise ConfigError(f"frame must be 'base' or 'laser', got {frame!r}")
     stamps: list[float] = []
     poses: list[FloatArray] = []
     for scan in iter_scans(path, lenient=lenient):
