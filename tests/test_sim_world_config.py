@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from linefit.errors import ConfigError
 from slam.errors import InputError
@@ -233,3 +236,47 @@ def test_bad_config_files_are_rejected(tmp_path):
     with pytest.raises(ConfigError, match="integer"):
         SimConfig.from_toml(path)
     assert replace(SimConfig(), seed=3).seed == 3
+
+
+# ---------------------------------------------------------------------------------------------
+# Fuzz: any text or bytes as world.json gives an InputError or a valid world, nothing else
+# ---------------------------------------------------------------------------------------------
+
+_json_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
+    lambda children: (
+        st.lists(children, max_size=4) | st.dictionaries(st.text(max_size=8), children, max_size=4)
+    ),
+    max_leaves=20,
+)
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    data=st.one_of(
+        st.binary(max_size=200),
+        st.text(max_size=200).map(str.encode),
+        _json_values.map(lambda v: json.dumps({"segments": v}).encode()),
+        st.lists(
+            st.fixed_dictionaries(
+                {
+                    "id": st.integers(-2, 3),
+                    "p1": st.lists(st.floats(), max_size=3),
+                    "p2": st.just([1, 1]),
+                }
+            ),
+            max_size=3,
+        ).map(lambda v: json.dumps({"segments": v}).encode()),
+    )
+)
+def test_fuzzed_world_files_give_input_errors(tmp_path, data):
+    path = tmp_path / "fuzz.json"
+    path.write_bytes(data)
+    try:
+        world = read_world(path)
+    except InputError as exc:
+        assert str(path) in str(exc)
+    else:
+        assert len(world) >= 1 and np.isfinite(world.segments).all()

@@ -68,7 +68,7 @@ class World:
     description: str = ""
 
     def __post_init__(self) -> None:
-        seg = np.asarray(self.segments, dtype=np.float64)
+        seg = np.array(self.segments, dtype=np.float64)  # a private, read-only copy
         if seg.ndim != 3 or seg.shape[1:] != (2, 2):
             raise InputError(f"world segments must have shape (n, 2, 2), got {seg.shape}")
         n = seg.shape[0]
@@ -80,7 +80,7 @@ class World:
         if (lengths <= 1e-9).any():
             k = int(np.flatnonzero(lengths <= 1e-9)[0])
             raise InputError(f"world segment {k} has zero length")
-        ids = np.asarray(self.ids)
+        ids = np.array(self.ids)
         if ids.shape != (n,) or not np.issubdtype(ids.dtype, np.integer):
             raise InputError(f"world ids must be {n} integers, got shape {ids.shape}")
         ids = ids.astype(np.int64)
@@ -92,7 +92,7 @@ class World:
             raise InputError(f"world needs {n} labels, got {len(self.labels)}")
         wp = self.waypoints
         if wp is not None:
-            wp = np.asarray(wp, dtype=np.float64)
+            wp = np.array(wp, dtype=np.float64)
             if wp.ndim != 2 or wp.shape[1] != 2 or wp.shape[0] < 2:
                 raise InputError(f"waypoints must have shape (k >= 2, 2), got {wp.shape}")
             if not np.isfinite(wp).all():
