@@ -13,7 +13,7 @@ integer id (reported per beam by the ray caster) and a label (``"wall"``, ``"doo
 
 ``waypoints`` may be missing (then a trajectory must be given another way).  Reading checks
 everything and raises :class:`~slam.errors.InputError` naming the file: not JSON, missing keys,
-non-finite or zero-length segments, duplicate ids.
+non-finite or zero-length segments, coordinates beyond ±1e6 m, duplicate ids.
 """
 
 from __future__ import annotations
@@ -38,6 +38,8 @@ IntArray = NDArray[np.int64]
 
 WORLD_FORMAT = "lineslam-world"
 WORLD_VERSION = 1
+#: Largest coordinate magnitude accepted (m).
+MAX_COORDINATE_M = 1e6
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +78,8 @@ class World:
             raise InputError("a world needs at least one segment")
         if not np.isfinite(seg).all():
             raise InputError("world segments contain NaN or infinite coordinates")
+        if np.abs(seg).max() > MAX_COORDINATE_M:
+            raise InputError(f"world coordinates beyond ±{MAX_COORDINATE_M:g} m")
         lengths = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)
         if (lengths <= 1e-9).any():
             k = int(np.flatnonzero(lengths <= 1e-9)[0])
@@ -95,8 +99,8 @@ class World:
             wp = np.array(wp, dtype=np.float64)
             if wp.ndim != 2 or wp.shape[1] != 2 or wp.shape[0] < 2:
                 raise InputError(f"waypoints must have shape (k >= 2, 2), got {wp.shape}")
-            if not np.isfinite(wp).all():
-                raise InputError("waypoints contain NaN or infinite coordinates")
+            if not np.isfinite(wp).all() or np.abs(wp).max() > MAX_COORDINATE_M:
+                raise InputError(f"waypoints must be finite and within ±{MAX_COORDINATE_M:g} m")
             wp.flags.writeable = False
         seg.flags.writeable = False
         ids.flags.writeable = False
