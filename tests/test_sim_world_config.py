@@ -21,6 +21,7 @@ from slam.sim import (
     RelationsConfig,
     SimConfig,
     TrajectoryConfig,
+    cast_scan,
     get_world,
     load_world,
     read_world,
@@ -75,7 +76,10 @@ def test_default_paths_are_drivable(name):
     assert np.abs(np.asarray(wrap_angle(direction - p[:-1, 2])))[straight].max() < 1e-9
     np.testing.assert_allclose(p[0, :2], world.waypoints[0], atol=1e-12)
     # Every beam of a scan from the path hits something (closed worlds, no max-range readings).
-    assert len(world) > 50
+    bearings = LaserConfig().bearings_rad()
+    for pose in p[::10]:
+        _, ids = cast_scan(pose, bearings, world, 80.0)
+        assert (ids >= 0).all()
 
 
 def test_corners_turn_on_the_spot_when_there_is_no_room_and_reversals_are_rejected():
