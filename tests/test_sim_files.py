@@ -170,3 +170,17 @@ def test_demo_dataset_is_committed_small_and_regenerates_identically(tmp_path):
         read_tum(DEMO / "odometry.tum"), read_relations(DEMO / "relations.txt")
     )
     assert 0.1 < odometry.abs_trans_m.mean < 1.0
+
+
+def test_config_names_the_world_that_was_simulated(tmp_path):
+    # A world passed in that is not the config's world: config.toml points at world.json.
+    log = simulate(get_world("lab"), None, SimConfig(world="loop"), seed=1)
+    paths = write_simulation(log, tmp_path / "a", beam_hits=False)
+    config = SimConfig.from_toml(paths["config"])
+    assert config.world == str(paths["world"])
+    main(["simulate", "--config", str(paths["config"]), "--out", str(tmp_path / "b"), "--quiet"])
+    assert filecmp.cmp(paths["log"], tmp_path / "b" / "log.clf", shallow=False)
+    # The config's own world: its name is kept.
+    log = simulate(get_world("lab"), None, SimConfig(world="lab"), seed=1)
+    paths = write_simulation(log, tmp_path / "c", beam_hits=False)
+    assert SimConfig.from_toml(paths["config"]).world == "lab"

@@ -8,20 +8,25 @@ Files (``INTERFACES.md``)::
     world.json         the world's segments (with ids) and waypoints
     beam_hits.npy      int32 (n_scans, n_beams): id of the segment each beam hit, -1 = no return
     odometry.tum       the odometry's laser poses (the odometry-only baseline), same stamps
-    config.toml        the SimConfig used (reload with --config)
+    config.toml        the SimConfig used (reload with --config); its ``world`` is the world's
+                       name, or the path of the world.json written here when the simulated world
+                       is not the one ``config.world`` names
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from slam.errors import InputError
 from slam.io.carmen_write import CarmenWriteStats, write_carmen
 from slam.io.relations import relations_from_trajectory, write_relations
 from slam.io.tum import write_tum
 from slam.sim.simulate import SimulatedLog
-from slam.sim.world import write_world
+from slam.sim.world import World, write_world
+from slam.sim.worlds import load_world
 
 __all__ = ["SIM_FILES", "write_simulation"]
 
@@ -88,5 +93,18 @@ def write_simulation(
     write_world(log.world, paths["world"])
     if beam_hits:
         np.save(paths["beam_hits"], log.hit_ids.astype(np.int32))
-    config.to_toml(paths["config"])
+    world_ref = _world_reference(config.world, log.world, paths["world"])
+    replace(config, world=world_ref).to_toml(paths["config"])
     return paths
+
+
+def _world_reference(name_or_path: str, world: World, written: Path) -> str:
+    """``name_or_path`` if it loads ``world`` itself, else the ``world.json`` just written."""
+    try:
+        named = load_world(name_or_path)
+    except InputError:
+        return str(written)
+    same = named.segments.shape == world.segments.shape and (
+        np.array_equal(named.segments, world.segments) and np.array_equal(named.ids, world.ids)
+    )
+    return name_or_path if same else str(written)
