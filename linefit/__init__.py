@@ -8,7 +8,7 @@ matplotlib or CLI code).
 
 from linefit.config import LineFitConfig, SensorNoiseConfig
 from linefit.errors import ConfigError, DegenerateGeometryError, InputError, LineslamError
-from linefit.extract import extract_lines, fit_line, fit_scan_line
+from linefit.extract import extract_lines, extract_lines_batch, fit_line, fit_scan_line
 from linefit.line import Line, normal_form, wrap_angle
 from linefit.noise import point_covariances
 
@@ -21,6 +21,7 @@ __all__ = [
     "LineslamError",
     "SensorNoiseConfig",
     "extract_lines",
+    "extract_lines_batch",
     "fit_line",
     "fit_scan_line",
     "normal_form",

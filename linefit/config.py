@@ -117,13 +117,19 @@ class LineFitConfig:
     breakpoint_sigma : float
         Multiple of σ_d added to the breakpoint distance.
     hough_angle_step_rad, hough_range_step_m : float
-        Hough accumulator resolution Δβ (rad) and Δℛ (m); defaults 1° and 5 cm.
+        Hough accumulator resolution Δβ (rad) and Δℛ (m); defaults 2° and 10 cm (coarse on
+        purpose: each peak is refined by a total-least-squares line, see :mod:`linefit.hough`).
     hough_min_votes : int
         Smallest Hough peak that starts a line.
     hough_gather_m : float
         Points within this distance (m) of a peak's line, then of its refined line, join it.
     hough_max_peaks : int
         Cap on Hough peaks examined per scan.
+    hough_recover : bool
+        After the Hough lines are fitted, group the points that no line kept by
+        split-and-merge and fit those pieces together with the lines (a coarse Hough peak can
+        absorb, and then lose, the points of a small face that happens to be collinear with
+        other points).  False: the pure Sec. IV grouping.
     split_threshold_m : float
         Split-and-merge: a point farther than ``max(split_threshold_m,
         split_threshold_sigma · σ_d)`` from a piece's chord splits it (m).
@@ -146,16 +152,17 @@ class LineFitConfig:
     min_length_m: float = 0.1
     max_range_m: float | None = None
     outlier_chi2: float = 10.83
-    max_refits: int = 5
+    max_refits: int = 3
     min_segment_points: int = 3
     max_missing_beams: int = 2
     breakpoint_lambda_rad: float = math.radians(10.0)
     breakpoint_sigma: float = 3.0
-    hough_angle_step_rad: float = math.radians(1.0)
-    hough_range_step_m: float = 0.05
+    hough_angle_step_rad: float = math.radians(2.0)
+    hough_range_step_m: float = 0.1
     hough_min_votes: int = 5
     hough_gather_m: float = 0.05
     hough_max_peaks: int = 60
+    hough_recover: bool = True
     split_threshold_m: float = 0.03
     split_threshold_sigma: float = 4.0
     merge_collinear: bool = True
@@ -176,6 +183,7 @@ class LineFitConfig:
         )
         _require(isinstance(self.weighted, bool), "weighted must be true or false")
         _require(isinstance(self.merge_collinear, bool), "merge_collinear must be true or false")
+        _require(isinstance(self.hough_recover, bool), "hough_recover must be true or false")
         for name, low in (
             ("min_points", 2),
             ("max_iterations", 1),

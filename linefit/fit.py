@@ -122,32 +122,6 @@ class GroupFit:
     weighted: bool
 
 
-def _frame(
-    pts: PointSet, pidx: IntArray, gidx: IntArray, alpha: FloatArray
-) -> tuple[FloatArray, ...]:
-    """u_R, u_S, P_R, P_S, P_RS of every membership for the lines' current angles."""
-    ca_g = np.cos(alpha)
-    sa_g = np.sin(alpha)
-    ca = ca_g[gidx]
-    sa = sa_g[gidx]
-    x = pts.x[pidx]
-    y = pts.y[pidx]
-    q11 = pts.q11[pidx]
-    q12 = pts.q12[pidx]
-    q22 = pts.q22[pidx]
-    u_r = x * ca + y * sa
-    u_s = y * ca - x * sa
-    cc = ca * ca
-    ss = sa * sa
-    sc = sa * ca
-    a = q11 * cc + q22 * ss
-    b = 2.0 * q12 * sc
-    p_r = np.maximum(a + b, VARIANCE_FLOOR_M2)
-    p_s = np.maximum(q11 + q22 - a - b, VARIANCE_FLOOR_M2)
-    p_rs = (q22 - q11) * sc + q12 * (cc - ss)
-    return u_r, u_s, p_r, p_s, p_rs
-
-
 def nearest_representative(alpha: FloatArray, reference: FloatArray) -> FloatArray:
     """``alpha`` or ``alpha + π`` (the same infinite line), whichever is nearer ``reference``.
 
@@ -156,13 +130,6 @@ def nearest_representative(alpha: FloatArray, reference: FloatArray) -> FloatArr
     diff = np.asarray(wrap_angle(np.asarray(alpha) - np.asarray(reference)), dtype=float)
     diff = np.where(np.abs(diff) > 0.5 * np.pi, np.asarray(wrap_angle(diff + np.pi)), diff)
     return np.asarray(reference, dtype=float) + diff
-
-
-def _weighted_means(
-    gidx: IntArray, n_groups: int, weights: FloatArray, values: FloatArray
-) -> FloatArray:
-    total = np.bincount(gidx, weights=weights, minlength=n_groups)
-    return np.bincount(gidx, weights=weights * values, minlength=n_groups) / total
 
 
 def tls_groups(
@@ -228,7 +195,7 @@ def fit_groups(
     weighted: bool = True,
     max_iterations: int = 20,
     tolerance_rad: float = 1e-10,
-    alpha_step: str = "prop2",
+    alpha_step: str = "gauss_newton",
 ) -> GroupFit:
     """Fit ``G`` lines at once (Props. 1-2 when weighted, total least squares otherwise).
 
@@ -237,8 +204,8 @@ def fit_groups(
     pts
         The points of the scan.
     pidx, gidx
-        Memberships (shape ``(m,)``): point index and group id in ``0..G-1``.  Every group
-        needs at least two memberships.
+        Memberships (shape ``(m,)``): point index and group id in ``0..G-1``, sorted by group.
+        Every group needs at least two memberships.
     n_groups
         ``G``.
     alpha0
@@ -249,7 +216,10 @@ def fit_groups(
     max_iterations
         Cap on Prop. 2 iterations.
     tolerance_rad
-        Convergence when ``|δα|`` falls below this.
+        A line has converged when its last ``|δα|`` is below this; the iteration stops when
+        all have.
+    alpha_step
+        ``"gauss_newton"`` or ``"prop2"`` (see the module docstring).
 
     Returns
     -------
@@ -257,47 +227,110 @@ def fit_groups(
         Lines with signed ``r`` (the representative closest to ``alpha0``) and the per-membership
         quantities the covariance needs.
     """
+    G = n_groups
+    m = pidx.shape[0]
+    # memberships are sorted by group: every per-line sum is one reduceat over the rows
+    starts = np.flatnonzero(np.concatenate([[True], gidx[1:] != gidx[:-1]]))
+    if starts.shape[0] != G or (m and (gidx[0] != 0 or gidx[-1] != G - 1)):
+        raise ValueError("memberships must be sorted by group and every group non-empty")
+    counts = np.diff(np.append(starts, m)).astype(float)
+    x_all = pts.x[pidx]
+    y_all = pts.y[pidx]
+    # centre each group on its centroid (no cancellation in the sums below)
+    mx = np.add.reduceat(x_all, starts) / counts
+    my = np.add.reduceat(y_all, starts) / counts
+    x = x_all - mx[gidx]
+    y = y_all - my[gidx]
+    q11 = pts.q11[pidx]
+    q12 = pts.q12[pidx]
+    q22 = pts.q22[pidx]
+    q_tr = q11 + q22
+    q_half = 0.5 * q_tr
+    q_diff = 0.5 * (q11 - q22)
+
     alpha = np.asarray(alpha0, dtype=float).copy()
-    iterations = np.zeros(n_groups, dtype=np.intp)
-    converged = np.ones(n_groups, dtype=bool)
+    iterations = np.zeros(G, dtype=np.intp)
+    active = np.ones(G, dtype=bool)
     if not weighted:
-        _, a_tls, _ = tls_groups(pts, pidx, gidx, n_groups)
+        _, a_tls, _ = tls_groups(pts, pidx, gidx, G)
         alpha = nearest_representative(a_tls, alpha)
+        active[:] = False  # closed form: nothing to iterate
     else:
-        gauss_newton = alpha_step == "gauss_newton"
-        active = np.ones(n_groups, dtype=bool)
+        prop2 = alpha_step == "prop2"
+        # working set: the lines still iterating (compacted when many have converged)
+        groups = np.arange(G)
+        gw, sw = gidx, starts
+        xw, yw, qh, qd, q12w, qt = x, y, q_half, q_diff, q12, q_tr
         for _ in range(max_iterations):
-            u_r, u_s, p_r, p_s, _ = _frame(pts, pidx, gidx, alpha)
-            w = 1.0 / p_r
-            ws = 1.0 / p_s
-            r = _weighted_means(gidx, n_groups, w, u_r)
-            s = _weighted_means(gidx, n_groups, ws, u_s)
-            d_r = u_r - r[gidx]
-            if gauss_newton:
-                # exact curvature: δ_S measured from the P_R-weighted centre
-                s = _weighted_means(gidx, n_groups, w, u_s)
-            d_s = u_s - s[gidx]
-            wds = w * d_s
-            num = np.bincount(gidx, weights=wds * d_r, minlength=n_groups)
-            den = np.bincount(gidx, weights=wds * d_s, minlength=n_groups)
+            act_w = active[groups]
+            if act_w.sum() < 0.6 * groups.shape[0]:
+                keep = act_w[gw]
+                groups = groups[act_w]
+                local = np.cumsum(act_w) - 1
+                gw = local[gw[keep]]
+                xw, yw, qh, qd, q12w, qt = (a[keep] for a in (xw, yw, qh, qd, q12w, qt))
+                sw = np.flatnonzero(np.concatenate([[True], gw[1:] != gw[:-1]]))
+                act_w = np.ones(groups.shape[0], dtype=bool)
+            a_w = alpha[groups]
+            ca_g, sa_g = np.cos(a_w), np.sin(a_w)
+            ca, sa = ca_g[gw], sa_g[gw]
+            u_r = xw * ca + yw * sa
+            u_s = yw * ca - xw * sa
+            p_r = qh + qd * (ca * ca - sa * sa) + q12w * (2.0 * sa * ca)
+            np.maximum(p_r, VARIANCE_FLOOR_M2, out=p_r)
+            rows = np.empty((7 if prop2 else 5, xw.shape[0]))
+            w = np.divide(1.0, p_r, out=rows[0])
+            np.multiply(w, u_r, out=rows[1])
+            np.multiply(w, u_s, out=rows[2])
+            np.multiply(rows[1], u_s, out=rows[3])
+            np.multiply(rows[2], u_s, out=rows[4])
+            if prop2:
+                p_s = np.maximum(qt - p_r, VARIANCE_FLOOR_M2)
+                np.divide(1.0, p_s, out=rows[5])
+                np.multiply(rows[5], u_s, out=rows[6])
+            sums = np.add.reduceat(rows, sw, axis=1)
+            W, s_wr, s_ws, s_wrs, s_wss = sums[0], sums[1], sums[2], sums[3], sums[4]
+            centre = s_ws / W  # P_R-weighted centre of u_S
+            num = s_wrs - s_wr * centre  # Σ w δ_R u_S  (Σ w δ_R = 0)
+            if prop2:
+                s_p = sums[6] / sums[5]  # Prop. 1's P_S-weighted S
+                den = s_wss - 2.0 * s_p * s_ws + s_p * s_p * W
+            else:
+                den = s_wss - centre * s_ws
             with np.errstate(invalid="ignore", divide="ignore"):
                 step = -num / den
-            step = np.where(active & np.isfinite(step), step, 0.0)
-            alpha += step
-            iterations += active
-            active &= np.abs(step) >= tolerance_rad
+            # converged lines are frozen, so a line's result does not depend on the others
+            step = np.where(act_w & np.isfinite(step), step, 0.0)
+            alpha[groups] += step
+            iterations[groups] += act_w
+            active[groups] = act_w & (np.abs(step) >= tolerance_rad)
             if not active.any():
                 break
-        converged = ~active
-    u_r, u_s, p_r, p_s, p_rs = _frame(pts, pidx, gidx, alpha)
+    converged = ~active
+
+    # final frame in sensor coordinates
+    ca_g, sa_g = np.cos(alpha), np.sin(alpha)
+    ca, sa = ca_g[gidx], sa_g[gidx]
+    u_r = x_all * ca + y_all * sa
+    u_s = y_all * ca - x_all * sa
+    cc = ca * ca
+    ss = sa * sa
+    sc = sa * ca
+    p_r = np.maximum(q11 * cc + 2.0 * q12 * sc + q22 * ss, VARIANCE_FLOOR_M2)
+    p_s = np.maximum(q_tr - p_r, VARIANCE_FLOOR_M2)
+    p_rs = (q22 - q11) * sc + q12 * (cc - ss)
     if weighted:
         w_r = 1.0 / p_r
         w_s = 1.0 / p_s
     else:
-        w_r = np.ones_like(p_r)
-        w_s = np.ones_like(p_s)
-    r = _weighted_means(gidx, n_groups, w_r, u_r)
-    s = _weighted_means(gidx, n_groups, w_s, u_s)
+        w_r = np.ones(m)
+        w_s = np.ones(m)
+    # R and S from Prop. 1, computed in centred coordinates
+    u_r_c = x * ca + y * sa
+    u_s_c = y * ca - x * sa
+    sums = np.add.reduceat(np.stack([w_r, w_r * u_r_c, w_s, w_s * u_s_c]), starts, axis=1)
+    r = sums[1] / sums[0] + mx * ca_g + my * sa_g
+    s = sums[3] / sums[2] + my * ca_g - mx * sa_g
     return GroupFit(
         r=r,
         alpha=alpha,

@@ -135,6 +135,7 @@ def split_merge_groups(
     y: FloatArray,
     beam: IntArray,
     sigma_range: FloatArray,
+    scan: IntArray | None = None,
     *,
     split_threshold_m: float,
     split_threshold_sigma: float,
@@ -148,11 +149,14 @@ def split_merge_groups(
     Parameters
     ----------
     x, y
-        Valid scan points (m) in beam order, shape ``(n,)``.
+        Valid scan points (m) in beam order, shape ``(n,)``; several scans may be
+        concatenated (``scan``).
     beam
         Their beam indices.
     sigma_range
         Their range standard deviations ``σ_d`` (m).
+    scan
+        Scan of each point (non-decreasing); pieces never span two scans.  None: one scan.
     split_threshold_m, split_threshold_sigma
         A point splits a piece when farther from its chord than
         ``max(split_threshold_m, split_threshold_sigma · σ_d)``.
@@ -164,23 +168,24 @@ def split_merge_groups(
     Returns
     -------
     Grouping
-        One candidate line per piece.
+        One candidate line per piece, memberships sorted by piece (pieces in point order).
     """
     n = x.shape[0]
     if n < max(2, min_points):
         return Grouping.empty()
     thr = np.maximum(split_threshold_m, split_threshold_sigma * sigma_range)
-    brk = np.flatnonzero(
-        breakpoint_mask(
-            x,
-            y,
-            beam,
-            sigma_range,
-            max_missing_beams=max_missing_beams,
-            lambda_rad=lambda_rad,
-            sigma_factor=sigma_factor,
-        )
+    brk_mask = breakpoint_mask(
+        x,
+        y,
+        beam,
+        sigma_range,
+        max_missing_beams=max_missing_beams,
+        lambda_rad=lambda_rad,
+        sigma_factor=sigma_factor,
     )
+    if scan is not None:
+        brk_mask |= scan[1:] != scan[:-1]
+    brk = np.flatnonzero(brk_mask)
     starts = np.concatenate([[0], brk + 1]).astype(np.intp)
     ends = np.concatenate([brk, [n - 1]]).astype(np.intp)
     keep = ends - starts + 1 >= 2
