@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from linefit.config import LineFitConfig, SensorNoiseConfig
+from linefit.config import LineFitConfig
 from linefit.errors import ConfigError
 from linefit.tomlconfig import dump_toml, load_toml
 
@@ -50,9 +50,9 @@ class RunConfig:
     ) -> RunConfig:
         """Return a copy with the sensor noise (``--sigma-d``, ``--sigma-phi``) overridden."""
         noise = self.linefit.noise
-        noise = SensorNoiseConfig(
+        noise = replace(
+            noise,
             sigma_range_m=noise.sigma_range_m if sigma_d is None else sigma_d,
             sigma_bearing_rad=noise.sigma_bearing_rad if sigma_phi is None else sigma_phi,
-            sigma_range_per_m=noise.sigma_range_per_m,
         )
         return replace(self, linefit=replace(self.linefit, noise=noise))
