@@ -435,4 +435,3 @@ class MapBuilder:
         st = self._store
         x, P = to_normal_form(st.x, st.P)
         return x, P
-
