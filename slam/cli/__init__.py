@@ -11,6 +11,7 @@ import sys
 
 import click
 
+from slam.cli import cmd_map  # noqa: F401  (commands register on import)
 from slam.cli._app import app
 from slam.errors import LineslamError
 
