@@ -66,7 +66,7 @@ class _FigureData:
     """What the figures need, collected while mapping (bounded in size)."""
 
     max_ellipse_scans: int = 10
-    ellipse_every: int = 15
+    ellipse_every: int = 30
     points: list[FloatArray] = field(default_factory=list)
     ellipse_centers: list[FloatArray] = field(default_factory=list)
     ellipse_covs: list[FloatArray] = field(default_factory=list)

@@ -22,7 +22,14 @@ import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 from numpy.typing import NDArray
 
-__all__ = ["band_polygons", "figure_panels", "plot_lines", "plot_points", "point_ellipses"]
+__all__ = [
+    "band_polygons",
+    "figure_panels",
+    "nice_scale",
+    "plot_lines",
+    "plot_points",
+    "point_ellipses",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -111,6 +118,17 @@ def plot_lines(
     ax.set_aspect("equal")
 
 
+def nice_scale(target: float) -> float:
+    """Largest of 1, 2, 5 × 10^k not above ``target`` (at least 1)."""
+    if not np.isfinite(target) or target <= 1.0:
+        return 1.0
+    k = np.floor(np.log10(target))
+    for m in (5.0, 2.0, 1.0):
+        if m * 10**k <= target:
+            return float(m * 10**k)
+    return float(10**k)
+
+
 def figure_panels(
     path: str | Path,
     points: FloatArray,
@@ -119,32 +137,50 @@ def figure_panels(
     fit: tuple[FloatArray, FloatArray, Sequence[FloatArray]],
     merged: tuple[FloatArray, FloatArray, Sequence[FloatArray]] | None,
     title: str = "",
-    scale: float = 50.0,
+    scale: float | None = None,
 ) -> Path:
-    """The paper's panels A (points), B (fitted lines), C (merged lines) side by side.
+    """The paper's panels A (points), B (fitted lines), C (merged lines).
 
     ``fit`` and ``merged`` are ``(r_alpha (K, 2), cov (K, 2, 2), segments list of (k, 2, 2))``
-    in the world frame.  Uncertainties are multiplied by ``scale`` (the paper: 50).
+    in the world frame.  Uncertainties are multiplied by a factor shown in each title (the paper
+    uses 50); ``scale=None`` picks, per panel, a round factor that makes the typical 3σ region
+    about 1 % of the map's extent (pose uncertainty makes merged lines far wider than fits).
     """
-    n_panels = 3 if merged is not None else 2
-    fig, axes = plt.subplots(1, n_panels, figsize=(5.5 * n_panels, 5.5))
-    plot_points(axes[0], points, ellipse_centers, ellipse_covs, scale=scale)
-    axes[0].set_title(f"A: raw points ({len(points)}), 3σ×{scale:g}")
-    plot_lines(axes[1], *fit, scale=scale)
-    axes[1].set_title(f"B: fitted lines ({len(fit[0])}), 3σ×{scale:g}")
-    if merged is not None:
-        plot_lines(axes[2], *merged, scale=scale, color="tab:green")
-        axes[2].set_title(f"C: merged lines ({len(merged[0])}), 3σ×{scale:g}")
     pts = np.asarray(points).reshape(-1, 2)
     if pts.shape[0]:
-        lo, hi = np.percentile(pts, 0.5, axis=0), np.percentile(pts, 99.5, axis=0)
-        pad = 0.05 * max(float(np.max(hi - lo)), 1.0)
-        for ax in axes:
-            ax.set_xlim(lo[0] - pad, hi[0] + pad)
-            ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+    else:
+        lo, hi = np.zeros(2), np.ones(2)
+    extent = float(max(np.max(hi - lo), 1.0))
+
+    def auto(sd: FloatArray) -> float:
+        if scale is not None:
+            return scale
+        sd = sd[np.isfinite(sd) & (sd > 0)]
+        return nice_scale(0.01 * extent / (3 * float(np.median(sd)))) if sd.size else 1.0
+
+    n_panels = 3 if merged is not None else 2
+    wide = (hi[0] - lo[0]) > 2.0 * (hi[1] - lo[1])
+    shape = (n_panels, 1) if wide else (1, n_panels)
+    size = (11.0, 3.2 * n_panels) if wide else (5.5 * n_panels, 5.5)
+    fig, axes = plt.subplots(*shape, figsize=size)
+    covs = np.asarray(ellipse_covs).reshape(-1, 2, 2)
+    sc = auto(np.sqrt(np.linalg.eigvalsh(covs)[:, -1]) if covs.size else np.zeros(0))
+    plot_points(axes[0], pts, ellipse_centers, ellipse_covs, scale=sc)
+    axes[0].set_title(f"A: raw points ({len(pts)}), 3σ ×{sc:g}")
+    sc = auto(np.sqrt(np.asarray(fit[1]).reshape(-1, 2, 2)[:, 0, 0]))
+    plot_lines(axes[1], *fit, scale=sc)
+    axes[1].set_title(f"B: fitted lines ({len(fit[0])}), 3σ ×{sc:g}")
+    if merged is not None:
+        sc = auto(np.sqrt(np.asarray(merged[1]).reshape(-1, 2, 2)[:, 0, 0]))
+        plot_lines(axes[2], *merged, scale=sc, color="tab:green")
+        axes[2].set_title(f"C: merged lines ({len(merged[0])}), 3σ ×{sc:g}")
+    pad = 0.05 * extent
     for ax in axes:
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_xlabel("x (m)")
-    axes[0].set_ylabel("y (m)")
+        ax.set_ylabel("y (m)")
     if title:
         fig.suptitle(title)
     fig.tight_layout()
