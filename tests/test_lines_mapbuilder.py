@@ -221,3 +221,15 @@ def test_within_scan_pieces_merge_and_bad_input(rng):
     with pytest.raises(Exception, match="pose_world_laser"):
         b.add_scan(lines[:1], np.array([np.nan, 0, 0]))
     assert b.add_scan([], pose) == 1
+
+
+def test_spatial_prefilter_changes_cost_not_result(rng):
+    scans = make_scans(rng, 8, POSE_COV)
+    fast = build(scans, POSE_COV)
+    slow = MapBuilder(MapConfig(), spatial_prefilter=False)
+    for lines, pose, _ in scans:
+        slow.add_scan(lines, pose, POSE_COV)
+    a, b = fast.line_map(), slow.line_map()
+    assert len(a) == len(b) and a.n_segments == b.n_segments
+    np.testing.assert_allclose(a.r_alpha(), b.r_alpha(), atol=1e-12)
+    assert fast.stats.candidate_pairs_tested < slow.stats.candidate_pairs_tested
