@@ -28,6 +28,8 @@ def spd(rng: np.random.Generator, n: int, d: int, scale: np.ndarray) -> np.ndarr
 def test_gate_is_the_papers_three_sigma():
     assert chi2_gate() == pytest.approx(11.829, abs=1e-3)
     assert chi2_gate(0.95, 2) == pytest.approx(5.991, abs=1e-3)
+    for p, k in ((0.9973, 1), (0.99, 3), (0.5, 5)):
+        assert chi2_gate(p, k) == pytest.approx(chi2.ppf(p, k), rel=1e-10)
     with pytest.raises(ConfigError):
         chi2_gate(1.0)
 

@@ -48,11 +48,11 @@ from slam.lines.merge import (
     chi2_gate,
     extent_gap,
     fuse,
-    mahalanobis2,
+    mahalanobis2_unchecked,
     to_normal_form,
     unite_segments,
 )
-from slam.lines.transform import transform_line, transform_segments
+from slam.lines.transform import segment_shift, transform_line
 
 __all__ = ["LineMap", "MapBuilder", "MapLine", "MergeStats"]
 
@@ -197,9 +197,11 @@ class _Store:
         self._set_geometry(idx)
         return idx
 
-    def compact(self) -> None:
+    def compact(self, force: bool = False) -> None:
+        """Drop fused-away entries (when they are more than a quarter of the store, or forced)."""
         keep = np.flatnonzero(self.active)
-        if keep.size == len(self):
+        dead = len(self) - keep.size
+        if dead == 0 or (not force and dead < max(64, len(self) // 4)):
             return
         for name in ("x", "P", "ext", "bbox", "nobs", "ids", "active", "version"):
             setattr(self, name, getattr(self, name)[keep])
@@ -207,38 +209,76 @@ class _Store:
         self.segvars = [self.segvars[i] for i in keep]
 
     # -- gating --------------------------------------------------------------------------------
-    def _pairs_for(self, i: int, others: NDArray[np.intp]) -> tuple[NDArray[np.intp], FloatArray]:
-        """Lines among ``others`` compatible with line ``i``, and their ``D²`` (vectorised)."""
-        if others.size == 0:
-            return others, np.zeros(0)
+    def _pairs(
+        self, rows: NDArray[np.intp], exclude_new_before: bool = False
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]:
+        """All compatible pairs ``(rows[k], j)`` with ``j`` active, vectorised over rows × map.
+
+        Candidates come from the bounding boxes (grown by ``max_gap_m``), then the χ² test,
+        the side test and the gap test.  With ``exclude_new_before``, a pair of two rows is
+        reported once (row order) and never with itself.
+
+        Returns
+        -------
+        i, j : ndarray of int
+            Pair members (``i`` from ``rows``).
+        d2 : ndarray
+            Their ``D²``.
+        """
+        cols = np.flatnonzero(self.active)
+        empty = (np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0))
+        if rows.size == 0 or cols.size == 0:
+            return empty
         g = self.max_gap_m
         if self.prefilter:
-            bi, bo = self.bbox[i], self.bbox[others]
+            # first against the union box of all rows (one pass over the map), then row by row
+            ub = self.bbox[rows]
+            lo, hi = ub[:, :2].min(axis=0) - g, ub[:, 2:].max(axis=0) + g
+            bb = self.bbox[cols]
+            cols = cols[
+                (bb[:, 0] <= hi[0])
+                & (bb[:, 2] >= lo[0])
+                & (bb[:, 1] <= hi[1])
+                & (bb[:, 3] >= lo[1])
+            ]
+            if cols.size == 0:
+                return empty
+            br, bc = self.bbox[rows][:, None, :], self.bbox[cols][None, :, :]
             near = (
-                (bo[:, 0] <= bi[2] + g)
-                & (bo[:, 2] >= bi[0] - g)
-                & (bo[:, 1] <= bi[3] + g)
-                & (bo[:, 3] >= bi[1] - g)
+                (bc[..., 0] <= br[..., 2] + g)
+                & (bc[..., 2] >= br[..., 0] - g)
+                & (bc[..., 1] <= br[..., 3] + g)
+                & (bc[..., 3] >= br[..., 1] - g)
             )
-            cand = others[near]
         else:
-            cand = others
-        if cand.size == 0:
-            return cand, np.zeros(0)
-        self.stats.candidate_pairs_tested += int(cand.size)
-        d2 = mahalanobis2(self.x[i], self.P[i], self.x[cand], self.P[cand], self.same_side)
+            near = np.ones((rows.size, cols.size), bool)
+        # never a line with itself; pairs of two rows only once
+        pos = np.full(len(self), -1)
+        pos[rows] = np.arange(rows.size)
+        col_pos = pos[cols]
+        if exclude_new_before:
+            near &= (col_pos[None, :] < 0) | (col_pos[None, :] > np.arange(rows.size)[:, None])
+        else:
+            near &= cols[None, :] != rows[:, None]
+        ri, ci = np.nonzero(near)
+        if ri.size == 0:
+            return empty
+        ii, jj = rows[ri], cols[ci]
+        self.stats.candidate_pairs_tested += int(ii.size)
+        d2 = mahalanobis2_unchecked(self.x[ii], self.P[ii], self.x[jj], self.P[jj], self.same_side)
         ok = d2 <= self.gate
-        cand, d2 = cand[ok], d2[ok]
-        if cand.size and np.isfinite(g):
-            # extents of the candidates projected on line i's tangent
-            ends = self._ends_world(self.x[cand], self.ext[cand])
-            t_i = np.array([-np.sin(self.x[i, 1]), np.cos(self.x[i, 1])])
-            proj = ends @ t_i
-            proj_ext = np.column_stack([proj.min(axis=1), proj.max(axis=1)])
-            close = extent_gap(self.ext[i], proj_ext) <= g
-            cand, d2 = cand[close], d2[close]
-        self.stats.pairs_in_gate += int(cand.size)
-        return cand, d2
+        ii, jj, d2 = ii[ok], jj[ok], d2[ok]
+        if ii.size and np.isfinite(g):
+            # extents of j projected on line i's tangent
+            ends = self._ends_world(self.x[jj], self.ext[jj])  # (p, 2, 2)
+            a_i = self.x[ii, 1]
+            t_i = np.stack([-np.sin(a_i), np.cos(a_i)], -1)
+            proj = np.einsum("pkd,pd->pk", ends, t_i)
+            proj_ext = np.stack([proj.min(axis=1), proj.max(axis=1)], -1)
+            close = extent_gap(self.ext[ii], proj_ext) <= g
+            ii, jj, d2 = ii[close], jj[close], d2[close]
+        self.stats.pairs_in_gate += int(ii.size)
+        return ii, jj, d2
 
     # -- fusion --------------------------------------------------------------------------------
     def _fuse(self, keep: int, drop: int) -> None:
@@ -266,29 +306,23 @@ class _Store:
 
     def merge(self, new: NDArray[np.intp]) -> None:
         """Best-pair-first merging of the lines ``new`` into everything active."""
-        heap: list[tuple[float, int, int, int, int]] = []
-        new_set = np.zeros(len(self), bool)
-        new_set[new] = True
-        for i in new:
-            # new against old lines, and new against later new lines (each pair once)
-            others = np.flatnonzero(self.active & (~new_set | (np.arange(len(self)) > i)))
-            others = others[others != i]
-            cand, d2 = self._pairs_for(int(i), others)
-            for j, d in zip(cand.tolist(), d2.tolist(), strict=True):
-                heapq.heappush(heap, (d, int(i), j, int(self.version[i]), int(self.version[j])))
+        ii, jj, d2 = self._pairs(np.asarray(new, dtype=np.intp), exclude_new_before=True)
+        v = self.version
+        heap = list(
+            zip(d2.tolist(), ii.tolist(), jj.tolist(), v[ii].tolist(), v[jj].tolist(), strict=True)
+        )
+        heapq.heapify(heap)
         while heap:
-            d, i, j, vi, vj = heapq.heappop(heap)
+            _, i, j, vi, vj = heapq.heappop(heap)
             if not (self.active[i] and self.active[j]):
                 continue
             if self.version[i] != vi or self.version[j] != vj:
                 continue
             keep, drop = (i, j) if self.ids[i] <= self.ids[j] else (j, i)
             self._fuse(keep, drop)
-            others = np.flatnonzero(self.active)
-            others = others[others != keep]
-            cand, d2 = self._pairs_for(keep, others)
+            _, kj, kd = self._pairs(np.array([keep], dtype=np.intp))
             vk = int(self.version[keep])
-            for o, dd in zip(cand.tolist(), d2.tolist(), strict=True):
+            for o, dd in zip(kj.tolist(), kd.tolist(), strict=True):
                 heapq.heappush(heap, (dd, keep, o, vk, int(self.version[o])))
 
 
@@ -398,14 +432,12 @@ class MapBuilder:
             local = self._new_store()
             local.same_side = False  # one sensor: representatives are already aligned
             local.merge(local.append(x, P, segs, vars_, nobs, np.arange(n, dtype=np.int64)))
-            local.compact()
+            local.compact(force=True)
             x, P, segs, vars_, nobs = local.x, local.P, local.segs, local.segvars, local.nobs
         xw, Pw = transform_line(x, P, pose, Ppose, normal_form=False)
-        sw, vw = [], []
-        for k in range(x.shape[0]):
-            s, v = transform_segments(segs[k], vars_[k], x[k], P[k], pose, Ppose, False)
-            sw.append(s)
-            vw.append(v)
+        shift, extra, _ = segment_shift(x, P, pose, Ppose)
+        sw = [seg + sh for seg, sh in zip(segs, shift.tolist(), strict=True)]
+        vw = [var + ex for var, ex in zip(vars_, extra.tolist(), strict=True)]
         ids = np.arange(self._next_id, self._next_id + xw.shape[0], dtype=np.int64)
         self._next_id += xw.shape[0]
         store = self._store
@@ -417,8 +449,8 @@ class MapBuilder:
         """The current map (normal form, segments as world points)."""
         st = self._store
         out = []
-        order = np.argsort(st.ids)
-        for i in order:
+        active = np.flatnonzero(st.active)
+        for i in active[np.argsort(st.ids[active])]:
             x, P = to_normal_form(st.x[i], st.P[i])
             ends = st._ends_world(np.broadcast_to(st.x[i], (st.segs[i].shape[0], 3)), st.segs[i])
             var = st.segvars[i]
@@ -444,5 +476,5 @@ class MapBuilder:
     def world_lines(self) -> tuple[FloatArray, FloatArray]:
         """Current map lines as arrays ``(K, 3)`` and ``(K, 3, 3)`` (normal form)."""
         st = self._store
-        x, P = to_normal_form(st.x, st.P)
+        x, P = to_normal_form(st.x[st.active], st.P[st.active])
         return x, P

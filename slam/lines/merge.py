@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from slam.errors import ConfigError, InputError
 from slam.geometry import wrap_angle
@@ -41,6 +40,7 @@ __all__ = [
     "fuse_many",
     "is_compatible",
     "mahalanobis2",
+    "mahalanobis2_unchecked",
     "to_normal_form",
     "unite_segments",
 ]
@@ -57,7 +57,11 @@ def chi2_gate(probability: float = DEFAULT_GATE_PROBABILITY, dof: int = 2) -> fl
         raise ConfigError(f"gate probability must be in (0, 1), got {probability!r}")
     if dof < 1:
         raise ConfigError(f"dof must be >= 1, got {dof!r}")
-    return float(chi2.ppf(probability, dof))
+    if dof == 2:
+        return float(-2.0 * np.log1p(-probability))  # closed form for 2 dof
+    from scipy.special import gammaincinv  # lighter than scipy.stats
+
+    return float(2.0 * gammaincinv(dof / 2.0, probability))
 
 
 def _as_line(line: FloatArray, name: str) -> FloatArray:
@@ -120,7 +124,15 @@ def _difference(
     l2 = _as_line(l2, "l2")
     P1 = check_covariance(np.asarray(P1)[..., :2, :2], 2, "P1")
     P2 = check_covariance(np.asarray(P2)[..., :2, :2], 2, "P2")
+    return _difference_unchecked(l1, P1, l2, P2, same_side)
+
+
+def _difference_unchecked(
+    l1: FloatArray, P1: FloatArray, l2: FloatArray, P2: FloatArray, same_side: bool
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
     a1, r1 = l1[..., 1], l1[..., 0]
+    P1 = P1[..., :2, :2]
+    P2 = P2[..., :2, :2]
     if same_side:
         d_alpha = np.asarray(wrap_angle(a1 - l2[..., 1]))
         opposite = np.abs(d_alpha) > np.pi / 2.0
@@ -131,6 +143,16 @@ def _difference(
         delta = np.stack(np.broadcast_arrays(r1 - l2a[..., 0], a1 - l2a[..., 1]), -1)
         opposite = np.zeros(delta.shape[:-1], dtype=bool)
     return delta, P1 + P2a, opposite
+
+
+def mahalanobis2_unchecked(
+    l1: FloatArray, P1: FloatArray, l2: FloatArray, P2: FloatArray, same_side: bool = False
+) -> FloatArray:
+    """:func:`mahalanobis2` without input validation (for inner loops on validated arrays)."""
+    delta, S, opposite = _difference_unchecked(l1, P1, l2, P2, same_side)
+    Si = inv2x2(S, "P1 + P2")
+    d2 = np.einsum("...i,...ij,...j->...", delta, Si, delta)
+    return np.where(opposite, np.inf, d2)
 
 
 def mahalanobis2(
@@ -391,6 +413,10 @@ def unite_segments(
     var = np.asarray(segments_var, dtype=float).reshape(-1, 2)
     if seg.shape[0] == 0:
         return seg.copy(), var.copy()
+    if seg.shape[0] == 1:
+        if seg[0, 0] <= seg[0, 1]:
+            return seg.copy(), var.copy()
+        return seg[:, ::-1].copy(), var[:, ::-1].copy()
     lo = np.minimum(seg[:, 0], seg[:, 1])
     hi = np.maximum(seg[:, 0], seg[:, 1])
     order = np.argsort(lo, kind="stable")

@@ -44,6 +44,7 @@ __all__ = [
     "invert_pose",
     "line_from_world",
     "line_to_world",
+    "segment_shift",
     "transform_line",
     "transform_line_to_child",
     "transform_segments",
@@ -152,6 +153,49 @@ def line_from_world(
     return transform_line_to_child(line_world, cov_world, pose_world_laser, pose_cov, normal_form)
 
 
+def segment_shift(
+    line_j: FloatArray,
+    cov_j: FloatArray,
+    pose_i_j: FloatArray,
+    pose_cov: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """How tangent coordinates on lines move from frame ``j`` to frame ``i`` (vectorised).
+
+    A point at tangent coordinate ``s`` on the line maps by Eq. 30 to ``s + shift`` with
+    ``shift = −x sin α_i + y cos α_i`` (common to all points of the line).  The variance of an
+    end grows by the pose term ``(K P^ij Kᵀ)_ss`` plus the lever-arm term
+    ``(x cos α_i + y sin α_i)² P_αα`` (first order; the correlation between an extreme point and
+    ``α`` is not tracked).
+
+    Parameters
+    ----------
+    line_j : ndarray, shape (..., 3)
+    cov_j : ndarray, shape (..., 3, 3)
+        Only ``P_αα`` is used (not validated here).
+    pose_i_j : ndarray, shape (..., 3)
+    pose_cov : ndarray, shape (..., 3, 3), optional
+
+    Returns
+    -------
+    shift, extra_var : ndarray, shape (...)
+    flipped : ndarray of bool, shape (...)
+        True where the normal form of the moved line has the opposite tangent (``s → −s``).
+    """
+    line_j = np.asarray(line_j, dtype=float)
+    P_pose = _pose_cov_or_zero(pose_cov)
+    _, _, K = line_to_parent(line_j, pose_i_j, normal_form=False)
+    pose = np.asarray(pose_i_j, dtype=float)
+    x, y, g = pose[..., 0], pose[..., 1], pose[..., 2]
+    a_i = line_j[..., 1] + g
+    shift = -x * np.sin(a_i) + y * np.cos(a_i)
+    lever = -x * np.cos(a_i) - y * np.sin(a_i)
+    k_s = K[..., 2, :]
+    extra = np.einsum("...i,...ij,...j->...", k_s, P_pose, k_s)
+    extra = extra + lever**2 * np.asarray(cov_j, dtype=float)[..., 1, 1]
+    r_i = line_j[..., 0] + x * np.cos(a_i) + y * np.sin(a_i)
+    return np.asarray(shift), np.asarray(extra), np.asarray(r_i < 0.0)
+
+
 def transform_segments(
     segments_s: FloatArray,
     segments_var: FloatArray,
@@ -163,11 +207,8 @@ def transform_segments(
 ) -> tuple[FloatArray, FloatArray]:
     """Move the segment extents of one line from frame ``j`` to frame ``i``.
 
-    A point at tangent coordinate ``s`` on the line maps by Eq. 30 to ``s + (−x sin α_i +
-    y cos α_i)`` (a shift common to all points of the line); if the result is flipped to the
-    normal form, ``s`` changes sign and each segment's ends swap.  Variances grow by the pose
-    term ``(K P^ij Kᵀ)_ss`` and the lever-arm term ``(x cos α_i + y sin α_i)² P_αα`` (first order;
-    the correlation between an extreme point and ``α`` is not tracked).
+    Shift and variance growth as in :func:`segment_shift`; if the result is flipped to the
+    normal form, ``s`` changes sign and each segment's ends swap.
 
     Parameters
     ----------
@@ -187,19 +228,11 @@ def transform_segments(
     """
     seg = np.asarray(segments_s, dtype=float).reshape(-1, 2)
     var = np.asarray(segments_var, dtype=float).reshape(-1, 2)
-    line_j = np.asarray(line_j, dtype=float)
     cov = check_covariance(cov_j, 3, "cov_j")
-    P_pose = _pose_cov_or_zero(pose_cov)
-    x, y, g = np.asarray(pose_i_j, dtype=float)
-    a_i = line_j[1] + g
-    shift = -x * np.sin(a_i) + y * np.cos(a_i)
-    lever = -x * np.cos(a_i) - y * np.sin(a_i)
-    _, _, K = line_to_parent(line_j, pose_i_j, normal_form=False)
-    extra = float((K @ P_pose @ K.T)[2, 2] + lever**2 * cov[1, 1])
-    seg_i = seg + shift
-    var_i = var + extra
-    r_i = line_j[0] + x * np.cos(a_i) + y * np.sin(a_i)
-    if normal_form and r_i < 0.0:
+    shift, extra, flipped = segment_shift(line_j, cov, pose_i_j, pose_cov)
+    seg_i = seg + float(shift)
+    var_i = var + float(extra)
+    if normal_form and bool(flipped):
         seg_i = -seg_i[::-1, ::-1]
         var_i = var_i[::-1, ::-1]
     return np.ascontiguousarray(seg_i), np.ascontiguousarray(var_i)
