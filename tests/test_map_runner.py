@@ -84,3 +84,64 @@ def test_runner_summary_map_and_figures(rng, tmp_path):
     )
     # the pose is the noisy estimate (σ 2 cm, 0.003 rad): points within a few cm of a wall
     assert np.median(on_wall) < 0.05
+
+
+def write_flaser_log(path, rng, n_poses=8):
+    """A CARMEN log (FLASER, 361 beams over 180°) of the corridor, with the paper's noise."""
+    data = make_scans(rng, n_poses, np.zeros((3, 3)))
+    rows = []
+    for k, (_, pose, _) in enumerate(data):
+        ranges = ray_cast(pose, max_range=80.0)
+        hit = ranges < 80.0
+        ranges[hit] += rng.normal(0, 0.005, hit.sum())
+        vals = " ".join(f"{r:.4f}" for r in ranges)
+        p = " ".join(f"{v:.6f}" for v in pose)
+        rows.append(f"FLASER 361 {vals} {p} {p} {1000.0 + k:.6f} nohost {1000.0 + k:.6f}")
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_cli_map_end_to_end(rng, tmp_path):
+    import linefit
+
+    pytest.importorskip("slam.io.carmen")
+    if not hasattr(linefit, "extract_lines"):
+        pytest.skip("linefit.extract_lines not merged yet")
+    from slam.cli import main
+
+    log = write_flaser_log(tmp_path / "corridor.clf", rng)
+    out = tmp_path / "out"
+    main(
+        [
+            "map",
+            str(log),
+            "--out",
+            str(out),
+            "--quiet",
+            "--pose-sigma-xy",
+            "0.01",
+            "--pose-sigma-theta",
+            "0.002",
+        ]
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["scans"] == 8 and summary["frame"] == "laser"
+    assert summary["lines_merged"] < summary["lines_fit"]
+    assert summary["compression"] > 0.98
+    assert (out / "config.toml").is_file() and (out / "figures" / "map_panels.png").is_file()
+    cfg = RunConfig.from_toml(out / "config.toml")
+    assert cfg.map.pose_sigma_xy_m == 0.01
+    m = read_map_json(out / "map.json")
+    # the long walls are found with their door gaps: y = -1 (3 pieces), y = +1 (2 pieces)
+    lower = [
+        ln
+        for ln in m.lines
+        if abs(ln.r - 1.0) < 0.03 and abs(abs(ln.alpha) - np.pi / 2) < 0.01 and ln.length > 10
+    ]
+    assert any(ln.segments.shape[0] >= 2 for ln in lower)
+    # bad input: a binary file gives a one-line error and exit status 2
+    bad = tmp_path / "bad.clf"
+    bad.write_bytes(b"\x00\x01\x02garbage")
+    with pytest.raises(SystemExit) as info:
+        main(["map", str(bad), "--out", str(tmp_path / "o2"), "--quiet"])
+    assert info.value.code == 2
