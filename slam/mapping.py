@@ -49,10 +49,9 @@ def fit_scan(scan: Scan, config: RunConfig) -> tuple[list[Line], int]:
     """Lines of one scan (laser frame) and the number of points that could enter a fit."""
     from linefit import extract_lines
 
-    mask = valid_beams(scan, config)
-    n_points = int(np.count_nonzero(mask))
-    ranges = np.where(mask, scan.ranges, np.inf)
-    return list(extract_lines(ranges, scan.bearings, config.linefit)), n_points
+    n_points = int(np.count_nonzero(valid_beams(scan, config)))
+    lines = extract_lines(scan.ranges, scan.bearings, config.linefit, max_range_m=scan.max_range_m)
+    return list(lines), n_points
 
 
 def scan_pose(scan: Scan) -> FloatArray | None:
