@@ -14,6 +14,7 @@ from slam.lines import (
     extent_gap,
     fuse,
     fuse_many,
+    fuse_pair_unchecked,
     is_compatible,
     mahalanobis2,
     unite_segments,
@@ -193,3 +194,26 @@ def test_chi2_gate_false_alarm_rate(rng):
     assert abs(rate - p) < 4 * np.sqrt(p * (1 - p) / m)
     d2 = mahalanobis2(l1, P1, l2, P2)
     assert abs(np.mean(d2 <= chi2.ppf(0.5, 2)) - 0.5) < 0.01
+
+
+def test_fast_pair_fusion_equals_vectorised_fusion(rng):
+    n = 300
+    l1 = np.column_stack(
+        [rng.uniform(-3, 3, n), rng.uniform(-np.pi, np.pi, n), rng.normal(0, 2, n)]
+    )
+    l2 = l1 + rng.normal(0, [0.05, 0.02, 1.0], (n, 3))
+    l2[::3] = np.column_stack([-l2[::3, 0], wrap_angle(l2[::3, 1] + np.pi), -l2[::3, 2]])
+    l1[:5, 1] = np.pi - 1e-4  # near the ±π seam
+    P1 = spd(rng, n, 3, np.array([0.02, 0.01, 0.3]))
+    P2 = spd(rng, n, 3, np.array([0.03, 0.02, 0.5]))
+    P2[::7, 2, 2] = 0.0
+    P2[::7, 2, :2] = P2[::7, :2, 2] = 0.0
+    ref, Pref = fuse(l1, P1, l2, P2, normal_form=False)
+    for k in range(n):
+        x, P = fuse_pair_unchecked(l1[k], P1[k], l2[k], P2[k])
+        d = x - ref[k]
+        d[1] = wrap_angle(d[1])
+        np.testing.assert_allclose(d, 0.0, atol=1e-12)
+        np.testing.assert_allclose(P, Pref[k], rtol=1e-9, atol=1e-15)
+    with pytest.raises(DegenerateGeometryError):
+        fuse_pair_unchecked(l1[0], np.zeros((3, 3)), l1[0], np.zeros((3, 3)))

@@ -47,7 +47,7 @@ from slam.lines.config import MapConfig
 from slam.lines.merge import (
     chi2_gate,
     extent_gap,
-    fuse,
+    fuse_pair_unchecked,
     mahalanobis2_unchecked,
     to_normal_form,
     unite_segments,
@@ -283,7 +283,7 @@ class _Store:
     # -- fusion --------------------------------------------------------------------------------
     def _fuse(self, keep: int, drop: int) -> None:
         xk, xd = self.x[keep], self.x[drop]
-        x, P = fuse(xk, self.P[keep], xd, self.P[drop], normal_form=False)
+        x, P = fuse_pair_unchecked(xk, self.P[keep], xd, self.P[drop])
         t = np.array([-np.sin(x[1]), np.cos(x[1])])
         segs, vars_ = [], []
         for xo, so, vo in (

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.errors import ConfigError, InputError
+from slam.errors import ConfigError, DegenerateGeometryError, InputError
 from slam.geometry import wrap_angle
 from slam.lines.checks import check_covariance, inv2x2
 
@@ -38,6 +38,7 @@ __all__ = [
     "extent_gap",
     "fuse",
     "fuse_many",
+    "fuse_pair_unchecked",
     "is_compatible",
     "mahalanobis2",
     "mahalanobis2_unchecked",
@@ -320,6 +321,67 @@ def fuse(
     line = np.array(line, copy=True)
     line[..., 1] = np.asarray(wrap_angle(line[..., 1]))
     return line, cov
+
+
+def fuse_pair_unchecked(
+    l1: FloatArray, P1: FloatArray, l2: FloatArray, P2: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`fuse` of one pair of ``(r, α, s)`` lines, no validation, line 1's representative.
+
+    Same result as ``fuse(l1, P1, l2, P2, normal_form=False)`` (tested), about 20× faster:
+    for inner loops (map building) on arrays that were validated once.
+    """
+    r1, a1, s1 = float(l1[0]), float(l1[1]), float(l1[2])
+    r2, a2, s2 = float(l2[0]), float(l2[1]), float(l2[2])
+    d = (a2 - a1 + np.pi) % (2.0 * np.pi) - np.pi
+    if abs(d) > np.pi / 2.0:
+        r2, s2 = -r2, -s2
+        d = (d + 2.0 * np.pi) % (2.0 * np.pi) - np.pi
+        flip = np.array([-1.0, 1.0, -1.0])
+        P2 = P2 * flip[:, None] * flip[None, :]
+    a2 = a1 + d
+    A1, A2 = P1[:2, :2], P2[:2, :2]
+    S = A1 + A2
+    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    if not (S[0, 0] > 0.0 and S[1, 1] > 0.0 and det > 1e-14 * S[0, 0] * S[1, 1]):
+        raise DegenerateGeometryError("P1 + P2 is singular or not positive definite")
+    Si = np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
+    G = A1 @ Si
+    W1 = np.eye(2) - G
+    r_m, a_m = np.array([r1, a1]) + G @ np.array([r2 - r1, a2 - a1])
+    v1, v2 = float(P1[2, 2]), float(P2[2, 2])
+    if v1 > 0.0 and v2 > 0.0:
+        w1 = v2 / (v1 + v2)
+    elif v1 <= 0.0 and v2 <= 0.0:
+        w1 = 0.5
+    else:
+        w1 = 1.0 if v1 <= 0.0 else 0.0
+    w2 = 1.0 - w1
+    cm, sm = np.cos(a_m), np.sin(a_m)
+    c1, sn1, c2, sn2 = np.cos(a1), np.sin(a1), np.cos(a2), np.sin(a2)
+    # centroids c_k = r_k n_k + s_k t_k and their weighted mean
+    cx = w1 * (r1 * c1 - s1 * sn1) + w2 * (r2 * c2 - s2 * sn2)
+    cy = w1 * (r1 * sn1 + s1 * c1) + w2 * (r2 * sn2 + s2 * c2)
+    s_m = -cx * sm + cy * cm
+    dsm_dam = -(cx * cm + cy * sm)
+    # ∂(c_k·t_m)/∂(r_k, α_k, s_k): (n_k·t_m, (r_k t_k − s_k n_k)·t_m, t_k·t_m)
+    nt1, tt1 = -c1 * sm + sn1 * cm, sn1 * sm + c1 * cm
+    nt2, tt2 = -c2 * sm + sn2 * cm, sn2 * sm + c2 * cm
+    row1 = w1 * np.array([nt1, r1 * tt1 - s1 * nt1, tt1])
+    row2 = w2 * np.array([nt2, r2 * tt2 - s2 * nt2, tt2])
+    row1[:2] += dsm_dam * W1[1]
+    row2[:2] += dsm_dam * G[1]
+    J1 = np.zeros((3, 3))
+    J2 = np.zeros((3, 3))
+    J1[:2, :2], J2[:2, :2] = W1, G
+    J1[2], J2[2] = row1, row2
+    cov = J1 @ P1 @ J1.T + J2 @ P2 @ J2.T
+    cov[:2, :2] = W1 @ A1
+    cov = 0.5 * (cov + cov.T)
+    a_m = (a_m + np.pi) % (2.0 * np.pi) - np.pi
+    if a_m == -np.pi:
+        a_m = np.pi
+    return np.array([r_m, a_m, s_m]), cov
 
 
 def to_normal_form(line: FloatArray, cov: FloatArray) -> tuple[FloatArray, FloatArray]:
