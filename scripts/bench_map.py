@@ -13,9 +13,10 @@ import argparse
 import time
 from itertools import islice
 
-from slam.config import RunConfig
 from slam.io.carmen import iter_scans
 from slam.io.catalog import resolve_log
+
+from slam.config import RunConfig
 from slam.lines.mapbuilder import MapBuilder
 from slam.mapping import fit_scan, scan_pose
 

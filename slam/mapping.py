@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -128,6 +128,7 @@ def build_map(
     collect_figures: bool = True,
     progress: Callable[[int], None] | None = None,
     fit: Callable[[Scan, RunConfig], tuple[list[Line], int]] | None = None,
+    pose_covs: Sequence[FloatArray] | None = None,
 ) -> MapRun:
     """Fit every scan and merge its lines into a map with the scans' own poses.
 
@@ -147,6 +148,9 @@ def build_map(
     fit : callable, optional
         ``fit(scan, config) -> (lines, n_points)``; default :func:`fit_scan`
         (:func:`linefit.extract_lines`).
+    pose_covs : sequence of ndarray (3, 3), optional
+        One pose covariance per scan (right perturbation), e.g. odometry compounded from the
+        first pose; default ``config.map.pose_cov`` for every scan.
     """
     fit_fn = fit_scan if fit is None else fit
     builder = MapBuilder(config.map)
@@ -164,7 +168,9 @@ def build_map(
         t1 = time.perf_counter()
         lines, pts = fit_fn(scan, config)
         t2 = time.perf_counter()
-        builder.add_scan(lines, pose, config.map.pose_cov)
+        k = n_scans + skipped
+        P = config.map.pose_cov if pose_covs is None else pose_covs[k]
+        builder.add_scan(lines, pose, P)
         t3 = time.perf_counter()
         t_fit += t2 - t1
         t_merge += t3 - t2
