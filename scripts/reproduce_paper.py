@@ -20,9 +20,14 @@ import numpy as np
 
 from slam.config import RunConfig
 from slam.lines.mapbuilder import MapBuilder
-from slam.lines.transform import compose_chain
-from slam.mapping import build_map, compression, fit_scan, scan_pose, write_map_results
-from slam.types import Scan
+from slam.mapping import (
+    build_map,
+    compression,
+    fit_scan,
+    scan_pose,
+    simulate_paper_sequence,
+    write_map_results,
+)
 
 # (data, points, lines, merged, compression %) from Sec. VI (reading notes)
 PAPER = {
@@ -47,56 +52,14 @@ HEADER = (
 )
 
 
-SIGMA_D, SIGMA_PHI = 0.005, 1e-4
-N_BEAMS = 720  # the paper's 720 points per scan: 0.25° over 180°
-SPACING_M = {"hallway": 3.5, "lab": 2.4}  # distance between the poses along the path
-
-
-def sim_sequence(world_name: str, n_poses: int, rng: np.random.Generator):
-    """``n_poses`` scans along the world's path with the paper's sensor, odometry poses.
-
-    Returns the scans (``pose_odom_laser`` = odometry) and each pose's covariance relative to
-    the first pose (odometry compounded with :func:`compose_chain`: the paper's ``P^1j``).
-    """
-    from slam.sim import (
-        cast_scan,
-        get_world,
-        motion_noise_covariance,
-        noisy_motions,
-        relative_motions,
-        trajectory_from_waypoints,
-    )
-    from slam.sim.config import OdometryNoiseConfig, TrajectoryConfig
-
-    world = get_world(world_name)
-    traj = trajectory_from_waypoints(world.waypoints, TrajectoryConfig(scan_spacing_m=0.05))
-    path = traj.poses_world_base
-    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path[:, :2], axis=0).T))])
-    targets = 1.0 + SPACING_M[world_name] * np.arange(n_poses)
-    truth = path[np.searchsorted(arc, targets)]
-    odo = OdometryNoiseConfig()
-    motions = relative_motions(truth)
-    est, covs = compose_chain(
-        noisy_motions(motions, odo, rng), motion_noise_covariance(motions, odo), truth[0]
-    )
-    bearings = -np.pi / 2 + np.arange(N_BEAMS) * (np.pi / N_BEAMS)
-    scans = []
-    for k, pose in enumerate(truth):
-        # the paper's noise model: the ray is cast at Φ + ε_φ, reported at Φ; range + ε_d
-        ranges, _ = cast_scan(pose, bearings + rng.normal(0, SIGMA_PHI, N_BEAMS), world, 80.0)
-        ranges = np.where(np.isfinite(ranges), ranges + rng.normal(0, SIGMA_D, N_BEAMS), 80.0)
-        scans.append(Scan(k, float(k), ranges, bearings, max_range_m=80.0, pose_odom_laser=est[k]))
-    return scans, list(covs)
-
-
-def sim_rows(config: RunConfig, seed: int, figures: str | None) -> list[str]:
+def sim_rows(config: RunConfig, seed: int, figures: str | None, pose_cov: str) -> list[str]:
     from pathlib import Path
 
     out = []
     for world, label in (("hallway", "hallway"), ("lab", "laboratory")):
         for n in (1, 2, 8, 10):
             rng = np.random.default_rng([seed, n, len(world)])
-            scans, covs = sim_sequence(world, n, rng)
+            scans, covs = simulate_paper_sequence(world, n, rng, pose_cov)
             run = build_map(scans, config, pose_covs=covs, collect_figures=figures is not None)
             s = run.summary
             paper = PAPER.get((label, n))
@@ -153,6 +116,13 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--figures", default=None, help="folder for the paper-style figures")
     parser.add_argument("--no-real", action="store_true", help="skip the real logs")
+    parser.add_argument(
+        "--pose-cov",
+        choices=("step", "chain"),
+        default="step",
+        help="each scan's pose covariance: the odometry step from the previous scan (default) "
+        "or odometry compounded from the first scan (the paper's P^1j)",
+    )
     args = parser.parse_args()
     config = RunConfig(seed=args.seed)
 
@@ -163,7 +133,7 @@ def main() -> None:
     print("\nlineslam, simulated (σ_d 5 mm, σ_φ 1e-4 rad, 720 beams; odometry poses with")
     print("the compounded odometry covariance from the first pose):\n")
     print(HEADER)
-    for line in sim_rows(config, args.seed, args.figures):
+    for line in sim_rows(config, args.seed, args.figures, args.pose_cov):
         print(line)
     if not args.no_real:
         print("\nReal logs (odometry poses, default [map] pose covariance):\n")

@@ -27,7 +27,15 @@ from slam.lines.mapio import write_map_json
 from slam.lines.transform import line_to_world
 from slam.types import Scan
 
-__all__ = ["MapRun", "build_map", "compression", "fit_scan", "run_map", "write_map_results"]
+__all__ = [
+    "MapRun",
+    "build_map",
+    "compression",
+    "fit_scan",
+    "run_map",
+    "simulate_paper_sequence",
+    "write_map_results",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -271,3 +279,76 @@ def run_map(
     run.summary["runtime_s"]["total"] = time.perf_counter() - t0
     (out / "summary.json").write_text(json.dumps(run.summary, indent=1) + "\n", "utf-8")
     return run.summary
+
+
+PAPER_SPACING_M = {"hallway": 3.5, "lab": 2.4}
+"""Distance (m) between the poses of a paper-style sequence along the world's path."""
+
+
+def simulate_paper_sequence(
+    world_name: str,
+    n_poses: int,
+    rng: np.random.Generator,
+    pose_cov: str = "step",
+    n_beams: int = 720,
+    sigma_range_m: float = 0.005,
+    sigma_bearing_rad: float = 1e-4,
+) -> tuple[list[Scan], list[FloatArray]]:
+    """A sequence like the paper's Sec. VI: ``n_poses`` scans along a simulated world's path.
+
+    The paper's sensor (720 beams, 0.25° over 180°; the ray is cast at ``Φ + ε_φ`` and reported
+    at ``Φ``, range noise ``ε_d``), poses ``PAPER_SPACING_M`` apart along the world's path
+    (:mod:`slam.sim`), odometry with the simulator's default noise between them.
+
+    Parameters
+    ----------
+    world_name : str
+        ``"hallway"`` or ``"lab"`` (or any :func:`slam.sim.get_world` name).
+    n_poses : int
+    rng : numpy.random.Generator
+    pose_cov : {"step", "chain"}
+        Each scan's pose covariance: the odometry step from the previous scan, i.e. the
+        uncertainty relative to the map built around it (default), or the odometry compounded
+        from the first scan (the paper's ``P^1j``; far poses then merge too eagerly).
+
+    Returns
+    -------
+    scans : list of Scan
+        ``pose_odom_laser`` is the odometry estimate; readings with no hit are at 80 m (max).
+    covs : list of ndarray (3, 3)
+        Pose covariance of each scan (right perturbation).
+    """
+    from slam.lines.transform import compose_chain
+    from slam.sim import (
+        cast_scan,
+        get_world,
+        motion_noise_covariance,
+        noisy_motions,
+        relative_motions,
+        trajectory_from_waypoints,
+    )
+    from slam.sim.config import OdometryNoiseConfig, TrajectoryConfig
+
+    if pose_cov not in ("step", "chain"):
+        raise ValueError(f"pose_cov must be 'step' or 'chain', got {pose_cov!r}")
+    world = get_world(world_name)
+    traj = trajectory_from_waypoints(world.waypoints, TrajectoryConfig(scan_spacing_m=0.05))
+    path = traj.poses_world_base
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path[:, :2], axis=0).T))])
+    targets = 1.0 + PAPER_SPACING_M.get(world_name, 3.0) * np.arange(n_poses)
+    truth = path[np.minimum(np.searchsorted(arc, targets), len(path) - 1)]
+    odo = OdometryNoiseConfig()
+    motions = relative_motions(truth)
+    step_covs = motion_noise_covariance(motions, odo)
+    est, chain_covs = compose_chain(noisy_motions(motions, odo, rng), step_covs, truth[0])
+    covs = chain_covs if pose_cov == "chain" else np.concatenate([np.zeros((1, 3, 3)), step_covs])
+    max_range = 80.0
+    bearings = -np.pi / 2 + np.arange(n_beams) * (np.pi / n_beams)
+    scans = []
+    for k, pose in enumerate(truth):
+        jitter = rng.normal(0.0, sigma_bearing_rad, n_beams)
+        ranges, _ = cast_scan(pose, bearings + jitter, world, max_range)
+        hit = np.isfinite(ranges) & (ranges < max_range)
+        ranges = np.where(hit, ranges + rng.normal(0.0, sigma_range_m, n_beams), max_range)
+        scans.append(Scan(k, float(k), ranges, bearings, max_range, pose_odom_laser=est[k]))
+    return scans, list(covs)
