@@ -38,17 +38,18 @@ PAPER = {
 }
 
 
-def row(name: str, points: int, lines: int, merged: int, segments: int) -> str:
+def row(name: str, points: int, lines: int, merged: int, segments: int, ref: str = "") -> str:
     return (
         f"| {name} | {points} | {lines} | {merged} ({segments}) | "
         f"{100 * compression(points, lines):.1f} % | {100 * compression(points, merged):.1f} % | "
-        f"{100 * compression(points, segments):.1f} % |"
+        f"{100 * compression(points, segments):.1f} % | {ref} |"
     )
 
 
 HEADER = (
     "| data | points | lines | merged lines (segments) | compression fit | "
-    "compression merged (line = 2 pts) | (segment = 2 pts) |\n|---|---|---|---|---|---|---|"
+    "compression merged (line = 2 pts) | (segment = 2 pts) | paper |\n"
+    "|---|---|---|---|---|---|---|---|"
 )
 
 
@@ -66,7 +67,7 @@ def sim_rows(config: RunConfig, seed: int, figures: str | None, pose_cov: str) -
             ref = ""
             if paper is not None:
                 p, l, m, c = paper
-                ref = f" paper: {p} → {l} → {'–' if m is None else m}, {c} %"
+                ref = f"{p} → {l} → {'–' if m is None else m}, {c} %"
             out.append(
                 row(
                     f"{n} pose(s), {label} (sim)",
@@ -74,8 +75,8 @@ def sim_rows(config: RunConfig, seed: int, figures: str | None, pose_cov: str) -
                     s["lines_fit"],
                     s["lines_merged"],
                     s["segments_merged"],
+                    ref,
                 )
-                + ref
             )
             if figures is not None and (world, n) in (("hallway", 8), ("lab", 10), ("hallway", 2)):
                 folder = Path(figures) / f"sim_{world}_{n}"
@@ -130,15 +131,19 @@ def main() -> None:
     print("| data | points | lines | merged | compression |\n|---|---|---|---|---|")
     for (world, n), (p, l, m, c) in PAPER.items():
         print(f"| {n} pose(s), {world} | {p} | {l} | {'–' if m is None else m} | {c} % |")
-    print("\nlineslam, simulated (σ_d 5 mm, σ_φ 1e-4 rad, 720 beams; odometry poses with")
-    print("the compounded odometry covariance from the first pose):\n")
+    what = {
+        "step": "the odometry step from the previous scan",
+        "chain": "the odometry compounded from the first scan",
+    }[args.pose_cov]
+    print("\nlineslam, simulated (σ_d 5 mm, σ_φ 1e-4 rad, 720 beams; odometry poses, each with")
+    print(f"the covariance of {what}; seed {args.seed}):\n")
     print(HEADER)
     for line in sim_rows(config, args.seed, args.figures, args.pose_cov):
         print(line)
     if not args.no_real:
         print("\nReal logs (odometry poses, default [map] pose covariance):\n")
         print(HEADER)
-        for line in real_log_rows(config, (1, 2, 8, 10)):
+        for line in real_log_rows(config, (1, 2, 8, 10, 100)):
             print(line)
 
 
