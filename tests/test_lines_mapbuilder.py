@@ -12,6 +12,7 @@ import pytest
 from scipy.stats import chi2
 
 from linefit.line import Line
+from slam.errors import InputError
 from slam.geometry import pose_compose, pose_exp, pose_inverse, wrap_angle
 from slam.lines import align_representative
 from slam.lines.config import MapConfig
@@ -218,7 +219,7 @@ def test_within_scan_pieces_merge_and_bad_input(rng):
     b = MapBuilder()
     assert b.add_scan([ln for ln in lines if ln is not None], pose, np.zeros((3, 3))) == 1
     assert b.line_map().lines[0].segments.shape[0] == 3
-    with pytest.raises(Exception, match="pose_world_laser"):
+    with pytest.raises(InputError, match="pose_world_laser"):
         b.add_scan(lines[:1], np.array([np.nan, 0, 0]))
     assert b.add_scan([], pose) == 1
 
