@@ -343,7 +343,7 @@ def simulate_paper_sequence(
     est, chain_covs = compose_chain(noisy_motions(motions, odo, rng), step_covs, truth[0])
     covs = chain_covs if pose_cov == "chain" else np.concatenate([np.zeros((1, 3, 3)), step_covs])
     max_range = 80.0
-    bearings = -np.pi / 2 + np.arange(n_beams) * (np.pi / n_beams)
+    bearings = np.asarray(-np.pi / 2 + np.arange(n_beams) * (np.pi / n_beams), dtype=np.float64)
     scans = []
     for k, pose in enumerate(truth):
         jitter = rng.normal(0.0, sigma_bearing_rad, n_beams)
