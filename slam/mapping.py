@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from linefit.line import Line
 from slam.config import RunConfig
+from slam.errors import InputError
 from slam.geometry import pose_compose
 from slam.lines.mapbuilder import LineMap, MapBuilder
 from slam.lines.mapio import write_map_json
@@ -332,6 +333,8 @@ def simulate_paper_sequence(
     if pose_cov not in ("step", "chain"):
         raise ValueError(f"pose_cov must be 'step' or 'chain', got {pose_cov!r}")
     world = get_world(world_name)
+    if world.waypoints is None:
+        raise InputError(f"world {world_name!r} has no default path (waypoints)")
     traj = trajectory_from_waypoints(world.waypoints, TrajectoryConfig(scan_spacing_m=0.05))
     path = traj.poses_world_base
     arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path[:, :2], axis=0).T))])
