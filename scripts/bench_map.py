@@ -14,10 +14,10 @@ import time
 from itertools import islice
 
 import numpy as np
-from slam.io.carmen import iter_scans
-from slam.io.catalog import resolve_log
 
 from slam.config import RunConfig
+from slam.io.carmen import iter_scans
+from slam.io.catalog import resolve_log
 from slam.lines.config import MapConfig
 from slam.lines.mapbuilder import MapBuilder
 from slam.mapping import fit_scan, scan_pose
