@@ -54,3 +54,68 @@ def test_merged_hallway_lines_lie_on_true_walls():
         )
         d = np.linalg.norm(a[:, None] + t[..., None] * ab[:, None] - mid[None], axis=-1)
         assert np.all(d.min(axis=0) < 0.01 + 3 * np.sqrt(ln.cov[0, 0])), (ln.r, ln.alpha, d.min(0))
+
+
+def test_merged_lines_consistent_with_true_walls_nees():
+    """Independent pose errors drawn from the stated covariance: NEES of merged (r, α) ~ χ²₂."""
+    from scipy.stats import chi2
+
+    from slam.geometry import pose_compose, pose_exp
+    from slam.lines import align_representative
+
+    world = sim.get_world("hallway")
+    seg = world.segments.reshape(-1, 2, 2)
+    a, b = seg[:, 0], seg[:, 1]
+    ab = b - a
+    normal = np.stack([ab[:, 1], -ab[:, 0]], 1) / np.linalg.norm(ab, axis=1)[:, None]
+    true_r = np.sum(normal * a, 1)
+    true_alpha = np.arctan2(normal[:, 1], normal[:, 0])
+    pose_cov = np.diag([0.01, 0.01, 0.002]) ** 2
+    L = np.linalg.cholesky(pose_cov)
+    rng = np.random.default_rng(11)
+    nees = []
+    for _ in range(12):
+        scans, _ = simulate_paper_sequence("hallway", 6, rng)
+        from slam.sim import trajectory_from_waypoints
+        from slam.sim.config import TrajectoryConfig
+
+        traj = trajectory_from_waypoints(world.waypoints, TrajectoryConfig(scan_spacing_m=0.05))
+        path = traj.poses_world_base
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path[:, :2], axis=0).T))])
+        truth = path[np.searchsorted(arc, 1.0 + 3.5 * np.arange(6))]
+        noisy = [
+            type(sc)(
+                sc.index,
+                sc.timestamp,
+                sc.ranges,
+                sc.bearings,
+                sc.max_range_m,
+                pose_odom_laser=pose_compose(p, pose_exp(L @ rng.normal(size=3))),
+            )
+            for sc, p in zip(scans, truth, strict=True)
+        ]
+        m = build_map(noisy, RunConfig(), pose_covs=[pose_cov] * 6, collect_figures=False)
+        for ln in m.line_map.lines:
+            if ln.n_observations < 2:
+                continue
+            mid = ln.segments.mean(axis=1)
+            t = np.einsum("skd,sd->sk", mid[None] - a[:, None], ab) / np.sum(ab * ab, 1)[:, None]
+            near = (
+                np.linalg.norm(
+                    a[:, None] + np.clip(t, 0, 1)[..., None] * ab[:, None] - mid[None], axis=-1
+                ).min(axis=1)
+                < 0.3
+            )
+            if not near.any():
+                continue
+            est, P, _ = align_representative(
+                np.broadcast_to([ln.r, ln.alpha], (near.sum(), 2)), ln.cov_r_alpha, true_alpha[near]
+            )
+            e = est - np.column_stack([true_r[near], true_alpha[near]])
+            e[:, 1] = (e[:, 1] + np.pi) % (2 * np.pi) - np.pi
+            d2 = np.einsum("ki,ij,kj->k", e, np.linalg.inv(ln.cov_r_alpha), e)
+            nees.append(d2.min())
+    nees = np.array(nees)
+    lo, hi = chi2.ppf([0.001, 0.999], 2 * nees.size)
+    assert nees.size > 50
+    assert lo <= nees.sum() <= hi, (nees.mean(), nees.size)
