@@ -113,7 +113,7 @@ def test_merged_lines_consistent_with_true_walls_nees():
             )
             e = est - np.column_stack([true_r[near], true_alpha[near]])
             e[:, 1] = (e[:, 1] + np.pi) % (2 * np.pi) - np.pi
-            d2 = np.einsum("ki,ij,kj->k", e, np.linalg.inv(ln.cov_r_alpha), e)
+            d2 = np.einsum("ki,kij,kj->k", e, np.linalg.inv(P), e)
             nees.append(d2.min())
     nees = np.array(nees)
     lo, hi = chi2.ppf([0.001, 0.999], 2 * nees.size)
