@@ -8,6 +8,7 @@ here independently of :mod:`linefit`.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from slam.geometry import pose_compose, pose_exp, wrap_angle
 from slam.lines import fuse, transform_line
@@ -66,15 +67,26 @@ def wall_points(rng, r, alpha, s_lo, s_hi, step=STEP):
     return np.column_stack([d * np.cos(phi), d * np.sin(phi)])
 
 
-def test_fusing_two_fits_equals_one_fit_of_all_points(rng):
+def linefit_fit(pts: np.ndarray, Q: np.ndarray, alpha0: float) -> tuple[np.ndarray, np.ndarray]:
+    """The same fit through linefit's public point-set fit (skips until it is merged)."""
+    import linefit
+
+    if not hasattr(linefit, "fit_line"):
+        pytest.skip("linefit.fit_line not merged yet")
+    ln = linefit.fit_line(pts, Q, alpha0=alpha0)
+    return np.array([ln.r, ln.alpha, ln.s]), ln.cov
+
+
+@pytest.mark.parametrize("fit", [ml_fit, linefit_fit], ids=["oracle", "linefit"])
+def test_fusing_two_fits_equals_one_fit_of_all_points(rng, fit):
     for _ in range(10):
         r, alpha = rng.uniform(1.0, 4.0), rng.uniform(-np.pi, np.pi)
         p1 = wall_points(rng, r, alpha, -4.0, -0.5)
         p2 = wall_points(rng, r, alpha, 1.0, 6.0)  # off-centre piece (reading note 8)
         Q1, Q2 = point_covs(p1), point_covs(p2)
-        l1, P1 = ml_fit(p1, Q1, alpha)
-        l2, P2 = ml_fit(p2, Q2, alpha)
-        lj, Pj = ml_fit(np.concatenate([p1, p2]), np.concatenate([Q1, Q2]), alpha)
+        l1, P1 = fit(p1, Q1, alpha)
+        l2, P2 = fit(p2, Q2, alpha)
+        lj, Pj = fit(np.concatenate([p1, p2]), np.concatenate([Q1, Q2]), alpha)
         lf, Pf = fuse(l1, P1, l2, P2)
         sd = np.sqrt(np.diag(Pj))
         d = lf - lj
