@@ -93,10 +93,12 @@ def test_fusing_two_fits_equals_one_fit_of_all_points(rng, fit):
         d[1] = wrap_angle(d[1])
         assert np.all(np.abs(d[:2]) < 0.05 * sd[:2]), d[:2] / sd[:2]
         np.testing.assert_allclose(Pf[:2, :2], Pj[:2, :2], rtol=0.02)
-        # s: the weighted centroid of all points.  The weights 1/P_S depend on α and each piece
-        # evaluates them at its own α̂, the joint fit at the joint α̂: a mm-level difference on
-        # pieces several metres long (beam spacing here: 2-5 cm)
-        assert abs(d[2]) < 5e-3
+        # s: the weighted centroid of all points, to within a few cm on pieces 3.5 m and 5 m
+        # long and 5 m apart (beam spacing 2-5 cm).  The oracle's s is uncorrelated with α
+        # (Eq. 25): the centroid weights are then exact, up to the α at which each fit
+        # evaluates its point weights 1/P_S (mm).  linefit's full covariance only gives the
+        # weights approximately (variance of s given α).
+        assert abs(d[2]) < (5e-3 if fit is ml_fit else 0.06)
         # Eq. 23 (the point fit's P_ss) ignores the rotation of the centroids with α; the
         # fusion propagates it (test_lines_merge checks that by Monte Carlo): never smaller
         assert Pf[2, 2] >= Pj[2, 2] * (1 - 1e-9)

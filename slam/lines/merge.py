@@ -19,7 +19,9 @@ form ``x = x₁ + G (x₂ − x₁)``, ``G = P₁ (P₁ + P₂)⁻¹``, ``P = (I
 in common: ``s`` of each line is the centroid of its *own* points, so the fused ``s`` is the
 ``1/P_ss``-weighted mean of the two centroids projected on the fused line (exactly what a single
 fit of all the points gives, Eq. 21/23), not a Kalman update of ``(r, α)`` by the difference of
-two centroids.  The 3×3 covariance is the first-order propagation through that map.
+two centroids.  The weights are ``1/P_s|α`` (the variance of ``s`` given ``α``; ``1/P_ss`` when
+they are uncorrelated, as in the paper's Eq. 25).  The 3×3 covariance is the first-order
+propagation through that map.
 """
 
 from __future__ import annotations
@@ -206,6 +208,23 @@ def is_compatible(
     return np.asarray(mahalanobis2(l1, P1, l2, P2, same_side) <= chi2_gate(probability))
 
 
+def _s_weight_variance(P: FloatArray) -> FloatArray:
+    """Variance of ``s`` given ``α`` (Schur complement), the basis of the centroid weights.
+
+    A fitted line's ``P_ss`` mostly reflects its rotation (``s`` moves by ``−r δα``); the part
+    that tells how many and how precise the points along the line are is the variance left
+    when ``α`` is known: ``P_ss − P_sα²/P_αα`` (``= 1/Σ(1/P_S)``, Eq. 23, when ``s`` and ``α``
+    are uncorrelated).  Weighting the centroids by its inverse makes the fused ``s`` the
+    weighted centroid of all the points (tested against a joint fit).
+    """
+    Pss = P[..., 2, 2]
+    Paa = P[..., 1, 1]
+    Psa = P[..., 2, 1]
+    safe = np.where(Paa > 0.0, Paa, 1.0)
+    cond = np.where(Paa > 0.0, Pss - Psa**2 / safe, Pss)
+    return np.asarray(np.maximum(cond, 1e-12 * Pss))
+
+
 def fuse(
     l1: FloatArray,
     P1: FloatArray,
@@ -229,9 +248,10 @@ def fuse(
     -------
     line : ndarray, shape (..., d)
     cov : ndarray, shape (..., d, d)
-        ``(r, α)``: Eqs. 36-37 (gain form).  ``s``: the ``1/P_ss``-weighted mean of both
-        centroids projected on the fused line, with the ``s`` variance ``1/(1/P_ss₁ + 1/P_ss₂)``
-        plus the first-order effect of the fused line's rotation; see the module docstring.
+        ``(r, α)``: Eqs. 36-37 (gain form).  ``s``: the ``1/P_s|α``-weighted mean of both
+        centroids projected on the fused line (``P_s|α = P_ss − P_sα²/P_αα``), covariance by
+        first-order propagation (for uncorrelated ``s``: ``1/(1/P_ss₁ + 1/P_ss₂)`` plus the
+        effect of the fused line's rotation); see the module docstring.
 
     Raises
     ------
@@ -271,8 +291,8 @@ def fuse(
         r_m, a_m = xm[..., 0], xm[..., 1]
         n_m = np.stack([np.cos(a_m), np.sin(a_m)], -1)
         t_m = np.stack([-np.sin(a_m), np.cos(a_m)], -1)
-        v1 = P1b[..., 2, 2]
-        v2 = P2a[..., 2, 2]
+        v1 = _s_weight_variance(P1b)
+        v2 = _s_weight_variance(P2a)
         # weights 1/P_ss (a line with P_ss = 0 pins s; two such lines: plain mean)
         both_zero = (v1 <= 0.0) & (v2 <= 0.0)
         w1 = np.where(both_zero, 0.5, np.where(v1 <= 0.0, 1.0, 0.0))
@@ -349,7 +369,7 @@ def fuse_pair_unchecked(
     G = A1 @ Si
     W1 = np.eye(2) - G
     r_m, a_m = np.array([r1, a1]) + G @ np.array([r2 - r1, a2 - a1])
-    v1, v2 = float(P1[2, 2]), float(P2[2, 2])
+    v1, v2 = float(_s_weight_variance(P1)), float(_s_weight_variance(P2))
     if v1 > 0.0 and v2 > 0.0:
         w1 = v2 / (v1 + v2)
     elif v1 <= 0.0 and v2 <= 0.0:
