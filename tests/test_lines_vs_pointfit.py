@@ -104,19 +104,24 @@ def test_fusing_two_fits_equals_one_fit_of_all_points(rng, fit):
         assert Pf[2, 2] >= Pj[2, 2] * (1 - 1e-9)
 
 
-def test_transform_of_fitted_line_equals_fit_of_transformed_points(rng):
+@pytest.mark.parametrize("fit", [ml_fit, linefit_fit], ids=["oracle", "linefit"])
+def test_transform_of_fitted_line_equals_fit_of_transformed_points(rng, fit):
     pose = np.array([2.0, -1.0, 0.8])
     c, s = np.cos(pose[2]), np.sin(pose[2])
     R = np.array([[c, -s], [s, c]])
     pts = wall_points(rng, 2.5, 0.4, -3.0, 2.0)
     Q = point_covs(pts)
-    lj, Pj = ml_fit(pts, Q, 0.4)
-    li_fit, Pi_fit = ml_fit(pts @ R.T + pose[:2], R @ Q @ R.T, 0.4 + pose[2])
+    lj, Pj = fit(pts, Q, 0.4)
+    li_fit, Pi_fit = fit(pts @ R.T + pose[:2], R @ Q @ R.T, 0.4 + pose[2])
     li, Pi = transform_line(lj, Pj, pose)
     d = li - li_fit
     d[1] = wrap_angle(d[1])
     np.testing.assert_allclose(d, 0.0, atol=1e-9)
     np.testing.assert_allclose(Pi[:2, :2], Pi_fit[:2, :2], rtol=1e-6)
+    if fit is linefit_fit:
+        # linefit's full (r, α, s) covariance moves with B as a whole (Eq. 31, exact pose);
+        # the oracle's Eq. 25 form (s uncorrelated with α) is not frame-invariant
+        np.testing.assert_allclose(Pi, Pi_fit, rtol=1e-6, atol=1e-15)
 
 
 def test_refit_under_pose_noise_matches_eq31_monte_carlo(rng):
