@@ -15,6 +15,7 @@ import typer
 from slam.cli import (  # noqa: F401  (commands register on import)
     cmd_datasets,
     cmd_evaluate,
+    cmd_map,
     cmd_simulate,
 )
 from slam.cli._app import app
