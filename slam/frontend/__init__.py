@@ -1,0 +1,10 @@
+"""Front end: register a scan's lines against a local line map before it enters the back-end."""
+
+from slam.frontend.lineset import LineSet
+from slam.frontend.registration import (
+    RegistrationConfig,
+    RegistrationResult,
+    register_lines,
+)
+
+__all__ = ["LineSet", "RegistrationConfig", "RegistrationResult", "register_lines"]
