@@ -274,6 +274,9 @@ class SlamConfig:
         scans get their keyframe's covariance compounded with the odometry noise).
     map_segment_gap_m : float
         In the output map, observed pieces of a line closer than this are one segment.
+    map_min_observations : int
+        Landmarks with fewer line measurements stay in the graph but are left out of the
+        output map (one-off lines: clutter, lines fitted across depth jumps).
     """
 
     backend: Literal["batch", "isam2"] = "isam2"
@@ -290,6 +293,7 @@ class SlamConfig:
     min_line_length_m: float = 0.1
     pose_covariances: Literal["keyframes", "none"] = "keyframes"
     map_segment_gap_m: float = 0.3
+    map_min_observations: int = 3
 
     def __post_init__(self) -> None:
         _require(
@@ -308,6 +312,7 @@ class SlamConfig:
             "pose_covariances must be keyframes or none",
         )
         _nonneg("map_segment_gap_m", self.map_segment_gap_m)
+        _require(self.map_min_observations >= 1, "map_min_observations must be >= 1")
 
     @property
     def prior_cov(self) -> FloatArray:

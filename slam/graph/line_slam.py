@@ -198,10 +198,13 @@ class LineSlam:
 
     def _usable(
         self, lines: Sequence[Line]
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """``z (K,2)``, ``R (K,2,2)``, end points ``(K,2,2)``, end variances ``(K,2)``."""
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, list[FloatArray], list[FloatArray]]:
+        """``z (K,2)``, ``R (K,2,2)``, end points ``(K,2,2)``, end variances ``(K,2)``, and each
+        line's visible pieces ``(p,2,2)`` with their end variances ``(p,2)``."""
         cfg = self.config
         z, R, ep, ev = [], [], [], []
+        pieces: list[FloatArray] = []
+        pieces_var: list[FloatArray] = []
         for ln in lines:
             cov = np.asarray(ln.cov, dtype=float)[:2, :2]
             ok = (
@@ -219,9 +222,12 @@ class LineSlam:
             R.append(0.5 * (cov + cov.T))
             ep.append(ln.endpoints)
             ev.append([ln.segments_var[0, 0], ln.segments_var[-1, 1]])
+            pieces.append(ln.point_at(ln.segments_s))
+            pieces_var.append(np.asarray(ln.segments_var, dtype=float))
         if not z:
-            return np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2))
-        return np.array(z), np.array(R), np.array(ep), np.array(ev)
+            empty = np.zeros((0, 2, 2))
+            return np.zeros((0, 2)), empty, empty, np.zeros((0, 2)), [], []
+        return np.array(z), np.array(R), np.array(ep), np.array(ev), pieces, pieces_var
 
     # -- the main step -----------------------------------------------------------------------
     def add_scan(self, scan: Scan, lines: Sequence[Line] | None = None) -> ScanReport:
@@ -284,7 +290,7 @@ class LineSlam:
     ) -> ScanReport:
         cfg = self.config
         g = self.graph
-        z, R, ep, ev = self._usable(lines)
+        z, R, ep, ev, pieces, pieces_var = self._usable(lines)
         K = z.shape[0]
         self.counters["lines_used"] += K
         warned: list[str] = []
@@ -363,7 +369,17 @@ class LineSlam:
             lm_idx[new] = g.add_landmarks(la_new, anchors)
             self._extents = np.vstack([self._extents, np.full((int(new.sum()), 2), np.nan)])
         use = matched | new
-        factors = g.add_line_factors(i, lm_idx[use], z[use], R[use], ep[use], ev[use])
+        used = np.flatnonzero(use)
+        factors = g.add_line_factors(
+            i,
+            lm_idx[use],
+            z[use],
+            R[use],
+            ep[use],
+            ev[use],
+            pieces=[pieces[k] for k in used],
+            pieces_var=[pieces_var[k] for k in used],
+        )
         self.counters["lines_matched"] += int(matched.sum())
         self.counters["lines_new"] += int(new.sum())
         self.counters["lines_ambiguous"] += int(ambiguous.sum())
@@ -496,7 +512,7 @@ class LineSlam:
                 self.config.motion.covariance(offsets),
             )
         counts = g.observation_counts()
-        ids = np.flatnonzero(g.landmark_alive & (counts > 0))
+        ids = np.flatnonzero(g.landmark_alive & (counts >= self.config.map_min_observations))
         la = g.landmarks_r_alpha[ids]
         lcov = self.backend.landmark_covariances(g, ids) if ids.size else np.zeros((0, 2, 2))
         J = anchored_jacobian(g.landmarks[ids], g.anchors[ids])
@@ -537,11 +553,13 @@ class LineSlam:
         g = self.graph
         if g.n_line_factors == 0 or ids.size == 0:
             return [np.zeros((0, 2, 2)) for _ in ids], [np.zeros((0, 2)) for _ in ids]
-        pts = g.world_endpoints()
-        lm = g.factor_landmark
+        pf = g.piece_factor
+        fp = g.factor_pose[pf]
+        ends = np.concatenate([g.piece_ends, np.zeros((pf.shape[0], 2, 1))], axis=-1)
+        pts = pose_compose(np.broadcast_to(g.poses[fp][:, None, :], ends.shape), ends)[..., :2]
         pos = np.full(g.n_landmarks, -1)
         pos[ids] = np.arange(ids.size)
-        row = pos[lm]
+        row = pos[g.factor_landmark[pf]]
         keep = row >= 0
         a = la_nf[row[keep], 1]
         r = la_nf[row[keep], 0]
@@ -549,12 +567,12 @@ class LineSlam:
         nrm = np.stack([np.cos(a), np.sin(a)], -1)
         s = np.einsum("fkd,fd->fk", pts[keep], t)
         lo, hi = s.min(axis=1), s.max(axis=1)
-        var = g.factor_endpoint_var[keep]
+        var = g.piece_var[keep]
         if kf_cov is not None:
-            th = g.poses[g.factor_pose[keep], 2]
+            th = g.poses[fp[keep], 2]
             c, sn = np.cos(th), np.sin(th)
             Rw = np.stack([np.stack([c, -sn], -1), np.stack([sn, c], -1)], -2)
-            Pw = Rw @ kf_cov[g.factor_pose[keep], :2, :2] @ np.swapaxes(Rw, 1, 2)
+            Pw = Rw @ kf_cov[fp[keep], :2, :2] @ np.swapaxes(Rw, 1, 2)
             var = var + np.einsum("fi,fij,fj->f", t, Pw, t)[:, None]
         order = np.argsort(row[keep], kind="stable")
         rows = row[keep][order]

@@ -107,6 +107,10 @@ class LineGraph:
         self._f_sqrt_info = GrowableArray((2, 2))
         self._f_endpoints = GrowableArray((2, 2))
         self._f_endpoint_var = GrowableArray((2,))
+        # visible pieces of each measured line (a line may have gaps): ragged, by factor
+        self._p_factor = GrowableArray((), dtype=np.intp)
+        self._p_ends = GrowableArray((2, 2))
+        self._p_var = GrowableArray((2,))
         # odometry factors
         self._o_first = GrowableArray((), dtype=np.intp)
         self._o_second = GrowableArray((), dtype=np.intp)
@@ -210,6 +214,21 @@ class LineGraph:
         return self._f_endpoint_var.data
 
     @property
+    def piece_factor(self) -> IntArray:
+        """Line factor of each visible piece, ``(P,)`` (a measured line has one or more)."""
+        return self._p_factor.data
+
+    @property
+    def piece_ends(self) -> FloatArray:
+        """End points of each piece in its laser frame, ``(P, 2, 2)``."""
+        return self._p_ends.data
+
+    @property
+    def piece_var(self) -> FloatArray:
+        """Variances (m²) of each piece's ends along the line, ``(P, 2)``."""
+        return self._p_var.data
+
+    @property
     def odometry_first(self) -> IntArray:
         """First pose of each odometry factor, ``(E,)``."""
         return self._o_first.data
@@ -290,6 +309,8 @@ class LineGraph:
         cov: FloatArray,
         endpoints_laser: FloatArray,
         endpoint_var: FloatArray | None = None,
+        pieces: list[FloatArray] | None = None,
+        pieces_var: list[FloatArray] | None = None,
     ) -> IntArray:
         """Add line factors from pose ``pose`` to ``landmarks`` (``(k,)``); return indices.
 
@@ -306,6 +327,11 @@ class LineGraph:
             Measured segments' extreme end points (laser frame).
         endpoint_var : ndarray, shape (k, 2), optional
             Their variances along the line (m²); default 0.
+        pieces : list of k arrays of shape (p_i, 2, 2), optional
+            Visible pieces of each measured line (laser frame); default one piece from end
+            point to end point.
+        pieces_var : list of k arrays of shape (p_i, 2), optional
+            Variances of the pieces' ends; default ``endpoint_var``.
         """
         lm = np.asarray(landmarks, dtype=np.intp).reshape(-1)
         k = lm.shape[0]
@@ -324,8 +350,28 @@ class LineGraph:
         self._f_cov.append(c)
         self._f_sqrt_info.append(W)
         ev = np.zeros((k, 2)) if endpoint_var is None else np.asarray(endpoint_var, dtype=float)
-        self._f_endpoint_var.append(ev.reshape(k, 2))
-        return self._f_endpoints.append(np.asarray(endpoints_laser, dtype=float).reshape(k, 2, 2))
+        ev = ev.reshape(k, 2)
+        ep = np.asarray(endpoints_laser, dtype=float).reshape(k, 2, 2)
+        self._f_endpoint_var.append(ev)
+        idx = self._f_endpoints.append(ep)
+        if pieces is None:
+            self._p_factor.append(idx)
+            self._p_ends.append(ep)
+            self._p_var.append(ev)
+        else:
+            if len(pieces) != k:
+                raise InputError(f"expected {k} piece arrays, got {len(pieces)}")
+            for n, f in enumerate(idx):
+                pe = np.asarray(pieces[n], dtype=float).reshape(-1, 2, 2)
+                pv = (
+                    np.broadcast_to(ev[n], (pe.shape[0], 2))
+                    if pieces_var is None
+                    else np.asarray(pieces_var[n], dtype=float).reshape(-1, 2)
+                )
+                self._p_factor.append(np.full(pe.shape[0], f, dtype=np.intp))
+                self._p_ends.append(pe)
+                self._p_var.append(pv)
+        return idx
 
     def merge_landmarks(self, keep: int, drop: int, value: FloatArray | None = None) -> IntArray:
         """Fuse landmark ``drop`` into ``keep``: rewire ``drop``'s factors, retire ``drop``.
