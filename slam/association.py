@@ -124,7 +124,7 @@ def _chi2_quantile(probability: float, dof: int) -> float:
     return float(2.0 * gammaincinv(dof / 2.0, probability))
 
 
-def _chi2_ppf(probability: float, dof: FloatArray | int) -> Any:
+def _chi2_ppf(probability: float, dof: Any) -> Any:
     """χ² quantile(s) for integer degrees of freedom (cached)."""
     d = np.asarray(dof)
     if d.ndim == 0:

@@ -13,9 +13,9 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection
 
 __all__ = ["plot_slam_result"]
 
@@ -37,7 +37,7 @@ def plot_slam_result(result: Any, out_dir: Path, title: str = "") -> Path:
     fig, ax = plt.subplots(figsize=(9, 9))
     segs = [s for pieces in result.landmark_segments for s in pieces]
     if segs:
-        ax.add_collection(LineCollection(np.array(segs), colors="k", linewidths=1.2, label="map"))
+        ax.add_collection(LineCollection(list(segs), colors="k", linewidths=1.2, label="map"))
     p = np.asarray(result.poses_world_laser)
     ax.plot(p[:, 0], p[:, 1], "-", color="tab:blue", lw=0.8, label="trajectory (laser)")
     kf = np.asarray(result.is_keyframe, dtype=bool)

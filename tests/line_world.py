@@ -59,7 +59,7 @@ def split_walls(walls: list, normals: list, piece: float, door: float) -> tuple[
     for (p, q), n in zip(walls, normals, strict=True):
         p, q = np.asarray(p, float), np.asarray(q, float)
         length = np.linalg.norm(q - p)
-        k = max(1, int(round((length + door) / (piece + door))))
+        k = max(1, round((length + door) / (piece + door)))
         seg = (length - (k - 1) * door) / k
         d = (q - p) / length
         for j in range(k):
@@ -102,12 +102,12 @@ def loop_path(length: float, width: float, step: float, laps: float = 1.0) -> np
     poses = []
     corners = [(0.0, 0.0), (length, 0.0), (length, width), (0.0, width)]
     headings = [0.0, np.pi / 2, np.pi, -np.pi / 2]
-    total_sides = int(round(4 * laps))
+    total_sides = round(4 * laps)
     for k in range(total_sides):
         c0 = np.array(corners[k % 4])
         c1 = np.array(corners[(k + 1) % 4])
         side = np.linalg.norm(c1 - c0)
-        n = int(round(side / step))
+        n = round(side / step)
         for j in range(n):
             p = c0 + (c1 - c0) * j / n
             poses.append([p[0], p[1], headings[k % 4]])

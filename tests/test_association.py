@@ -1,4 +1,4 @@
-"""Data association: χ² gating with the right innovation covariance, NN, JCBB, overlap, fusion test."""
+"""Data association: χ² gate with the right innovation covariance, NN, JCBB, overlap, fusion."""
 
 from __future__ import annotations
 
@@ -141,7 +141,7 @@ def test_landmarks_compatible_uses_the_joint_marginal():
     P_corr = np.block([[sig, 0.99 * sig], [0.99 * sig, sig]])
     P_indep = np.block([[sig, np.zeros((2, 2))], [np.zeros((2, 2)), sig]])
     ok_corr, d2_corr = landmarks_compatible(l1, l2, P_corr, 0.9973)
-    ok_ind, d2_ind = landmarks_compatible(l1, l2, P_indep, 0.9973)
+    ok_ind, _ = landmarks_compatible(l1, l2, P_indep, 0.9973)
     assert not ok_corr and ok_ind
     assert d2_corr == pytest.approx(0.06**2 / (2 * 0.01 * 0.05**2), rel=1e-6)
     # the other representative of the same line is the same line

@@ -60,7 +60,7 @@ def incremental():
 
 
 def test_isam2_reaches_the_batch_solution(incremental):
-    g, solver, batch = incremental
+    g, _, batch = incremental
     np.testing.assert_allclose(g.poses[:, :2], batch.poses[:, :2], atol=2e-3)
     # iSAM2 linearises up to relinearize_threshold (0.01) away from the estimate: sub-mm effects
     np.testing.assert_allclose(wrap_angle(g.poses[:, 2] - batch.poses[:, 2]), 0.0, atol=3e-4)
@@ -71,7 +71,7 @@ def test_isam2_reaches_the_batch_solution(incremental):
 
 
 def test_isam2_marginals_match_batch(incremental):
-    g, solver, batch = incremental
+    _, solver, batch = incremental
     m = BatchSolver().marginals(batch)
     for i in (0, 75, 149):
         P_batch = m.marginalCovariance(keys_of("x", np.array([i]))[0])

@@ -246,7 +246,7 @@ def test_keyframes_and_result_round_trip(tmp_path):
     path = loop_path(10, 6, 0.1, laps=0.3)
     run = simulate_run(world, path, seed=8, motion=MOTION)
     cfg = SlamConfig(motion=MOTION, keyframes=KeyframeConfig(min_distance_m=0.5, min_angle_rad=0.3))
-    slam, res, reports = run_slam(run, cfg)
+    _, res, reports = run_slam(run, cfg)
     kf = np.array([r.keyframe for r in reports])
     assert kf[0] and 0.1 < kf.mean() < 0.35
     assert res.n_scans == len(run.scans) and res.is_keyframe.tolist() == kf.tolist()
@@ -270,5 +270,5 @@ def test_keyframes_and_result_round_trip(tmp_path):
 def test_scan_without_odometry_is_an_input_error():
     slam = LineSlam()
     scan = Scan(index=0, timestamp=0.0, ranges=np.zeros(0), bearings=np.zeros(0), source="x.clf:3")
-    with pytest.raises(InputError, match="x.clf:3.*odometry"):
+    with pytest.raises(InputError, match=r"x\.clf:3.*odometry"):
         slam.add_scan(scan, [])

@@ -55,7 +55,7 @@ def slam_command(
     if backend is not None:
         if backend not in ("batch", "isam2"):
             raise typer.BadParameter("--backend must be batch or isam2")
-        config = replace(config, slam=replace(config.slam, backend=backend))
+        config = replace(config, slam=replace(config.slam, backend=backend))  # type: ignore[arg-type]
     if max_scans is not None and max_scans < 1:
         raise typer.BadParameter("--max-scans must be >= 1")
     prepare_out_dir(out, config)

@@ -291,6 +291,7 @@ class BatchSolver:
                 system = self._damped(gfg, lms, scale[0], scale[1], lam)
             else:
                 system = gfg
+            assert ordering is not None
             try:
                 delta = system.optimize(ordering)
             except RuntimeError as exc:

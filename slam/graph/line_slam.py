@@ -199,8 +199,11 @@ class LineSlam:
     def _usable(
         self, lines: Sequence[Line]
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, list[FloatArray], list[FloatArray]]:
-        """``z (K,2)``, ``R (K,2,2)``, end points ``(K,2,2)``, end variances ``(K,2)``, and each
-        line's visible pieces ``(p,2,2)`` with their end variances ``(p,2)``."""
+        """Arrays of the usable lines of a scan.
+
+        Returns ``z (K,2)``, ``R (K,2,2)``, end points ``(K,2,2)``, end variances ``(K,2)``, and
+        each line's visible pieces ``(p,2,2)`` with their end variances ``(p,2)``.
+        """
         cfg = self.config
         z, R, ep, ev = [], [], [], []
         pieces: list[FloatArray] = []

@@ -41,7 +41,8 @@ def keys_of(kind: str, indices: IntArray) -> list[int]:
     """GTSAM keys ``X(i)`` (``kind="x"``) or ``L(j)`` (``kind="l"``) as Python ints, vectorised."""
     base = _X if kind == "x" else _L
     idx = np.asarray(indices, dtype=np.uint64)
-    return (idx + base).tolist()  # type: ignore[no-any-return]
+    keys: list[int] = (idx + base).tolist()
+    return keys
 
 
 def line_jacobian_factors(

@@ -148,7 +148,8 @@ class SlamResult:
             "segments": n_seg,
         }
         out.update({k: v for k, v in self.stats.items() if k not in out})
-        return _jsonable(out)  # type: ignore[no-any-return]
+        result: dict[str, Any] = _jsonable(out)
+        return result
 
     def write(self, out_dir: str | Path, min_observations: int = 1) -> Path:
         """Write ``trajectory.tum`` (+ covariances), ``map.json`` and ``summary.json``."""
