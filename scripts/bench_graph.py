@@ -79,7 +79,10 @@ def isam2_feed(src: LineGraph) -> tuple[float, float, float]:
             first = np.array([fs[np.flatnonzero(lms == j)[0]] for j in new])
             z3 = np.column_stack([src.factor_z[first], np.zeros(new.size)])
             la = line_to_parent(z3, g.poses[i], normal_form=False)[0][:, :2]
-            g.add_landmarks(la, src.anchors[new])
+            # anchors at the measured segments' mid-points seen from the current estimate
+            mid = src.factor_endpoints[first].mean(axis=1)
+            anchors = pose_compose(g.poses[i], np.column_stack([mid, np.zeros(new.size)]))
+            g.add_landmarks(la, anchors[:, :2])
         g.add_line_factors(i, lms, src.factor_z[fs], src.factor_cov[fs], src.factor_endpoints[fs])
         t0 = time.perf_counter()
         solver.update(g)

@@ -231,6 +231,14 @@ class Isam2Config:
         Read back the whole estimate at least every this many updates.
     final_updates : int
         Most extra updates (no new factors) run by :meth:`optimize` to converge.
+    relinearize_skip : int
+        iSAM2 checks for variables to relinearise only every this many updates (GTSAM's
+        default 10).  Relinearising at every update (1) lets the one-update lag of the block
+        rebuilds feed back into the next relinearisation: on long open chains the
+        relinearisations then cascade over the whole graph (``docs/graph.md``).
+    partial_relinearization_check : bool
+        iSAM2's ``enablePartialRelinearizationCheck``: only the top of the tree is checked for
+        variables to relinearise (cheap; deep variables may keep large updates).
     """
 
     relinearize_threshold: float = 0.01
@@ -240,6 +248,8 @@ class Isam2Config:
     full_refresh_variables: int = 200
     full_refresh_interval: int = 50
     final_updates: int = 20
+    relinearize_skip: int = 10
+    partial_relinearization_check: bool = True
 
     def __post_init__(self) -> None:
         _pos("relinearize_threshold", self.relinearize_threshold)
@@ -249,6 +259,7 @@ class Isam2Config:
         _require(self.full_refresh_variables >= 0, "full_refresh_variables must be >= 0")
         _require(self.full_refresh_interval >= 1, "full_refresh_interval must be >= 1")
         _require(self.final_updates >= 0, "final_updates must be >= 0")
+        _require(self.relinearize_skip >= 1, "relinearize_skip must be >= 1")
 
 
 @dataclass(frozen=True)

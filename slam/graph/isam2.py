@@ -100,8 +100,8 @@ class Isam2Solver:
         self.solver = solver or SolverConfig()
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(self.config.relinearize_threshold)
-        params.relinearizeSkip = 1
-        params.enablePartialRelinearizationCheck = True
+        params.relinearizeSkip = self.config.relinearize_skip
+        params.enablePartialRelinearizationCheck = self.config.partial_relinearization_check
         self.isam = gtsam.ISAM2(params)
         self.stats = Isam2Stats()
         self._n_poses = 0
@@ -194,8 +194,12 @@ class Isam2Solver:
         return blocks
 
     # -- the update ----------------------------------------------------------------------------
-    def update(self, graph: LineGraph) -> gtsam.ISAM2Result:
-        """Bring iSAM2 up to date with ``graph`` (one ``ISAM2.update``) and read back."""
+    def update(self, graph: LineGraph, force_relinearize: bool = False) -> gtsam.ISAM2Result:
+        """Bring iSAM2 up to date with ``graph`` (one ``ISAM2.update``) and read back.
+
+        ``force_relinearize`` checks every variable for relinearisation now, whatever
+        ``relinearize_skip`` says (used by :meth:`optimize`).
+        """
         if graph.prior_pose is None:
             raise EstimationError("the graph has no prior on its first pose (gauge)")
         t0 = time.perf_counter()
@@ -222,7 +226,6 @@ class Isam2Solver:
             nfg.push_back(native_odometry_factors(graph, self._n_odometry, with_prior=False))
             touched_poses.update(int(i) for i in graph.odometry_first[self._n_odometry :])
             self._n_odometry = graph.n_odometry
-        n_native = nfg.size()
         # new line factors
         self._graph_factor_pose = graph.factor_pose
         self._graph_factor_lm = graph.factor_landmark
@@ -265,14 +268,13 @@ class Isam2Solver:
         self.stats.time_s["build"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         try:
-            result = self.isam.update(nfg, values, remove)
+            result = self.isam.update(nfg, values, remove, force_relinearize=force_relinearize)
         except RuntimeError as exc:
             raise EstimationError(f"iSAM2 update failed: {exc}") from exc
         self.stats.time_s["update"] += time.perf_counter() - t0
         slots = list(result.getNewFactorsIndices())
         for p, slot in zip(rebuild, slots[n_before_blocks:], strict=True):
             self._slot_of_pose[p] = int(slot)
-        del n_native
         self._n_poses = graph.n_poses
         self._n_landmarks = graph.n_landmarks
         self.stats.updates += 1
@@ -324,13 +326,10 @@ class Isam2Solver:
         n = self.config.final_updates if max_updates is None else max_updates
         runs = 0
         for _ in range(n):
-            before = graph.poses.copy()
-            result = self.update(graph)
+            result = self.update(graph, force_relinearize=True)
             runs += 1
-            self.read_all(graph)
-            moved = float(np.max(np.abs(graph.poses - before), initial=0.0))
-            settled = int(result.getVariablesRelinearized()) == 0 and not self._theta_changed
-            if settled and (moved < 1e-9 or not self._pending):
+            # settled: iSAM2 relinearised nothing, so no block is stale and nothing is queued
+            if int(result.getVariablesRelinearized()) == 0 and not self._pending:
                 break
         self.read_all(graph)
         return runs
