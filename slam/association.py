@@ -77,8 +77,8 @@ class AssociationConfig:
     max_range_m : float
         Landmarks whose extent is farther than this from the laser are not candidates.
     max_candidates : int
-        At most this many candidates (the nearest) per scan: bounds the size of the joint
-        covariance that is computed.
+        At most this many candidates per scan (after the overlap test, those whose lines pass
+        closest to a measured segment): bounds the size of the joint covariance computed.
     jcbb_max_nodes : int
         Node budget of the JCBB search (best hypothesis so far when exhausted).
     cross_covariances : bool

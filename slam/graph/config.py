@@ -135,6 +135,9 @@ class FusionConfig:
         Pre-filter: pairs whose normals differ by more (mod π) are not tested.
     max_distance_m : float
         Pre-filter: largest distance between one landmark's extent mid-point and the other line.
+    retest_growth : float
+        A pair that failed the test is tested again once its landmarks have this many times the
+        measurements (together) they had then.
     """
 
     enabled: bool = True
@@ -143,9 +146,11 @@ class FusionConfig:
     max_gap_m: float = 0.3
     max_angle_rad: float = 0.2
     max_distance_m: float = 0.5
+    retest_growth: float = 2.0
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
+        _require(self.retest_growth >= 1.0, "retest_growth must be >= 1")
         _require(0.0 < self.gate_probability < 1.0, "gate_probability must be in (0, 1)")
         _nonneg("max_gap_m", self.max_gap_m)
         _pos("max_angle_rad", self.max_angle_rad)

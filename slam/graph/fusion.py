@@ -11,7 +11,12 @@ merged (:meth:`LineGraph.merge_landmarks`): the landmark with more observations 
 estimate set to the maximum-likelihood fusion of the two (:func:`slam.lines.fuse`, Eqs. 36-37,
 as a starting point: the next solve does the exact fusion, since all measurements now constrain
 one variable), and the other's factors are rewired to it.  Pairs are taken best first (smallest
-``D²``); a landmark takes part in at most one merge per round.
+``D²``); a landmark may absorb several others in one round but is never absorbed after
+absorbing.  A pair that failed the test
+is tested again only once its two landmarks together have ``retest_growth`` times the
+measurements they had (the joint marginal is the expensive part: one
+``jointMarginalCovariance`` per pair; two walls seen together every keyframe would otherwise be
+tested every round).
 """
 
 from __future__ import annotations
@@ -80,6 +85,7 @@ def fuse_landmarks(
     pairs: list[tuple[int, int]],
     joint_covariance: Callable[[IntArray], FloatArray],
     config: FusionConfig,
+    rejected: dict[tuple[int, int], int] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Test ``pairs`` on their joint marginal and merge the compatible ones (best first).
 
@@ -90,6 +96,8 @@ def fuse_landmarks(
     joint_covariance : callable
         ``landmarks (2,) -> (4, 4)`` joint marginal covariance in the anchored chart.
     config : FusionConfig
+    rejected : dict, optional
+        Memo of failed pairs → their total observation count when tested (updated in place).
 
     Returns
     -------
@@ -100,8 +108,13 @@ def fuse_landmarks(
     if not pairs:
         return []
     la = graph.landmarks_r_alpha
+    counts = graph.observation_counts()
     tested = []
     for a, b in pairs:
+        n_obs = int(counts[a] + counts[b])
+        retest_at = config.retest_growth * rejected.get((a, b), 0) if rejected is not None else 0
+        if n_obs < retest_at:
+            continue
         idx = np.array([a, b])
         P = joint_covariance(idx)
         T = np.zeros((4, 4))
@@ -111,14 +124,18 @@ def fuse_landmarks(
         ok, d2 = landmarks_compatible(la[a], la[b], P_ra, config.gate_probability)
         if ok:
             tested.append((d2, a, b, P_ra))
+        elif rejected is not None:
+            rejected[(a, b)] = n_obs
     tested.sort(key=lambda item: item[0])
-    counts = graph.observation_counts()
-    used: set[int] = set()
+    kept: set[int] = set()
+    dropped: set[int] = set()
     merged = []
     for d2, a, b, P_ra in tested:
-        if a in used or b in used:
-            continue
         keep, drop = (a, b) if counts[a] >= counts[b] else (b, a)
+        # each tested pair was tested against the kept landmark's estimate before this round's
+        # merges: a landmark may absorb several others, but is never absorbed after absorbing
+        if a in dropped or b in dropped or drop in kept:
+            continue
         ik, id_ = (0, 2) if keep == a else (2, 0)
         fused, _ = fuse(
             la[keep],
@@ -127,7 +144,10 @@ def fuse_landmarks(
             P_ra[id_ : id_ + 2, id_ : id_ + 2],
             normal_form=False,
         )
-        graph.merge_landmarks(keep, drop, fused)
-        used.update((a, b))
+        # the kept estimate moves only for its first merge in the round (the others were tested
+        # against the estimate before any merge); the next solve does the exact fusion
+        graph.merge_landmarks(keep, drop, fused if keep not in kept else None)
+        kept.add(keep)
+        dropped.add(drop)
         merged.append((keep, drop, float(d2)))
     return merged

@@ -147,6 +147,7 @@ class LineSlam:
         self._scan_n_landmarks: list[int] = []
         self._last_kf_odom: FloatArray | None = None
         self._kf_since_fusion = 0
+        self._fusion_rejected: dict[tuple[int, int], int] = {}
         self._base_laser = np.asarray(self.config.pose_base_laser, dtype=float)
         self.counters: dict[str, int] = {
             "points": 0,
@@ -319,10 +320,10 @@ class LineSlam:
                 cfg.association.max_range_m,
                 alive=g.landmark_alive,
                 anchors=g.anchors,
-                max_candidates=cfg.association.max_candidates,
             )
             if cand.size:
-                # thin the candidates by segment overlap (needs only the pose covariance)
+                # thin the candidates by segment overlap (needs only the pose covariance), then
+                # keep the max_candidates lines closest to a measured segment
                 P_pose = self._predicted_covariance(prev, cand[:0], delta, Q)
                 near = overlap_mask(
                     ep,
@@ -334,6 +335,8 @@ class LineSlam:
                     g.anchors[cand],
                 ).any(axis=0)
                 cand = cand[near]
+                if cand.size > cfg.association.max_candidates:
+                    cand = self._nearest_lines(cand, ep, x_pred, cfg.association.max_candidates)
             if cand.size:
                 P = self._predicted_covariance(prev, cand, delta, Q)
                 problem = build_problem(
@@ -425,6 +428,17 @@ class LineSlam:
             warnings=tuple(warned),
         )
 
+    def _nearest_lines(
+        self, cand: IntArray, endpoints_laser: FloatArray, x_pred: FloatArray, keep: int
+    ) -> IntArray:
+        """The ``keep`` candidates whose lines pass closest to a measured segment's mid-point."""
+        la = self.graph.landmarks_r_alpha[cand]
+        mid = endpoints_laser.mean(axis=1)
+        mid_w = pose_compose(x_pred, np.column_stack([mid, np.zeros(mid.shape[0])]))[:, :2]
+        n = np.stack([np.cos(la[:, 1]), np.sin(la[:, 1])], -1)
+        dist = np.abs(mid_w @ n.T - la[:, 0][None, :]).min(axis=0)
+        return np.sort(cand[np.argsort(dist, kind="stable")[:keep]])
+
     def _predicted_covariance(
         self, prev: int, cand: IntArray, delta: FloatArray, Q: FloatArray
     ) -> FloatArray:
@@ -467,6 +481,7 @@ class LineSlam:
             pairs,
             lambda idx: self.backend.joint_covariance(g, None, idx),
             self.config.fusion,
+            self._fusion_rejected,
         )
         if merged:
             self.counters["landmarks_merged"] += len(merged)
