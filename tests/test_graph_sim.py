@@ -110,3 +110,29 @@ def test_map_lines_lie_on_the_simulated_walls(loop_result):
                 and abs(np.angle(np.exp(1j * (long_lines[i, 1] - long_lines[j, 1])))) < 0.02
             )
             assert not same
+
+
+def test_pose_nees_over_seeded_simulator_runs():
+    """Lean Monte Carlo on the simulator (3 seeds, the first 100 scans of the loop): the pose
+    NEES at three spaced scans, averaged over the 9 samples, lies in the 99 % band of an
+    average of 9 χ²₃ (a longer study: scripts/study_graph_nees.py)."""
+    from scipy.stats import chi2
+
+    world = get_world("loop")
+    nees = []
+    for seed in range(1, 4):
+        log = simulate(world, None, SimConfig(odometry=ODOMETRY), seed=seed)
+        slam = LineSlam(SlamConfig(motion=matching_motion_model(ODOMETRY)))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SlamWarning)
+            for k, scan in enumerate(log.scans()):
+                if k == 100:
+                    break
+                slam.add_scan(scan)
+            slam.optimize()
+        res = slam.result()
+        e = pose_log(pose_between(log.poses_world_laser[:100], res.poses_world_laser))
+        n = np.einsum("ni,nij,nj->n", e, np.linalg.inv(res.pose_covariances), e)
+        nees.extend(n[[33, 66, 99]])
+    lo, hi = chi2.ppf([0.005, 0.995], 3 * len(nees)) / len(nees)
+    assert lo < np.mean(nees) < hi
