@@ -42,7 +42,7 @@ BoolArray = NDArray[np.bool_]
 
 def hough_accumulator(
     x: FloatArray, y: FloatArray, valid: BoolArray, angle_step_rad: float, range_step_m: float
-) -> tuple[NDArray[np.int32], IntArray, FloatArray, FloatArray, float]:
+) -> tuple[NDArray[np.int32], IntArray, FloatArray, float]:
     """Vote the valid points of ``N`` scans into one ``(β, ℛ)`` accumulator per scan.
 
     Parameters
@@ -60,8 +60,6 @@ def hough_accumulator(
         Vote counts; cell ``j·n_ℛ + i`` for angle bin ``j`` and distance bin ``i``.
     cells : ndarray of int, shape (N, n_β, n)
         The cell each point voted for at each angle (meaningless where not valid).
-    rho : ndarray of float32, shape (N, n_β, n)
-        The ``ℛ`` of each vote (m).
     betas : ndarray, shape (n_β,)
         The angle bins ``β_j`` (rad).
     r_max : float
@@ -77,20 +75,24 @@ def hough_accumulator(
     r_max = half * range_step_m
     n_rho = 2 * half
     # float32 is ample for bins of centimetres and halves the memory traffic
-    # layout (scan, angle, point): the votes of one angle row are adjacent in memory
-    x32 = x.astype(np.float32)[:, None, :]
-    y32 = y.astype(np.float32)[:, None, :]
-    rho = np.cos(betas).astype(np.float32)[None, :, None] * x32
-    rho += np.sin(betas).astype(np.float32)[None, :, None] * y32
-    # |ℛ| ≤ range < (half − 1)·Δℛ, so the shifted value is positive and truncation is floor
-    shifted = rho * np.float32(1.0 / range_step_m)
+    # layout (scan, angle, point): the votes of one angle row are adjacent in memory.
+    # |ℛ| ≤ range < (half − 1)·Δℛ, so the shifted bin coordinate is positive and truncation
+    # is floor; float32 is ample for bins of centimetres and halves the memory traffic.
+    inv = 1.0 / range_step_m
+    shifted = (np.cos(betas) * inv).astype(np.float32)[None, :, None] * x.astype(np.float32)[
+        :, None, :
+    ]
+    shifted += (np.sin(betas) * inv).astype(np.float32)[None, :, None] * y.astype(np.float32)[
+        :, None, :
+    ]
     shifted += (np.arange(n_beta) * n_rho + half).astype(np.float32)[None, :, None]
     cells = shifted.astype(np.intp)
     n_cells = n_beta * n_rho
     votes = cells + (np.arange(n_scans, dtype=np.intp) * n_cells)[:, None, None]
-    acc = np.zeros(n_scans * n_cells, dtype=np.int32)
-    np.add.at(acc, votes[np.broadcast_to(valid[:, None, :], votes.shape)], np.int32(1))
-    return acc.reshape(n_scans, n_cells), cells, rho, betas, r_max
+    acc = np.bincount(
+        votes[np.broadcast_to(valid[:, None, :], votes.shape)], minlength=n_scans * n_cells
+    ).astype(np.int32)
+    return acc.reshape(n_scans, n_cells), cells, betas, r_max
 
 
 def hough_groups(
@@ -132,7 +134,8 @@ def hough_groups(
     n_scans, n = x.shape
     if n_scans == 0 or n < 2 or not valid.any():
         return Grouping.empty(), np.zeros(0, dtype=np.intp)
-    acc, cells, rho, betas, r_max = hough_accumulator(x, y, valid, angle_step_rad, range_step_m)
+    acc, cells, betas, r_max = hough_accumulator(x, y, valid, angle_step_rad, range_step_m)
+    cos_b, sin_b = np.cos(betas), np.sin(betas)
     n_rho = acc.shape[1] // betas.shape[0]
     alive = valid.copy()
     tol_peak = max(gather_m, range_step_m)
@@ -155,7 +158,7 @@ def hough_groups(
         j, i = np.divmod(best, n_rho)
         rho_c = (i + 0.5) * range_step_m - r_max
         # candidate: unassigned points near the cell's line
-        rho_j = rho[rows, j]
+        rho_j = x[rows] * cos_b[j][:, None] + y[rows] * sin_b[j][:, None]
         cand = alive[rows] & (np.abs(rho_j - rho_c[:, None]) <= tol_peak)
         # refine twice: total least squares through the current set, recruit along it
         xs, ys, alive_r = x[rows], y[rows], alive[rows]
