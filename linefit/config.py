@@ -214,9 +214,7 @@ class LineFitConfig:
             )
         for name in ("min_length_m", "breakpoint_sigma", "split_threshold_sigma"):
             value = getattr(self, name)
-            _require(
-                math.isfinite(value) and value >= 0.0, f"{name} must be >= 0, got {value!r}"
-            )
+            _require(math.isfinite(value) and value >= 0.0, f"{name} must be >= 0, got {value!r}")
         _require(
             0.0 < self.breakpoint_lambda_rad <= 0.5 * math.pi,
             f"breakpoint_lambda_rad must be in (0, π/2], got {self.breakpoint_lambda_rad!r}",

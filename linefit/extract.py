@@ -1,5 +1,7 @@
-"""The public entry points: :func:`extract_lines` for a scan, :func:`extract_lines_batch` for
-many scans at once, :func:`fit_line` and :func:`fit_scan_line` for a given set of points.
+"""The public entry points of line extraction and fitting.
+
+:func:`extract_lines` for a scan, :func:`extract_lines_batch` for many scans at once,
+:func:`fit_line` and :func:`fit_scan_line` for a given set of points.
 
 Every step works on all the scans of a batch together (the points, candidate lines and
 segments of all scans are flat arrays with a scan id); :func:`extract_lines` is a batch of one.
@@ -307,6 +309,7 @@ def _refine(
         chi2 = (fit.u_r - fit.r[gidx]) ** 2 / (fit.p_r * (1.0 - _leverage(fit, gidx, G)))
         worst = np.zeros(G)
         np.maximum.at(worst, gidx, chi2)
+        assert grp.gate is not None
         reject = (chi2 > cfg.outlier_chi2) & (chi2 >= worst[gidx] / 9.0) & grp.gate[gidx]
         if not reject.any():
             break
@@ -513,6 +516,7 @@ def extract_lines_batch(
     pts = scan_points(d.ravel()[flat], phi.ravel()[flat], beam_of, cfg, sigma_range_fn)
     assert pts.var_range is not None
     sigma_range = np.sqrt(pts.var_range)
+
     def split_merge_of(sub: IntArray) -> _Groups:
         """Split-and-merge candidates among the valid points ``sub`` (sorted)."""
         grouping = split_merge_groups(
@@ -567,7 +571,9 @@ def extract_lines_batch(
                 used[fitted.pidx] = True
             extra = split_merge_of(all_points[~used])
             if extra.n:
-                grp = extra if fitted is None else _Groups.concat(_Groups.from_fitted(fitted), extra)
+                grp = (
+                    extra if fitted is None else _Groups.concat(_Groups.from_fitted(fitted), extra)
+                )
                 fitted = _refine(pts, sigma_range, grp, cfg) or fitted
     else:
         fitted = _refine(pts, sigma_range, split_merge_of(all_points), cfg)

@@ -397,7 +397,13 @@ def fit_alpha_numerical(
         mx, my = float(w @ x), float(w @ y)
         dx, dy = x - mx, y - my
 
-        def neg_loglik(delta: float, dx: FloatArray = dx, dy: FloatArray = dy) -> float:
+        def neg_loglik(
+            delta: float,
+            dx: FloatArray = dx,
+            dy: FloatArray = dy,
+            w: FloatArray = w,
+            alpha: float = alpha,
+        ) -> float:
             a = alpha + delta
             resid = dx * np.cos(a) + dy * np.sin(a)  # u_R − R with R from Prop. 1
             return 0.5 * float(w @ (resid * resid))

@@ -68,7 +68,7 @@ def hough_accumulator(
     """
     n_scans = x.shape[0]
     n_beta = max(1, round(np.pi / angle_step_rad))
-    betas = np.arange(n_beta) * (np.pi / n_beta)
+    betas = np.arange(n_beta, dtype=float) * (np.pi / n_beta)
     d2 = np.where(valid, x * x + y * y, 0.0)
     # bins anchored at ℛ = 0 (bin edges k·Δℛ), so a scan's cells do not depend on the batch
     half = int(np.ceil(np.sqrt(d2.max()) / range_step_m)) + 1 if d2.size else 1
@@ -85,14 +85,15 @@ def hough_accumulator(
     shifted += (np.sin(betas) * inv).astype(np.float32)[None, :, None] * y.astype(np.float32)[
         :, None, :
     ]
-    shifted += (np.arange(n_beta) * n_rho + half).astype(np.float32)[None, :, None]
+    shifted += np.float32(half)
     cells = shifted.astype(np.intp)
+    cells += (np.arange(n_beta, dtype=np.intp) * n_rho)[None, :, None]
     n_cells = n_beta * n_rho
     votes = cells + (np.arange(n_scans, dtype=np.intp) * n_cells)[:, None, None]
     acc = np.bincount(
         votes[np.broadcast_to(valid[:, None, :], votes.shape)], minlength=n_scans * n_cells
     ).astype(np.int32)
-    return acc.reshape(n_scans, n_cells), cells, betas, r_max
+    return np.asarray(acc.reshape(n_scans, n_cells)), np.asarray(cells), betas, r_max
 
 
 def hough_groups(

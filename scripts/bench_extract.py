@@ -74,7 +74,10 @@ def main() -> None:
             total = 0
             for k in range(0, n, args.batch):
                 out = extract_lines_batch(
-                    ranges[k : k + args.batch], bearings, cfg, max_range_m=max_range[k : k + args.batch]
+                    ranges[k : k + args.batch],
+                    bearings,
+                    cfg,
+                    max_range_m=max_range[k : k + args.batch],
                 )
                 total += sum(len(lines) for lines in out)
             return total
