@@ -160,6 +160,12 @@ def scan_points(
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class _Fitted:
+    """Fitted lines: memberships (``gidx`` ascending), fits, covariances and segments.
+
+    ``order`` sorts the memberships by (line, u_S); ``seg`` numbers the segments along
+    ``order`` (non-decreasing, lines in ascending order).
+    """
+
     pidx: IntArray
     gidx: IntArray
     n_groups: int
@@ -168,6 +174,61 @@ class _Fitted:
     cov: LineCovariances
     order: IntArray
     seg: IntArray
+
+    def select(self, keep_g: NDArray[np.bool_]) -> _Fitted:
+        """Only the lines ``keep_g`` (renumbered in order)."""
+        new_g = np.cumsum(keep_g) - 1
+        keep_m = keep_g[self.gidx]
+        new_m = np.cumsum(keep_m) - 1
+        f, c = self.fit, self.cov
+        kept_sorted = keep_m[self.order]
+        _, seg = np.unique(self.seg[kept_sorted], return_inverse=True)
+        fit = GroupFit(
+            **{k: getattr(f, k)[keep_g] for k in _PER_LINE},
+            **{k: getattr(f, k)[keep_m] for k in _PER_MEMBER},
+            weighted=f.weighted,
+        )
+        cov = LineCovariances(c.cov[keep_g], c.end_var[keep_m], c.gain_alpha[keep_m])
+        return _Fitted(
+            self.pidx[keep_m],
+            new_g[self.gidx[keep_m]],
+            int(keep_g.sum()),
+            self.gscan[keep_g],
+            fit,
+            cov,
+            new_m[self.order[kept_sorted]],
+            seg.reshape(-1).astype(np.intp),
+        )
+
+    @staticmethod
+    def concat(a: _Fitted, b: _Fitted) -> _Fitted:
+        """The lines of ``a`` followed by those of ``b``."""
+        fa, fb = a.fit, b.fit
+        fit = GroupFit(
+            **{k: np.concatenate([getattr(fa, k), getattr(fb, k)]) for k in _PER_LINE},
+            **{k: np.concatenate([getattr(fa, k), getattr(fb, k)]) for k in _PER_MEMBER},
+            weighted=fa.weighted,
+        )
+        cov = LineCovariances(
+            np.concatenate([a.cov.cov, b.cov.cov]),
+            np.concatenate([a.cov.end_var, b.cov.end_var]),
+            np.concatenate([a.cov.gain_alpha, b.cov.gain_alpha]),
+        )
+        n_seg_a = int(a.seg[-1]) + 1 if a.seg.shape[0] else 0
+        return _Fitted(
+            np.concatenate([a.pidx, b.pidx]),
+            np.concatenate([a.gidx, b.gidx + a.n_groups]),
+            a.n_groups + b.n_groups,
+            np.concatenate([a.gscan, b.gscan]),
+            fit,
+            cov,
+            np.concatenate([a.order, b.order + a.pidx.shape[0]]),
+            np.concatenate([a.seg, b.seg + n_seg_a]),
+        )
+
+
+_PER_LINE = ("r", "alpha", "s", "converged", "iterations")
+_PER_MEMBER = ("u_r", "u_s", "p_r", "p_s", "p_rs", "w_r", "w_s")
 
 
 @dataclass
@@ -179,11 +240,6 @@ class _Groups:
     n: int
     alpha0: FloatArray
     gscan: IntArray
-    gate: NDArray[np.bool_] | None = None  # groups subject to rejection (None: all)
-
-    def __post_init__(self) -> None:
-        if self.gate is None:
-            self.gate = np.ones(self.n, dtype=bool)
 
     def keep_groups(self, keep_g: NDArray[np.bool_]) -> None:
         new_id = np.cumsum(keep_g) - 1
@@ -193,43 +249,10 @@ class _Groups:
         self.n = int(keep_g.sum())
         self.alpha0 = self.alpha0[keep_g]
         self.gscan = self.gscan[keep_g]
-        assert self.gate is not None
-        self.gate = self.gate[keep_g]
 
     def keep_members(self, keep: NDArray[np.bool_]) -> None:
         self.pidx = self.pidx[keep]
         self.gidx = self.gidx[keep]
-
-    @classmethod
-    def from_fitted(cls, fitted: _Fitted) -> _Groups:
-        """The memberships of fitted lines, started from their fitted angles, not re-gated.
-
-        Refitting them from their own angle reproduces them exactly (the iteration stops at
-        once), so lines refitted alongside new ones do not depend on what else is in the batch.
-        """
-        return cls(
-            fitted.pidx,
-            fitted.gidx,
-            fitted.n_groups,
-            fitted.fit.alpha,
-            fitted.gscan,
-            np.zeros(fitted.n_groups, dtype=bool),
-        )
-
-    @classmethod
-    def concat(cls, a: _Groups, b: _Groups) -> _Groups:
-        """Both sets of groups, renumbered by scan (stable) and with memberships sorted."""
-        gscan = np.concatenate([a.gscan, b.gscan])
-        alpha0 = np.concatenate([a.alpha0, b.alpha0])
-        order = np.argsort(gscan, kind="stable")
-        new_id = np.empty_like(order)
-        new_id[order] = np.arange(order.shape[0])
-        gidx = new_id[np.concatenate([a.gidx, b.gidx + a.n])]
-        pidx = np.concatenate([a.pidx, b.pidx])
-        assert a.gate is not None and b.gate is not None
-        gate = np.concatenate([a.gate, b.gate])
-        srt = np.argsort(gidx, kind="stable")
-        return cls(pidx[srt], gidx[srt], a.n + b.n, alpha0[order], gscan[order], gate[order])
 
 
 def _fit_batch(pts: PointSet, grp: _Groups, cfg: LineFitConfig) -> GroupFit:
@@ -309,8 +332,7 @@ def _refine(
         chi2 = (fit.u_r - fit.r[gidx]) ** 2 / (fit.p_r * (1.0 - _leverage(fit, gidx, G)))
         worst = np.zeros(G)
         np.maximum.at(worst, gidx, chi2)
-        assert grp.gate is not None
-        reject = (chi2 > cfg.outlier_chi2) & (chi2 >= worst[gidx] / 9.0) & grp.gate[gidx]
+        reject = (chi2 > cfg.outlier_chi2) & (chi2 >= worst[gidx] / 9.0)
         if not reject.any():
             break
         grp.keep_members(~reject)
@@ -342,19 +364,20 @@ def _merge_collinear(
     G = fitted.n_groups
     if G < 2:
         return fitted
-    gscan = fitted.gscan  # non-decreasing
+    perm = np.argsort(fitted.gscan, kind="stable")  # lines by scan
+    gscan = fitted.gscan[perm]
     first_g = np.searchsorted(gscan, gscan, side="left")
     per_scan = np.searchsorted(gscan, gscan, side="right") - first_g
     k_max = int(per_scan.max())
     if k_max < 2:
         return fitted
-    # all pairs (i < j) within each scan
+    # all pairs (i < j) of lines within each scan
     ti, tj = np.triu_indices(k_max, 1)
     starts = np.unique(first_g)
     sizes = np.searchsorted(gscan, gscan[starts], side="right") - starts
     ok = tj[None, :] < sizes[:, None]
-    i = (starts[:, None] + ti[None, :])[ok]
-    j = (starts[:, None] + tj[None, :])[ok]
+    i = perm[(starts[:, None] + ti[None, :])[ok]]
+    j = perm[(starts[:, None] + tj[None, :])[ok]]
     r, alpha = fitted.fit.r, fitted.fit.alpha
     flip = r < 0.0
     rn = np.abs(r)
@@ -385,25 +408,33 @@ def _merge_collinear(
         if a != b:
             parent[max(a, b)] = min(a, b)
     roots = np.array([find(a) for a in range(G)])
-    _, new_g = np.unique(roots, return_inverse=True)
-    n_new = int(new_g.max()) + 1
-    if n_new == G:
+    joined = np.bincount(roots, minlength=G)[roots] > 1
+    if not joined.any():
         return fitted
-    gidx = new_g[fitted.gidx].astype(np.intp)
-    # a point shared by two merged lines counts once; memberships sorted by new group
-    key = gidx.astype(np.int64) * (len(pts) + 1) + fitted.pidx
+    # only the joined lines are refitted (from the angle of the set's first line)
+    _, new_g = np.unique(roots[joined], return_inverse=True)
+    new_g = new_g.reshape(-1)
+    n_new = int(new_g.max()) + 1
+    g_of = np.full(G, -1, dtype=np.intp)
+    g_of[joined] = new_g
+    members = joined[fitted.gidx]
+    gidx = g_of[fitted.gidx[members]]
+    pidx = fitted.pidx[members]
+    # a point shared by two joined lines counts once; memberships sorted by new line
+    key = gidx.astype(np.int64) * (len(pts) + 1) + pidx
     _, first = np.unique(key, return_index=True)
-    _, first_of_set, set_size = np.unique(new_g, return_index=True, return_counts=True)
+    joined_ids = np.flatnonzero(joined)
+    _, first_of_set = np.unique(new_g, return_index=True)
     grp = _Groups(
-        pidx=fitted.pidx[first],
+        pidx=pidx[first],
         gidx=gidx[first],
         n=n_new,
-        alpha0=alpha[first_of_set],
-        gscan=gscan[first_of_set],
-        gate=set_size > 1,  # only joined lines are re-gated
+        alpha0=alpha[joined_ids[first_of_set]],
+        gscan=fitted.gscan[joined_ids[first_of_set]],
     )
     refined = _refine(pts, sigma_range, grp, cfg)
-    return refined if refined is not None else fitted
+    rest = fitted.select(~joined)
+    return rest if refined is None else _Fitted.concat(rest, refined)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -571,10 +602,11 @@ def extract_lines_batch(
                 used[fitted.pidx] = True
             extra = split_merge_of(all_points[~used])
             if extra.n:
-                grp = (
-                    extra if fitted is None else _Groups.concat(_Groups.from_fitted(fitted), extra)
-                )
-                fitted = _refine(pts, sigma_range, grp, cfg) or fitted
+                new = _refine(pts, sigma_range, extra, cfg)
+                if fitted is None:
+                    fitted = new
+                elif new is not None:
+                    fitted = _Fitted.concat(fitted, new)
     else:
         fitted = _refine(pts, sigma_range, split_merge_of(all_points), cfg)
     if fitted is None:

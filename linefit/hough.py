@@ -59,7 +59,8 @@ def hough_accumulator(
     acc : ndarray of int32, shape (N, n_β · n_ℛ)
         Vote counts; cell ``j·n_ℛ + i`` for angle bin ``j`` and distance bin ``i``.
     cells : ndarray of int, shape (N, n_β, n)
-        The cell each point voted for at each angle (meaningless where not valid).
+        The cell each point voted for at each angle, as an index into ``acc.reshape(-1)``
+        (scan · n_β · n_ℛ + j · n_ℛ + i; meaningless where not valid).
     betas : ndarray, shape (n_β,)
         The angle bins ``β_j`` (rad).
     r_max : float
@@ -86,14 +87,17 @@ def hough_accumulator(
         :, None, :
     ]
     shifted += np.float32(half)
-    cells = shifted.astype(np.intp)
-    cells += (np.arange(n_beta, dtype=np.intp) * n_rho)[None, :, None]
     n_cells = n_beta * n_rho
-    votes = cells + (np.arange(n_scans, dtype=np.intp) * n_cells)[:, None, None]
-    acc = np.bincount(
-        votes[np.broadcast_to(valid[:, None, :], votes.shape)], minlength=n_scans * n_cells
-    ).astype(np.int32)
-    return np.asarray(acc.reshape(n_scans, n_cells)), np.asarray(cells), betas, r_max
+    # flat cell index: scan · n_cells + angle bin · n_ℛ + distance bin
+    votes = shifted.astype(np.intp)
+    votes += (
+        np.arange(n_scans, dtype=np.intp)[:, None, None] * n_cells
+        + np.arange(n_beta, dtype=np.intp)[None, :, None] * n_rho
+    )
+    acc = np.zeros(n_scans * n_cells, dtype=np.int32)
+    weight = np.broadcast_to(valid.astype(np.int32)[:, None, :], votes.shape)
+    np.add.at(acc, votes.reshape(-1), weight.reshape(-1))  # invalid points add 0
+    return acc.reshape(n_scans, n_cells), votes, betas, r_max
 
 
 def hough_groups(
@@ -194,7 +198,7 @@ def hough_groups(
         out_group_scan.append(rows)
         out_alpha.append(alpha)
         alive[rows[g_row], g_pt] = False
-        flat = (cells[rows[g_row], :, g_pt] + (rows[g_row] * acc.shape[1])[:, None]).ravel()
+        flat = cells[rows[g_row], :, g_pt].ravel()
         np.add.at(acc.reshape(-1), flat, np.int32(-1))
     if not out_group_scan:
         return Grouping.empty(), np.zeros(0, dtype=np.intp)
