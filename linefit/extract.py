@@ -15,16 +15,22 @@ Pipeline of :func:`extract_lines`
 3. Grouping into candidate lines: Hough transform (:mod:`linefit.hough`) or split-and-merge
    (:mod:`linefit.split_merge`).
 4. For all candidates at once (:mod:`linefit.fit`): the ML fit, then each point's normal
-   residual is tested against its own covariance (``δ_R²/P_R > outlier_chi2``: rejected; in
-   each round only points within a factor 4 of their line's worst are rejected, so one bad
-   point cannot mask the others), each line is cut into segments at gaps and range jumps and
-   pieces with fewer than ``min_segment_points`` points are dropped
-   (:mod:`linefit.segments`); refit until nothing changes (at most ``max_refits`` rounds).
-5. Optionally (``merge_collinear``) lines whose ``(r, α)`` pass a χ² test are joined into one
-   line with several segments and refitted.
-6. Lines with fewer than ``min_points`` points or shorter than ``min_length_m`` are dropped;
+   residual is tested against its own covariance, studentised by its leverage
+   (``δ_R²/(P_R (1 − h)) > outlier_chi2``: rejected; in each round only points within a factor
+   3 (in residual) of their line's worst are rejected, so one bad point cannot mask the
+   others), and refit, at most ``max_refits`` rounds; then each line is cut into segments at
+   gaps and range jumps, pieces with fewer than ``min_segment_points`` points leave it, and it
+   is refitted (:mod:`linefit.segments`).
+5. Hough only (``hough_recover``): the points no line kept are grouped by split-and-merge and
+   those candidates go through step 4 too.
+6. Optionally (``merge_collinear``) lines of one scan whose ``(r, α)`` pass a χ² test are
+   joined into one line with several segments and refitted (step 4).
+7. Lines with fewer than ``min_points`` points or shorter than ``min_length_m`` are dropped;
    covariances (:mod:`linefit.covariance`) and segment ends; normal form; sorted by their
    first beam index.
+
+Lines that are not changed by a later step are never refitted, so a scan's result does not
+depend on the other scans of its batch (tested).
 """
 
 from __future__ import annotations

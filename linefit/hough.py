@@ -149,11 +149,16 @@ def hough_groups(
     out_group_scan: list[IntArray] = []
     out_alpha: list[FloatArray] = []
     active = np.ones(n_scans, dtype=bool)
+    # per point: 1, x, y, x², xy, y² (the TLS sums of any subset are one matrix product)
+    moments = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
     for _ in range(max_peaks):
         rows = np.flatnonzero(active)
         if rows.shape[0] == 0:
             break
-        best = acc.argmax(axis=1)[rows]
+        if 2 * rows.shape[0] < n_scans:
+            best = acc[rows].argmax(axis=1)
+        else:
+            best = acc.argmax(axis=1)[rows]
         votes = acc[rows, best]
         go = votes >= min_votes
         active[rows[~go]] = False
@@ -167,23 +172,19 @@ def hough_groups(
         cand = alive[rows] & (np.abs(rho_j - rho_c[:, None]) <= tol_peak)
         # refine twice: total least squares through the current set, recruit along it
         xs, ys, alive_r = x[rows], y[rows], alive[rows]
+        moments_r = moments[rows]
         grp = cand
         alpha = betas[j]
         for _ in range(2):
-            cnt = grp.sum(axis=1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                mx = np.where(grp, xs, 0.0).sum(axis=1) / cnt
-                my = np.where(grp, ys, 0.0).sum(axis=1) / cnt
-            dx = np.where(grp, xs - mx[:, None], 0.0)
-            dy = np.where(grp, ys - my[:, None], 0.0)
-            cxx = (dx * dx).sum(axis=1)
-            cyy = (dy * dy).sum(axis=1)
-            cxy = (dx * dy).sum(axis=1)
+            m = np.matmul(grp[:, None, :].astype(float), moments_r)[:, 0, :]
+            cnt = np.maximum(m[:, 0], 1.0)
+            mx, my = m[:, 1] / cnt, m[:, 2] / cnt
+            cxx = m[:, 3] - cnt * mx * mx
+            cxy = m[:, 4] - cnt * mx * my
+            cyy = m[:, 5] - cnt * my * my
             alpha = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy) + 0.5 * np.pi
-            dist = np.abs(
-                (xs - mx[:, None]) * np.cos(alpha)[:, None]
-                + (ys - my[:, None]) * np.sin(alpha)[:, None]
-            )
+            ca, sa = np.cos(alpha), np.sin(alpha)
+            dist = np.abs(xs * ca[:, None] + ys * sa[:, None] - (mx * ca + my * sa)[:, None])
             grp = alive_r & (dist <= gather_m)
         ok = grp.sum(axis=1) >= min_votes
         # a peak whose refined line keeps too few points is suppressed, its points stay free
