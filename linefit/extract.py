@@ -189,11 +189,7 @@ class _Fitted:
         f, c = self.fit, self.cov
         kept_sorted = keep_m[self.order]
         _, seg = np.unique(self.seg[kept_sorted], return_inverse=True)
-        fit = GroupFit(
-            **{k: getattr(f, k)[keep_g] for k in _PER_LINE},
-            **{k: getattr(f, k)[keep_m] for k in _PER_MEMBER},
-            weighted=f.weighted,
-        )
+        fit = _fit_take(f, keep_g, keep_m)
         cov = LineCovariances(c.cov[keep_g], c.end_var[keep_m], c.gain_alpha[keep_m])
         return _Fitted(
             self.pidx[keep_m],
@@ -209,12 +205,7 @@ class _Fitted:
     @staticmethod
     def concat(a: _Fitted, b: _Fitted) -> _Fitted:
         """The lines of ``a`` followed by those of ``b``."""
-        fa, fb = a.fit, b.fit
-        fit = GroupFit(
-            **{k: np.concatenate([getattr(fa, k), getattr(fb, k)]) for k in _PER_LINE},
-            **{k: np.concatenate([getattr(fa, k), getattr(fb, k)]) for k in _PER_MEMBER},
-            weighted=fa.weighted,
-        )
+        fit = _fit_cat(a.fit, b.fit)
         cov = LineCovariances(
             np.concatenate([a.cov.cov, b.cov.cov]),
             np.concatenate([a.cov.end_var, b.cov.end_var]),
@@ -259,6 +250,67 @@ class _Groups:
     def keep_members(self, keep: NDArray[np.bool_]) -> None:
         self.pidx = self.pidx[keep]
         self.gidx = self.gidx[keep]
+
+    def subset(self, keep_g: NDArray[np.bool_], keep_m: NDArray[np.bool_] | None = None) -> _Groups:
+        """A copy with only the groups ``keep_g`` (and, if given, only the members ``keep_m``)."""
+        out = _Groups(self.pidx, self.gidx, self.n, self.alpha0, self.gscan)
+        if keep_m is not None:
+            out.keep_members(keep_m)
+        out.keep_groups(keep_g)
+        return out
+
+    @staticmethod
+    def cat(a: _Groups, b: _Groups) -> _Groups:
+        """The groups of ``a`` followed by those of ``b``."""
+        return _Groups(
+            np.concatenate([a.pidx, b.pidx]),
+            np.concatenate([a.gidx, b.gidx + a.n]),
+            a.n + b.n,
+            np.concatenate([a.alpha0, b.alpha0]),
+            np.concatenate([a.gscan, b.gscan]),
+        )
+
+
+def _fit_take(fit: GroupFit, keep_g: NDArray[np.bool_], keep_m: NDArray[np.bool_]) -> GroupFit:
+    """The fits of the lines ``keep_g`` (whose memberships are ``keep_m``)."""
+    return GroupFit(
+        **{k: getattr(fit, k)[keep_g] for k in _PER_LINE},
+        **{k: getattr(fit, k)[keep_m] for k in _PER_MEMBER},
+        weighted=fit.weighted,
+    )
+
+
+def _fit_cat(a: GroupFit, b: GroupFit) -> GroupFit:
+    """The fits of ``a`` followed by those of ``b``."""
+    return GroupFit(
+        **{k: np.concatenate([getattr(a, k), getattr(b, k)]) for k in _PER_LINE},
+        **{k: np.concatenate([getattr(a, k), getattr(b, k)]) for k in _PER_MEMBER},
+        weighted=a.weighted,
+    )
+
+
+def _refit_changed(
+    pts: PointSet,
+    grp: _Groups,
+    fit: GroupFit,
+    changed: NDArray[np.bool_],
+    keep_m: NDArray[np.bool_],
+    cfg: LineFitConfig,
+) -> tuple[_Groups, GroupFit | None, NDArray[np.bool_]]:
+    """Refit only the lines ``changed`` (with the members ``keep_m``); the others stay as they are.
+
+    Returns the groups (unchanged ones first), their fits, and which of them were refitted.
+    """
+    stay = ~changed
+    grp_u = grp.subset(stay)
+    fit_u = _fit_take(fit, stay, stay[grp.gidx])
+    grp_c = grp.subset(changed, keep_m)
+    grp_c.alpha0 = fit.alpha[changed]  # restart from the current fit
+    fit_c = _fit_kept(pts, grp_c, cfg) if grp_c.n else None
+    if fit_c is None:
+        return grp_u, (fit_u if grp_u.n else None), np.zeros(grp_u.n, dtype=bool)
+    refitted = np.concatenate([np.zeros(grp_u.n, dtype=bool), np.ones(grp_c.n, dtype=bool)])
+    return _Groups.cat(grp_u, grp_c), _fit_cat(fit_u, fit_c), refitted
 
 
 def _fit_batch(pts: PointSet, grp: _Groups, cfg: LineFitConfig) -> GroupFit:
@@ -319,45 +371,53 @@ def _fit_kept(pts: PointSet, grp: _Groups, cfg: LineFitConfig) -> GroupFit | Non
         ok = fit.converged & np.isfinite(fit.r) & np.isfinite(fit.alpha)
         if ok.all():
             return fit
-        grp.alpha0 = fit.alpha
+        if not ok.any():
+            break
+        # lines are fitted independently: drop the failures, keep the others' fits
+        fit = _fit_take(fit, ok, ok[grp.gidx])
         grp.keep_groups(ok)
+        return fit
     return None
 
 
 def _refine(
     pts: PointSet, sigma_range: FloatArray, grp: _Groups, cfg: LineFitConfig
 ) -> _Fitted | None:
-    """Fit, reject outliers, cut into segments and refit all candidate lines together."""
-    fit: GroupFit | None = None
-    for round_ in range(cfg.max_refits + 1):
-        fit = _fit_kept(pts, grp, cfg)
-        if fit is None:
-            return None
+    """Fit, reject outliers, cut into segments and refit all candidate lines together.
+
+    After the first fit only the lines that lost points are refitted.
+    """
+    fit = _fit_kept(pts, grp, cfg)
+    if fit is None:
+        return None
+    todo = np.ones(grp.n, dtype=bool)  # lines whose points may still be rejected
+    for _ in range(cfg.max_refits + 1):
         # per-point χ² gate on the normal residual, studentised by the point's leverage
         G, gidx = grp.n, grp.gidx
         chi2 = (fit.u_r - fit.r[gidx]) ** 2 / (fit.p_r * (1.0 - _leverage(fit, gidx, G)))
         worst = np.zeros(G)
         np.maximum.at(worst, gidx, chi2)
-        reject = (chi2 > cfg.outlier_chi2) & (chi2 >= worst[gidx] / 9.0)
+        reject = (chi2 > cfg.outlier_chi2) & (chi2 >= worst[gidx] / 9.0) & todo[gidx]
         if not reject.any():
             break
-        grp.keep_members(~reject)
-        grp.alpha0 = fit.alpha
-        if round_ == cfg.max_refits:
-            fit = _fit_kept(pts, grp, cfg)
-    if fit is None:
-        return None
+        changed = np.zeros(G, dtype=bool)
+        changed[gidx[reject]] = True
+        grp, fit_new, todo = _refit_changed(pts, grp, fit, changed, ~reject, cfg)
+        if fit_new is None:
+            return None
+        fit = fit_new
     # segments; pieces with too few points leave the line
     order, seg = _segments(pts, sigma_range, grp, fit, cfg)
     small = np.bincount(seg)[seg] < cfg.min_segment_points
     if small.any():
         keep = np.ones(grp.pidx.shape[0], dtype=bool)
         keep[order[small]] = False
-        grp.keep_members(keep)
-        grp.alpha0 = fit.alpha
-        fit = _fit_kept(pts, grp, cfg)
-        if fit is None:
+        changed = np.zeros(grp.n, dtype=bool)
+        changed[grp.gidx[~keep]] = True
+        grp, fit_new, _ = _refit_changed(pts, grp, fit, changed, keep, cfg)
+        if fit_new is None:
             return None
+        fit = fit_new
         order, seg = _segments(pts, sigma_range, grp, fit, cfg)
     cov = line_covariances(fit, pts, grp.pidx, grp.gidx, grp.n, cfg.noise.bearing_error)
     return _Fitted(grp.pidx, grp.gidx, grp.n, grp.gscan, fit, cov, order, seg)
