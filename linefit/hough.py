@@ -155,10 +155,8 @@ def hough_groups(
         rows = np.flatnonzero(active)
         if rows.shape[0] == 0:
             break
-        if 2 * rows.shape[0] < n_scans:
-            best = acc[rows].argmax(axis=1)
-        else:
-            best = acc.argmax(axis=1)[rows]
+        few = 2 * rows.shape[0] < n_scans  # then copying the active rows is cheaper
+        best = acc[rows].argmax(axis=1) if few else acc.argmax(axis=1)[rows]
         votes = acc[rows, best]
         go = votes >= min_votes
         active[rows[~go]] = False

@@ -20,11 +20,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from _mc import fit_trials, mean_nees, nees_bounds  # noqa: E402
-from _synthetic import wall_scan  # noqa: E402
-from test_covariance import CASES  # noqa: E402
+from _mc import fit_trials, mean_nees, nees_bounds
+from _synthetic import wall_scan
+from test_covariance import CASES
 
-from linefit import LineFitConfig, SensorNoiseConfig  # noqa: E402
+from linefit import LineFitConfig, SensorNoiseConfig
 
 
 def main() -> None:
@@ -34,8 +34,10 @@ def main() -> None:
     args = ap.parse_args()
     lo2, hi2 = nees_bounds(2, args.trials)
     lo1, hi1 = nees_bounds(1, args.trials)
-    print(f"{args.trials} trials per case, seed {args.seed}; 99 % NEES intervals: "
-          f"χ²₂ mean [{lo2:.3f}, {hi2:.3f}], χ²₁ mean [{lo1:.3f}, {hi1:.3f}]\n")
+    print(
+        f"{args.trials} trials per case, seed {args.seed}; 99 % NEES intervals: "
+        f"χ²₂ mean [{lo2:.3f}, {hi2:.3f}], χ²₁ mean [{lo1:.3f}, {hi1:.3f}]\n"
+    )
     print("| model | case | var R | var α | var S | NEES (R,α) | NEES ends | ends / paper P_S |")
     print("|---|---|---|---|---|---|---|---|")
     for model in ("beam", "reading"):
