@@ -544,24 +544,19 @@ def _lines_from_fit(
     out: list[list[Line]] = [[] for _ in range(n_scans)]
     sel = np.flatnonzero(keep)
     sel = sel[np.lexsort((first_beam[sel], fitted.gscan[sel]))]
+    # per line: python scalars and array slices, then the trusted constructor
+    r_l, a_l, s_l = r_n.tolist(), a_n.tolist(), s_n.tolist()
+    flip_l, scan_l = flip.tolist(), fitted.gscan.tolist()
+    sb, mb = seg_bounds.tolist(), mem_bounds.tolist()
     for g in sel.tolist():
-        segs = segs_all[seg_bounds[g] : seg_bounds[g + 1]]
-        svar = vars_all[seg_bounds[g] : seg_bounds[g + 1]]
-        if flip[g]:
+        segs = segs_all[sb[g] : sb[g + 1]]
+        svar = vars_all[sb[g] : sb[g + 1]]
+        if flip_l[g]:
             segs = -segs[::-1, ::-1]
             svar = svar[::-1, ::-1]
-        idx = sorted_beams[mem_bounds[g] : mem_bounds[g + 1]]
-        out[int(fitted.gscan[g])].append(
-            Line(
-                r=float(r_n[g]),
-                alpha=float(a_n[g]),
-                s=float(s_n[g]),
-                cov=cov_n[g],
-                segments_s=segs,
-                segments_var=svar,
-                n_points=int(idx.shape[0]),
-                indices=idx,
-            )
+        idx = sorted_beams[mb[g] : mb[g + 1]]
+        out[scan_l[g]].append(
+            Line._trusted(r_l[g], a_l[g], s_l[g], cov_n[g], segs, svar, mb[g + 1] - mb[g], idx)
         )
     return out
 
