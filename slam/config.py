@@ -13,6 +13,7 @@ from pathlib import Path
 from linefit.config import LineFitConfig
 from linefit.errors import ConfigError
 from linefit.tomlconfig import dump_toml, load_toml
+from slam.lines.config import MapConfig
 
 __all__ = ["RunConfig"]
 
@@ -27,10 +28,13 @@ class RunConfig:
         Seed of every random choice of the run.
     linefit : LineFitConfig
         Per-scan line extraction.
+    map : MapConfig
+        Merging lines across poses (``lineslam map``; paper Sec. V).
     """
 
     seed: int = 0
     linefit: LineFitConfig = field(default_factory=LineFitConfig)
+    map: MapConfig = field(default_factory=MapConfig)
 
     def __post_init__(self) -> None:
         if self.seed < 0:

@@ -12,7 +12,13 @@ import sys
 import click
 import typer
 
-from slam.cli import cmd_datasets, cmd_evaluate, cmd_extract  # noqa: F401  (commands register on import)
+from slam.cli import (  # noqa: F401  (commands register on import)
+    cmd_datasets,
+    cmd_evaluate,
+    cmd_extract,
+    cmd_map,
+    cmd_simulate,
+)
 from slam.cli._app import app
 from slam.errors import LineslamError
 
