@@ -198,7 +198,7 @@ def hough_groups(
         out_alpha.append(alpha)
         alive[rows[g_row], g_pt] = False
         flat = cells[rows[g_row], :, g_pt].ravel()
-        np.add.at(acc.reshape(-1), flat, np.int32(-1))
+        np.add.at(acc.reshape(-1), flat, np.full(flat.shape[0], -1, dtype=np.int32))
     if not out_group_scan:
         return Grouping.empty(), np.zeros(0, dtype=np.intp)
     # number the groups scan by scan, and sort memberships by group

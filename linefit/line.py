@@ -132,17 +132,16 @@ class Line:
         the normal constructor.
         """
         line = object.__new__(cls)
-        for name, value in (
-            ("r", r),
-            ("alpha", alpha),
-            ("s", s),
-            ("cov", cov),
-            ("segments_s", segments_s),
-            ("segments_var", segments_var),
-            ("n_points", n_points),
-            ("indices", indices),
-        ):
-            object.__setattr__(line, name, value)
+        line.__dict__.update(
+            r=r,
+            alpha=alpha,
+            s=s,
+            cov=cov,
+            segments_s=segments_s,
+            segments_var=segments_var,
+            n_points=n_points,
+            indices=indices,
+        )
         return line
 
     # -- derived geometry -------------------------------------------------------------------
