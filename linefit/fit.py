@@ -265,7 +265,11 @@ def fit_groups(
         last_step = np.zeros(G)
         fresh = np.zeros(G, dtype=bool)  # the previous step was a plain one
         gw, sw = gidx, starts
-        xw, yw, qh, qd, q12w, qt = x, y, q_half, q_diff, q12, q_tr
+        # complex form: u_R + i u_S = (x + i y)·e^{−iα},
+        # P_R = q_half + Re((q_diff − i q12)·e^{2iα})
+        zw = x + 1j * y
+        qzw = q_diff - 1j * q12
+        qh, qt = q_half, q_tr
         for _ in range(max_iterations):
             act_w = active[groups]
             if act_w.sum() < 0.6 * groups.shape[0]:
@@ -273,17 +277,15 @@ def fit_groups(
                 groups = groups[act_w]
                 local = np.cumsum(act_w) - 1
                 gw = local[gw[keep]]
-                xw, yw, qh, qd, q12w, qt = (a[keep] for a in (xw, yw, qh, qd, q12w, qt))
+                zw, qzw, qh, qt = zw[keep], qzw[keep], qh[keep], qt[keep]
                 sw = np.flatnonzero(np.concatenate([[True], gw[1:] != gw[:-1]]))
                 act_w = np.ones(groups.shape[0], dtype=bool)
-            a_w = alpha[groups]
-            ca_g, sa_g = np.cos(a_w), np.sin(a_w)
-            ca, sa = ca_g[gw], sa_g[gw]
-            u_r = xw * ca + yw * sa
-            u_s = yw * ca - xw * sa
-            p_r = qh + qd * (ca * ca - sa * sa) + q12w * (2.0 * sa * ca)
+            rot = np.exp(-1j * alpha[groups])
+            u = zw * rot[gw]
+            u_r, u_s = u.real, u.imag
+            p_r = qh + (qzw * (rot * rot).conj()[gw]).real
             np.maximum(p_r, VARIANCE_FLOOR_M2, out=p_r)
-            rows = np.empty((7 if prop2 else 5, xw.shape[0]))
+            rows = np.empty((7 if prop2 else 5, zw.shape[0]))
             w = np.divide(1.0, p_r, out=rows[0])
             np.multiply(w, u_r, out=rows[1])
             np.multiply(w, u_s, out=rows[2])
