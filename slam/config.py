@@ -13,6 +13,7 @@ from pathlib import Path
 from linefit.config import LineFitConfig
 from linefit.errors import ConfigError
 from linefit.tomlconfig import dump_toml, load_toml
+from slam.graph.config import SlamConfig
 from slam.lines.config import MapConfig
 
 __all__ = ["RunConfig"]
@@ -30,11 +31,15 @@ class RunConfig:
         Per-scan line extraction.
     map : MapConfig
         Merging lines across poses (``lineslam map``; paper Sec. V).
+    slam : SlamConfig
+        Factor-graph SLAM (``lineslam slam``): back-end, motion noise, keyframes,
+        association, fusion, solver.
     """
 
     seed: int = 0
     linefit: LineFitConfig = field(default_factory=LineFitConfig)
     map: MapConfig = field(default_factory=MapConfig)
+    slam: SlamConfig = field(default_factory=SlamConfig)
 
     def __post_init__(self) -> None:
         if self.seed < 0:

@@ -18,6 +18,7 @@ from slam.cli import (  # noqa: F401  (commands register on import)
     cmd_extract,
     cmd_map,
     cmd_simulate,
+    cmd_slam,
 )
 from slam.cli._app import app
 from slam.errors import LineslamError

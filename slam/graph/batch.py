@@ -1,0 +1,354 @@
+"""Batch Gauss-Newton / Levenberg-Marquardt over the whole line graph, in our own loop.
+
+Each iteration:
+
+1. linearise every factor at once in numpy: line factors
+   (:func:`slam.graph.factors.linearize_line_factors`, IRLS weights when a robust kernel is
+   configured), odometry and the gauge prior (:mod:`slam.graph.odometry`, GTSAM's
+   ``BetweenFactorPose2`` / ``PriorFactorPose2`` semantics);
+2. hand the pre-whitened blocks to GTSAM as ``JacobianFactor``s (unit noise) and eliminate the
+   ``GaussianFactorGraph`` (multifrontal Cholesky; COLAMD or METIS ordering, computed once per
+   solve);
+3. retract in numpy (poses ``x·Exp(ξ)``, landmarks additively in their anchored chart) and
+   evaluate the cost in numpy.
+
+Nothing in the loop costs more per factor as the graph grows except GTSAM's elimination itself
+(``scripts/bench_graph.py``).
+
+Step control: Gauss-Newton first; a step that raises the cost is rejected and retried with
+Levenberg-Marquardt damping ``λ·D`` (``D`` ≈ ``diag(AᵀA)``, Marquardt's scaling) on every
+variable; after an accepted damped step ``λ`` follows Nielsen's rule from the gain ratio and
+drops back to pure Gauss-Newton below ``lambda_initial``.  Converged when the relative cost
+decrease or the largest update component falls below its tolerance
+(:class:`slam.graph.config.SolverConfig`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.errors import EstimationError
+from slam.geometry import pose_retract
+from slam.graph.config import SolverConfig
+from slam.graph.factors import line_factor_costs, linearize_line_factors
+from slam.graph.landmark import retract_landmarks
+from slam.graph.linear import (
+    UNIT2,
+    UNIT3,
+    keys_of,
+    line_jacobian_factors,
+    odometry_jacobian_factors,
+    split_delta,
+)
+from slam.graph.odometry import between_costs, linearize_between, linearize_prior
+from slam.graph.problem import LineGraph
+
+__all__ = ["BatchSolver", "SolveStats"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+@dataclass
+class SolveStats:
+    """What one solve did.
+
+    Attributes
+    ----------
+    iterations : int
+        Linearisations performed.
+    initial_cost, final_cost : float
+        ``Σ ρ`` over line factors plus ``½‖e‖²`` over odometry and prior.
+    converged : bool
+        A convergence criterion was met (not just the iteration limit).
+    reason : str
+        Why the loop stopped.
+    time_s : dict
+        Wall-clock time per stage (``linearize``, ``solve``, ``retract``, ``cost``).
+    history : list of (float, float, bool)
+        ``(cost of the trial, λ, accepted)`` for every trial step.
+    """
+
+    iterations: int = 0
+    initial_cost: float = float("nan")
+    final_cost: float = float("nan")
+    converged: bool = False
+    reason: str = ""
+    time_s: dict[str, float] = field(default_factory=dict)
+    history: list[tuple[float, float, bool]] = field(default_factory=list)
+
+
+class BatchSolver:
+    """Own Gauss-Newton / Levenberg-Marquardt loop with GTSAM elimination.
+
+    Parameters
+    ----------
+    config : SolverConfig
+    """
+
+    def __init__(self, config: SolverConfig | None = None) -> None:
+        self.config = config or SolverConfig()
+
+    @staticmethod
+    def active_landmarks(graph: LineGraph) -> IntArray:
+        """Landmarks that are alive and have at least one factor (the solved ones)."""
+        counts = graph.observation_counts()
+        return np.flatnonzero(graph.landmark_alive & (counts > 0))
+
+    # -- cost and linearisation ----------------------------------------------------------------
+    def cost(self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray) -> float:
+        """Total cost at the given full-size estimate arrays (poses, anchored landmarks)."""
+        total = 0.0
+        if graph.n_line_factors:
+            lm = graph.factor_landmark
+            total += float(
+                np.sum(
+                    line_factor_costs(
+                        poses[graph.factor_pose],
+                        landmarks[lm],
+                        graph.anchors[lm],
+                        graph.factor_z,
+                        graph.factor_sqrt_info,
+                        self.config.robust_kernel,
+                        self.config.robust_k,
+                    )
+                )
+            )
+        if graph.n_odometry:
+            total += float(
+                np.sum(
+                    between_costs(
+                        poses[graph.odometry_first],
+                        poses[graph.odometry_second],
+                        graph.odometry_measured,
+                        graph.odometry_sqrt_info,
+                    )
+                )
+            )
+        if graph.prior_pose is not None and graph.prior_sqrt_info is not None:
+            total += linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)[2]
+        return total
+
+    def linearize(
+        self,
+        graph: LineGraph,
+        poses: FloatArray | None = None,
+        landmarks: FloatArray | None = None,
+    ) -> gtsam.GaussianFactorGraph:
+        """The whole graph linearised at the given estimate (default: the graph's own)."""
+        poses = graph.poses if poses is None else poses
+        landmarks = graph.landmarks if landmarks is None else landmarks
+        gfg = gtsam.GaussianFactorGraph()
+        if graph.prior_pose is not None and graph.prior_sqrt_info is not None:
+            A, b, _ = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
+            gfg.push_back(gtsam.JacobianFactor(keys_of("x", np.array([0]))[0], A, b, UNIT3))
+        if graph.n_odometry:
+            A1, A2, b = linearize_between(
+                poses[graph.odometry_first],
+                poses[graph.odometry_second],
+                graph.odometry_measured,
+                graph.odometry_sqrt_info,
+            )
+            for f in odometry_jacobian_factors(
+                graph.odometry_first, graph.odometry_second, A1, A2, b
+            ):
+                gfg.push_back(f)
+        if graph.n_line_factors:
+            lm = graph.factor_landmark
+            lin = linearize_line_factors(
+                poses[graph.factor_pose],
+                landmarks[lm],
+                graph.anchors[lm],
+                graph.factor_z,
+                graph.factor_sqrt_info,
+                self.config.robust_kernel,
+                self.config.robust_k,
+            )
+            for f in line_jacobian_factors(graph.factor_pose, lm, lin):
+                gfg.push_back(f)
+        return gfg
+
+    def damping_scale(
+        self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Marquardt scaling: ``diag(AᵀA)`` per pose ``(N, 3)`` and landmark ``(M, 2)``.
+
+        Line factors contribute their whitened Jacobian columns' squared norms exactly; odometry
+        contributes ``diag(Σ⁻¹)`` to both of its poses (its Jacobians are rotations of the
+        identity to first order).  Floored at ``1e-9`` of the largest entry.
+        """
+        N, M = graph.n_poses, graph.n_landmarks
+        dp = np.zeros((N, 3))
+        dl = np.zeros((M, 2))
+        if graph.n_line_factors:
+            lm = graph.factor_landmark
+            lin = linearize_line_factors(
+                poses[graph.factor_pose],
+                landmarks[lm],
+                graph.anchors[lm],
+                graph.factor_z,
+                graph.factor_sqrt_info,
+                self.config.robust_kernel,
+                self.config.robust_k,
+            )
+            np.add.at(dp, graph.factor_pose, np.sum(lin.A_pose**2, axis=1))
+            np.add.at(dl, lm, np.sum(lin.A_landmark**2, axis=1))
+        if graph.n_odometry:
+            info = np.sum(graph.odometry_sqrt_info**2, axis=1)  # diag(WᵀW)
+            np.add.at(dp, graph.odometry_first, info)
+            np.add.at(dp, graph.odometry_second, info)
+        if graph.prior_sqrt_info is not None and N:
+            dp[0] += np.sum(graph.prior_sqrt_info**2, axis=0)
+        top = max(float(dp.max(initial=0.0)), float(dl.max(initial=0.0)), 1e-300)
+        return np.maximum(dp, 1e-9 * top), np.maximum(dl, 1e-9 * top)
+
+    @staticmethod
+    def _damped(
+        gfg: gtsam.GaussianFactorGraph,
+        landmarks: IntArray,
+        scale_poses: FloatArray,
+        scale_landmarks: FloatArray,
+        lam: float,
+    ) -> gtsam.GaussianFactorGraph:
+        """``gfg`` plus damping factors ``√(λ D)`` on every variable."""
+        out = gtsam.GaussianFactorGraph()
+        out.push_back(gfg)
+        z3, z2 = np.zeros(3), np.zeros(2)
+        sp = np.sqrt(lam * scale_poses)
+        sl = np.sqrt(lam * scale_landmarks[landmarks])
+        for k, d in zip(keys_of("x", np.arange(scale_poses.shape[0])), sp, strict=True):
+            out.push_back(gtsam.JacobianFactor(k, np.diag(d), z3, UNIT3))
+        for k, d in zip(keys_of("l", landmarks), sl, strict=True):
+            out.push_back(gtsam.JacobianFactor(k, np.diag(d), z2, UNIT2))
+        return out
+
+    def _ordering(self, gfg: gtsam.GaussianFactorGraph) -> gtsam.Ordering:
+        if self.config.ordering == "metis":
+            return gtsam.Ordering.MetisGaussianFactorGraph(gfg)
+        return gtsam.Ordering.ColamdGaussianFactorGraph(gfg)
+
+    # -- the loop ---------------------------------------------------------------------------
+    def solve(self, graph: LineGraph, max_iterations: int | None = None) -> SolveStats:
+        """Optimise ``graph``'s estimate in place.
+
+        Parameters
+        ----------
+        graph : LineGraph
+            Needs the gauge prior (:meth:`LineGraph.set_prior`).
+        max_iterations : int, optional
+            Most linearisations; default ``config.max_iterations``.
+
+        Returns
+        -------
+        SolveStats
+
+        Raises
+        ------
+        EstimationError
+            No prior, a non-finite cost, or a linear system GTSAM cannot solve.
+        """
+        cfg = self.config
+        iters = cfg.max_iterations if max_iterations is None else max_iterations
+        stats = SolveStats(time_s={"linearize": 0.0, "solve": 0.0, "retract": 0.0, "cost": 0.0})
+        if graph.n_poses == 0:
+            stats.converged, stats.reason = True, "empty graph"
+            return stats
+        if graph.prior_pose is None:
+            raise EstimationError("the graph has no prior on its first pose (gauge)")
+        lms = self.active_landmarks(graph)
+        poses = graph.poses.copy()
+        landmarks = graph.landmarks.copy()
+        cost = self.cost(graph, poses, landmarks)
+        if not np.isfinite(cost):
+            raise EstimationError("the initial estimate has a non-finite cost")
+        stats.initial_cost = cost
+        lam, nu = 0.0, 2.0
+        scale: tuple[FloatArray, FloatArray] | None = None
+        ordering = None
+        gfg = gtsam.GaussianFactorGraph()
+        relinearize = True
+        while True:
+            if relinearize:
+                if stats.iterations >= iters:
+                    stats.reason = "iteration limit"
+                    break
+                t0 = time.perf_counter()
+                gfg = self.linearize(graph, poses, landmarks)
+                stats.iterations += 1
+                scale = None
+                if ordering is None:
+                    ordering = self._ordering(gfg)
+                stats.time_s["linearize"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            if lam > 0.0:
+                if scale is None:
+                    scale = self.damping_scale(graph, poses, landmarks)
+                system = self._damped(gfg, lms, scale[0], scale[1], lam)
+            else:
+                system = gfg
+            assert ordering is not None
+            try:
+                delta = system.optimize(ordering)
+            except RuntimeError as exc:
+                raise EstimationError(f"linear system could not be solved: {exc}") from exc
+            predicted = float(gfg.error(delta.scale(0.0)) - gfg.error(delta))
+            stats.time_s["solve"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            d_lm, d_pose = split_delta(delta, lms.shape[0], graph.n_poses)
+            step = float(max(np.max(np.abs(d_pose)), np.max(np.abs(d_lm), initial=0.0)))
+            new_poses = pose_retract(poses, d_pose)
+            new_landmarks = landmarks.copy()
+            new_landmarks[lms] = retract_landmarks(landmarks[lms], d_lm)
+            stats.time_s["retract"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            new_cost = self.cost(graph, new_poses, new_landmarks)
+            stats.time_s["cost"] += time.perf_counter() - t0
+            accepted = bool(np.isfinite(new_cost)) and new_cost <= cost * (1.0 + 1e-12) + 1e-15
+            stats.history.append((new_cost, lam, accepted))
+            if accepted:
+                decrease = cost - new_cost
+                poses, landmarks, cost = new_poses, new_landmarks, new_cost
+                relinearize = True
+                if lam > 0.0:
+                    rho = decrease / predicted if predicted > 0.0 else 0.0
+                    lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                    nu = 2.0
+                    if lam < cfg.lambda_min:
+                        lam = 0.0
+                if step < cfg.step_tolerance:
+                    stats.converged, stats.reason = True, "step below tolerance"
+                    break
+                if decrease <= cfg.relative_tolerance * max(cost, 1e-300):
+                    stats.converged, stats.reason = True, "relative decrease below tolerance"
+                    break
+            else:
+                relinearize = False
+                if lam == 0.0:
+                    lam = cfg.lambda_initial
+                else:
+                    lam *= nu
+                    nu *= 2.0
+                if lam > cfg.lambda_max:
+                    stats.converged, stats.reason = True, "no step decreases the cost"
+                    break
+        graph.poses[:] = poses
+        graph.landmarks[:] = landmarks
+        stats.final_cost = cost
+        return stats
+
+    def marginals(self, graph: LineGraph) -> gtsam.Marginals:
+        """``gtsam.Marginals`` of the system linearised at the graph's current estimate.
+
+        Landmark covariances from it are in the anchored chart ``(ρ, φ)``
+        (:func:`slam.graph.landmark.anchored_jacobian` maps them to ``(r, α)``).
+        """
+        gfg = self.linearize(graph)
+        try:
+            return gtsam.Marginals(gfg, gtsam.VectorValues())
+        except RuntimeError as exc:
+            raise EstimationError(f"marginals could not be computed: {exc}") from exc

@@ -1,0 +1,358 @@
+"""Incremental smoothing with ``gtsam.ISAM2``, with no Python callback inside GTSAM.
+
+Design (measured in ``scripts/bench_graph.py``; see ``docs/graph.md``):
+
+* **Odometry and the gauge prior** are native ``BetweenFactorPose2`` / ``PriorFactorPose2``;
+  iSAM2 relinearises them itself in C++.
+* **Line factors** are linearised in numpy (:func:`slam.graph.factors.linearize_line_factors`)
+  at iSAM2's linearisation point ``θ`` of their variables.  All line factors of one keyframe
+  are stacked into one ``gtsam.JacobianFactor`` (pose + its landmarks) and wrapped in one
+  ``gtsam.LinearContainerFactor`` (native C++): one Python object per keyframe instead of per
+  line, and iSAM2 never calls back into Python.
+* **Relinearisation policy.**  A ``LinearContainerFactor`` keeps its Jacobian; when iSAM2
+  moves ``θ`` of one of its variables (its own relinearisation, ``relinearize_threshold``) it
+  only shifts the right-hand side.  After every update whose result reports relinearised
+  variables, ``θ`` is read back (one C++ call) and every keyframe block with a variable that
+  moved since the block was built (beyond ``relin_*`` thresholds; default: any move) is queued;
+  the next update removes those blocks by factor index and adds fresh ones linearised at the
+  new ``θ``, in the same ``ISAM2.update`` call.  With the default thresholds the line factors
+  are thus always linearised where iSAM2 linearises its native factors.
+* **Robust kernels** weight a block when it is (re)built, from the residual at ``θ`` (IRLS with
+  weights refreshed on relinearisation).
+* **Landmark fusion**: the blocks of keyframes that saw the retired landmark are rebuilt
+  against the kept one; the retired variable keeps a weak prior (σ = 1) so that the system
+  stays well posed (iSAM2 cannot delete a variable).
+* iSAM2's ``enablePartialRelinearizationCheck`` is on: without it, the relinearisation check
+  visits the whole tree every update and the cost per update grows linearly with the graph.
+
+The estimate is read back after each update: the variables touched by the update, or the whole
+estimate (``calculateEstimate`` + ``utilities.extractPose2/extractPoint2``, C++) after a large
+re-elimination (a loop closure) and at least every ``full_refresh_interval`` updates.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from linefit.line import wrap_angle
+from slam.errors import EstimationError
+from slam.graph.config import Isam2Config, SolverConfig
+from slam.graph.factors import linearize_line_factors
+from slam.graph.linear import keys_of, line_jacobian_factors, native_odometry_factors
+from slam.graph.problem import GrowableArray, LineGraph
+
+__all__ = ["Isam2Solver", "Isam2Stats"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+@dataclass
+class Isam2Stats:
+    """Counters of an :class:`Isam2Solver` (cumulative).
+
+    Attributes
+    ----------
+    updates : int
+        ``ISAM2.update`` calls.
+    blocks_built : int
+        Keyframe blocks (``LinearContainerFactor``) built, first time or again.
+    blocks_relinearized : int
+        Of those, rebuilt because iSAM2 moved a variable (relinearisation policy).
+    blocks_merged : int
+        Rebuilt because of landmark fusion.
+    variables_relinearized : int
+        Sum of iSAM2's own relinearised-variable counts.
+    full_refreshes : int
+        Whole-estimate read-backs.
+    time_s : dict
+        ``build`` (numpy + factor objects), ``update`` (GTSAM), ``readback``.
+    """
+
+    updates: int = 0
+    blocks_built: int = 0
+    blocks_relinearized: int = 0
+    blocks_merged: int = 0
+    variables_relinearized: int = 0
+    full_refreshes: int = 0
+    time_s: dict[str, float] = field(
+        default_factory=lambda: {"build": 0.0, "update": 0.0, "readback": 0.0}
+    )
+
+
+class Isam2Solver:
+    """Mirror a :class:`LineGraph` into ``gtsam.ISAM2``, one update per call.
+
+    Parameters
+    ----------
+    config : Isam2Config
+    solver : SolverConfig
+        For the robust kernel.
+    """
+
+    def __init__(self, config: Isam2Config | None = None, solver: SolverConfig | None = None):
+        self.config = config or Isam2Config()
+        self.solver = solver or SolverConfig()
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(self.config.relinearize_threshold)
+        params.relinearizeSkip = 1
+        params.enablePartialRelinearizationCheck = True
+        self.isam = gtsam.ISAM2(params)
+        self.stats = Isam2Stats()
+        self._n_poses = 0
+        self._n_landmarks = 0
+        self._n_odometry = 0
+        self._n_factors = 0
+        self._n_merges = 0
+        self._prior_added = False
+        self._factors_of_pose: dict[int, list[int]] = {}
+        self._slot_of_pose: dict[int, int] = {}
+        self._pending: set[int] = set()
+        self._lin_pose = GrowableArray((3,))
+        self._lin_lm = GrowableArray((2,))
+        self._theta_poses = GrowableArray((3,))
+        self._theta_lms = GrowableArray((2,))
+        self._theta_changed = False
+        self._since_full = 0
+
+    # -- linearisation point -----------------------------------------------------------------
+    def _refresh_theta(self) -> None:
+        lp = self.isam.getLinearizationPoint()
+        poses = np.asarray(gtsam.utilities.extractPose2(lp), dtype=float).reshape(-1, 3)
+        lms = np.asarray(gtsam.utilities.extractPoint2(lp), dtype=float).reshape(-1, 2)
+        self._theta_poses.data[:] = poses
+        self._theta_lms.data[:] = lms
+
+    def _stale_groups(self) -> set[int]:
+        """Keyframes whose block was built at a linearisation point iSAM2 has since left."""
+        n = len(self._lin_pose)
+        if n == 0:
+            return set()
+        cfg = self.config
+        fp = self._graph_factor_pose[:n]
+        fl = self._graph_factor_lm[:n]
+        tp = self._theta_poses.data[fp]
+        tl = self._theta_lms.data[fl]
+        lp = self._lin_pose.data
+        ll = self._lin_lm.data
+        moved = np.hypot(tp[:, 0] - lp[:, 0], tp[:, 1] - lp[:, 1]) > cfg.relin_translation_m
+        moved |= np.abs(tp[:, 2] - lp[:, 2]) > cfg.relin_angle_rad
+        moved |= np.abs(tl[:, 0] - ll[:, 0]) > cfg.relin_range_m
+        moved |= np.abs(tl[:, 1] - ll[:, 1]) > cfg.relin_angle_rad
+        return {int(p) for p in np.unique(fp[moved])}
+
+    # -- blocks --------------------------------------------------------------------------------
+    def _build_blocks(
+        self, graph: LineGraph, poses: list[int]
+    ) -> list[gtsam.LinearContainerFactor]:
+        """One ``LinearContainerFactor`` per keyframe in ``poses``, linearised at ``θ``.
+
+        The numpy linearisation runs once for all the blocks' factors together.
+        """
+        if not poses:
+            return []
+        groups = [np.asarray(self._factors_of_pose[p], dtype=np.intp) for p in poses]
+        fs = np.concatenate(groups)
+        fp = graph.factor_pose[fs]
+        lm = graph.factor_landmark[fs]
+        theta_p = self._theta_poses.data[fp]
+        theta_l = self._theta_lms.data[lm]
+        lin = linearize_line_factors(
+            theta_p,
+            theta_l,
+            graph.anchors[lm],
+            graph.factor_z[fs],
+            graph.factor_sqrt_info[fs],
+            self.solver.robust_kernel,
+            self.solver.robust_k,
+        )
+        jfs = line_jacobian_factors(fp, lm, lin)
+        self._lin_pose.data[fs] = theta_p
+        self._lin_lm.data[fs] = theta_l
+        key_p = keys_of("x", np.asarray(poses))
+        key_l = keys_of("l", lm)
+        blocks = []
+        start = 0
+        for pose, key, group in zip(poses, key_p, groups, strict=True):
+            stop = start + group.shape[0]
+            gfg = gtsam.GaussianFactorGraph()
+            values = gtsam.Values()
+            tp = self._theta_poses.data[pose]
+            values.insert(key, gtsam.Pose2(tp[0], tp[1], tp[2]))
+            for f in range(start, stop):
+                gfg.push_back(jfs[f])
+                if not values.exists(key_l[f]):
+                    values.insert(key_l[f], gtsam.Point2(theta_l[f, 0], theta_l[f, 1]))
+            blocks.append(gtsam.LinearContainerFactor(gtsam.JacobianFactor(gfg), values))
+            start = stop
+        self.stats.blocks_built += len(blocks)
+        return blocks
+
+    # -- the update ----------------------------------------------------------------------------
+    def update(self, graph: LineGraph) -> gtsam.ISAM2Result:
+        """Bring iSAM2 up to date with ``graph`` (one ``ISAM2.update``) and read back."""
+        if graph.prior_pose is None:
+            raise EstimationError("the graph has no prior on its first pose (gauge)")
+        t0 = time.perf_counter()
+        nfg = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        touched_poses: set[int] = set()
+        touched_lms: set[int] = set()
+        # new variables
+        new_p = np.arange(self._n_poses, graph.n_poses)
+        for key, p in zip(keys_of("x", new_p), graph.poses[new_p], strict=True):
+            values.insert(key, gtsam.Pose2(p[0], p[1], p[2]))
+        self._theta_poses.append(graph.poses[new_p])
+        new_l = np.arange(self._n_landmarks, graph.n_landmarks)
+        for key, v in zip(keys_of("l", new_l), graph.landmarks[new_l], strict=True):
+            values.insert(key, gtsam.Point2(v[0], v[1]))
+        self._theta_lms.append(graph.landmarks[new_l])
+        touched_poses.update(int(i) for i in new_p)
+        touched_lms.update(int(j) for j in new_l)
+        # native factors
+        if not self._prior_added:
+            nfg.push_back(native_odometry_factors(graph, graph.n_odometry, with_prior=True))
+            self._prior_added = True
+        if graph.n_odometry > self._n_odometry:
+            nfg.push_back(native_odometry_factors(graph, self._n_odometry, with_prior=False))
+            touched_poses.update(int(i) for i in graph.odometry_first[self._n_odometry :])
+            self._n_odometry = graph.n_odometry
+        n_native = nfg.size()
+        # new line factors
+        self._graph_factor_pose = graph.factor_pose
+        self._graph_factor_lm = graph.factor_landmark
+        new_f = np.arange(self._n_factors, graph.n_line_factors)
+        if new_f.size:
+            self._lin_pose.append(np.zeros((new_f.size, 3)))
+            self._lin_lm.append(np.zeros((new_f.size, 2)))
+            for f, p in zip(new_f, graph.factor_pose[new_f], strict=True):
+                self._factors_of_pose.setdefault(int(p), []).append(int(f))
+            self._pending.update(int(p) for p in np.unique(graph.factor_pose[new_f]))
+        self._n_factors = graph.n_line_factors
+        # landmark fusion since the last update
+        weak = gtsam.noiseModel.Isotropic.Sigma(2, 1.0)
+        for rec in graph.merge_log[self._n_merges :]:
+            groups = {int(p) for p in np.unique(graph.factor_pose[rec.factors])}
+            self.stats.blocks_merged += len(groups)
+            self._pending.update(groups)
+            t = self._theta_lms.data[rec.drop]
+            nfg.add(
+                gtsam.PriorFactorPoint2(
+                    keys_of("l", np.array([rec.drop]))[0], gtsam.Point2(t[0], t[1]), weak
+                )
+            )
+        self._n_merges = len(graph.merge_log)
+        # relinearisation policy
+        if self._theta_changed:
+            stale = self._stale_groups() - self._pending
+            self.stats.blocks_relinearized += len(stale)
+            self._pending.update(stale)
+            self._theta_changed = False
+        rebuild = sorted(self._pending)
+        self._pending = set()
+        remove = [self._slot_of_pose[p] for p in rebuild if p in self._slot_of_pose]
+        n_before_blocks = nfg.size()
+        for block in self._build_blocks(graph, rebuild):
+            nfg.add(block)
+        for p in rebuild:
+            touched_poses.add(p)
+            touched_lms.update(int(j) for j in graph.factor_landmark[self._factors_of_pose[p]])
+        self.stats.time_s["build"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        try:
+            result = self.isam.update(nfg, values, remove)
+        except RuntimeError as exc:
+            raise EstimationError(f"iSAM2 update failed: {exc}") from exc
+        self.stats.time_s["update"] += time.perf_counter() - t0
+        slots = list(result.getNewFactorsIndices())
+        for p, slot in zip(rebuild, slots[n_before_blocks:], strict=True):
+            self._slot_of_pose[p] = int(slot)
+        del n_native
+        self._n_poses = graph.n_poses
+        self._n_landmarks = graph.n_landmarks
+        self.stats.updates += 1
+        n_relin = int(result.getVariablesRelinearized())
+        self.stats.variables_relinearized += n_relin
+        t0 = time.perf_counter()
+        if n_relin > 0:
+            self._refresh_theta()
+            self._theta_changed = True
+        self._since_full += 1
+        full = (
+            int(result.getVariablesReeliminated()) > self.config.full_refresh_variables
+            or self._since_full >= self.config.full_refresh_interval
+        )
+        if full:
+            self.read_all(graph)
+        else:
+            self._read_some(graph, touched_poses, touched_lms)
+        self.stats.time_s["readback"] += time.perf_counter() - t0
+        return result
+
+    def read_all(self, graph: LineGraph) -> None:
+        """Copy the whole current estimate into ``graph``."""
+        est = self.isam.calculateEstimate()
+        poses = np.asarray(gtsam.utilities.extractPose2(est), dtype=float).reshape(-1, 3)
+        lms = np.asarray(gtsam.utilities.extractPoint2(est), dtype=float).reshape(-1, 2)
+        poses[:, 2] = np.asarray(wrap_angle(poses[:, 2]))
+        lms[:, 1] = np.asarray(wrap_angle(lms[:, 1]))
+        graph.poses[:] = poses
+        graph.landmarks[:] = lms
+        self._since_full = 0
+        self.stats.full_refreshes += 1
+
+    def _read_some(self, graph: LineGraph, poses: set[int], landmarks: set[int]) -> None:
+        for i, key in zip(sorted(poses), keys_of("x", np.array(sorted(poses))), strict=True):
+            p = self.isam.calculateEstimatePose2(key)
+            graph.poses[i] = (p.x(), p.y(), p.theta())
+        for j, key in zip(
+            sorted(landmarks), keys_of("l", np.array(sorted(landmarks))), strict=True
+        ):
+            v = np.asarray(self.isam.calculateEstimatePoint2(key), dtype=float)
+            graph.landmarks[j] = (v[0], float(wrap_angle(v[1])))
+
+    def optimize(self, graph: LineGraph, max_updates: int | None = None) -> int:
+        """Extra updates (no new factors) until iSAM2 and the block policy settle.
+
+        Returns the number of updates run.
+        """
+        n = self.config.final_updates if max_updates is None else max_updates
+        runs = 0
+        for _ in range(n):
+            before = graph.poses.copy()
+            result = self.update(graph)
+            runs += 1
+            self.read_all(graph)
+            moved = float(np.max(np.abs(graph.poses - before), initial=0.0))
+            settled = int(result.getVariablesRelinearized()) == 0 and not self._theta_changed
+            if settled and (moved < 1e-9 or not self._pending):
+                break
+        self.read_all(graph)
+        return runs
+
+    # -- covariances -----------------------------------------------------------------------
+    def joint_covariance(self, poses: IntArray, landmarks: IntArray) -> FloatArray:
+        """Joint marginal covariance of ``poses`` (3 each) then ``landmarks`` (2 each).
+
+        Landmark blocks are in the anchored chart ``(ρ, φ)``.
+        """
+        keys = keys_of("x", np.asarray(poses)) + keys_of("l", np.asarray(landmarks))
+        try:
+            return np.asarray(
+                self.isam.jointMarginalCovariance(gtsam.KeyVector(keys)).fullMatrix(), dtype=float
+            )
+        except RuntimeError as exc:
+            raise EstimationError(f"iSAM2 marginals failed: {exc}") from exc
+
+    def pose_covariance(self, pose: int) -> FloatArray:
+        """Marginal covariance of one pose (right tangent space)."""
+        return np.asarray(self.isam.marginalCovariance(keys_of("x", np.array([pose]))[0]))
+
+    def landmark_covariance(self, landmark: int) -> FloatArray:
+        """Marginal covariance of one landmark (anchored chart)."""
+        return np.asarray(self.isam.marginalCovariance(keys_of("l", np.array([landmark]))[0]))

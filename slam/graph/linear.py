@@ -1,0 +1,111 @@
+"""From numpy linearisations to GTSAM linear systems (and back).
+
+* Line, odometry and prior factors, linearised in numpy, become pre-whitened
+  ``gtsam.JacobianFactor``s with unit noise: one Python constructor call each (~4 µs), never a
+  Python callback from inside GTSAM.
+* GTSAM eliminates the ``GaussianFactorGraph``; the solution's ``VectorValues.vector()`` (one
+  C++ call) is split into per-variable updates by key order: landmarks ``L(j)`` sort before
+  poses ``X(i)`` (``'l' < 'x'``), each group by index.
+* For iSAM2 (whose odometry factors are native): ``native_odometry_factors``.
+"""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.graph.factors import LineLinearization
+from slam.graph.problem import LineGraph
+
+__all__ = [
+    "UNIT2",
+    "UNIT3",
+    "keys_of",
+    "line_jacobian_factors",
+    "native_odometry_factors",
+    "odometry_jacobian_factors",
+    "split_delta",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+UNIT2 = gtsam.noiseModel.Unit.Create(2)
+UNIT3 = gtsam.noiseModel.Unit.Create(3)
+_X = np.uint64(ord("x")) << np.uint64(56)
+_L = np.uint64(ord("l")) << np.uint64(56)
+
+
+def keys_of(kind: str, indices: IntArray) -> list[int]:
+    """GTSAM keys ``X(i)`` (``kind="x"``) or ``L(j)`` (``kind="l"``) as Python ints, vectorised."""
+    base = _X if kind == "x" else _L
+    idx = np.asarray(indices, dtype=np.uint64)
+    keys: list[int] = (idx + base).tolist()
+    return keys
+
+
+def line_jacobian_factors(
+    pose_index: IntArray, landmark_index: IntArray, lin: LineLinearization
+) -> list[gtsam.JacobianFactor]:
+    """One pre-whitened ``JacobianFactor`` (unit noise) per linearised line factor."""
+    kx = keys_of("x", pose_index)
+    kl = keys_of("l", landmark_index)
+    return [
+        gtsam.JacobianFactor(key_x, A_x, key_l, A_l, rhs, UNIT2)
+        for key_x, A_x, key_l, A_l, rhs in zip(
+            kx, lin.A_pose, kl, lin.A_landmark, lin.b, strict=True
+        )
+    ]
+
+
+def odometry_jacobian_factors(
+    first: IntArray, second: IntArray, A_first: FloatArray, A_second: FloatArray, b: FloatArray
+) -> list[gtsam.JacobianFactor]:
+    """Pre-whitened ``JacobianFactor``s of odometry factors (two 3×3 blocks each)."""
+    k1 = keys_of("x", first)
+    k2 = keys_of("x", second)
+    return [
+        gtsam.JacobianFactor(a, Aa, c, Ac, rhs, UNIT3)
+        for a, Aa, c, Ac, rhs in zip(k1, A_first, k2, A_second, b, strict=True)
+    ]
+
+
+def split_delta(
+    delta: gtsam.VectorValues, n_landmarks: int, n_poses: int
+) -> tuple[FloatArray, FloatArray]:
+    """Per-variable updates ``(n_landmarks, 2)`` and ``(n_poses, 3)`` from a solution.
+
+    The solution must hold exactly ``n_landmarks`` landmarks and ``n_poses`` poses; the
+    landmarks come first in key order.
+    """
+    v = np.asarray(delta.vector(), dtype=float)
+    n_l = 2 * n_landmarks
+    if v.shape[0] != n_l + 3 * n_poses:
+        raise RuntimeError("solution does not match the graph's variables")  # pragma: no cover
+    return v[:n_l].reshape(n_landmarks, 2), v[n_l:].reshape(n_poses, 3)
+
+
+def native_odometry_factors(
+    graph: LineGraph, start: int = 0, with_prior: bool = True
+) -> gtsam.NonlinearFactorGraph:
+    """Native factors of ``graph``: the prior (if set and asked for) and odometry ``start:``."""
+    nfg = gtsam.NonlinearFactorGraph()
+    if with_prior and graph.prior_pose is not None and graph.prior_cov is not None:
+        p = graph.prior_pose
+        nfg.add(
+            gtsam.PriorFactorPose2(
+                keys_of("x", np.array([0]))[0],
+                gtsam.Pose2(*p),
+                gtsam.noiseModel.Gaussian.Covariance(graph.prior_cov),
+            )
+        )
+    first = keys_of("x", graph.odometry_first[start:])
+    second = keys_of("x", graph.odometry_second[start:])
+    for a, b, m, c in zip(
+        first, second, graph.odometry_measured[start:], graph.odometry_cov[start:], strict=True
+    ):
+        nfg.add(
+            gtsam.BetweenFactorPose2(a, b, gtsam.Pose2(*m), gtsam.noiseModel.Gaussian.Covariance(c))
+        )
+    return nfg

@@ -1,0 +1,99 @@
+"""``lineslam slam`` end to end on the demo log (a few dozen scans), files per INTERFACES.md."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import REPO_ROOT
+
+from slam.cli import main
+from slam.config import RunConfig
+from slam.geometry import pose_between, pose_log
+from slam.io import read_tum
+from slam.lines.mapio import read_map_json
+
+DEMO = REPO_ROOT / "datasets" / "sim" / "demo"
+
+
+def run(args, capsys):
+    try:
+        main(args)
+        code = 0
+    except SystemExit as exc:
+        code = exc.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.mark.parametrize("backend", ["isam2", "batch"])
+def test_slam_writes_the_results_folder(tmp_path, capsys, backend):
+    out = tmp_path / "run"
+    code, stdout, _ = run(
+        [
+            "slam",
+            str(DEMO / "log.clf"),
+            "--out",
+            str(out),
+            "--backend",
+            backend,
+            "--max-scans",
+            "60",
+            "--quiet",
+        ],
+        capsys,
+    )
+    assert code == 0 and stdout == ""
+    for name in ("trajectory.tum", "map.json", "summary.json", "config.toml"):
+        assert (out / name).is_file()
+    traj = read_tum(out / "trajectory.tum")
+    assert len(traj.timestamps) == 60
+    lines = (out / "trajectory.tum").read_text().splitlines()
+    assert all(len(line.split()) == 8 for line in lines)
+    # time stamps as in the log, and the estimate close to the simulator's truth
+    truth = read_tum(DEMO / "ground_truth.tum")
+    np.testing.assert_allclose(traj.timestamps, truth.timestamps[:60], atol=1e-6)
+    err = pose_log(pose_between(truth.poses[:60], traj.poses))
+    assert np.abs(err[:, :2]).max() < 0.02
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("scans", "points", "lines_fit", "lines_merged", "compression", "runtime_s"):
+        assert key in summary
+    assert summary["frame"] == "laser" and summary["scans"] == 60
+    assert summary["backend"]["backend"] == backend
+    assert {"read", "estimate", "optimize", "write", "total"} <= set(summary["runtime_s"])
+    line_map = read_map_json(out / "map.json")
+    assert len(line_map) == summary["lines_merged"] > 5
+    assert all(ln.r >= 0 and -np.pi < ln.alpha <= np.pi for ln in line_map.lines)
+    cfg = RunConfig.from_toml(out / "config.toml")
+    assert cfg.slam.backend == backend
+
+
+def test_slam_plot_and_bad_input(tmp_path, capsys):
+    out = tmp_path / "run"
+    code, _, _ = run(
+        [
+            "slam",
+            str(DEMO / "log.clf"),
+            "--out",
+            str(out),
+            "--max-scans",
+            "10",
+            "--plot",
+            "--quiet",
+        ],
+        capsys,
+    )
+    assert code == 0 and (out / "figures" / "trajectory_map.png").stat().st_size > 1000
+    code, _, err = run(
+        ["slam", str(tmp_path / "missing.clf"), "--out", str(out), "--quiet"], capsys
+    )
+    assert code == 2 and "missing.clf" in err and len(err.strip().splitlines()) == 1
+    bad = tmp_path / "bad.clf"
+    bad.write_text("FLASER 3 1.0 2.0 oops\n")
+    code, _, err = run(["slam", str(bad), "--out", str(out), "--quiet"], capsys)
+    assert code == 2 and "bad.clf" in err
+    code, _, err = run(
+        ["slam", str(DEMO / "log.clf"), "--out", str(out), "--backend", "ekf", "--quiet"], capsys
+    )
+    assert code != 0 and "backend" in err

@@ -1,0 +1,127 @@
+"""Batch solver: convergence, invariance, fast path vs CustomFactor, covariances, kernels."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+
+from linefit.line import wrap_angle
+from slam.errors import EstimationError
+from slam.geometry import line_to_parent, pose_between, pose_compose, pose_log
+from slam.graph import BatchSolver, LineGraph, SolverConfig, line_custom_factor, synthetic_problem
+from slam.graph.landmark import anchored_from_r_alpha
+from slam.graph.linear import keys_of, native_odometry_factors
+
+
+def pose_errors(est, truth):
+    return pose_log(pose_between(truth, est))
+
+
+def test_converges_from_dead_reckoning_to_the_optimum():
+    p = synthetic_problem(250, seed=1)
+    g = p.graph
+    st = BatchSolver().solve(g)
+    assert st.converged and st.iterations <= 6
+    # the same problem solved from the truth reaches the same minimum
+    q = synthetic_problem(250, seed=1).graph
+    q.poses[:] = p.poses_true
+    q.landmarks[:] = anchored_from_r_alpha(p.landmarks_true, q.anchors)
+    st_true = BatchSolver().solve(q)
+    assert st.final_cost == pytest.approx(st_true.final_cost, rel=1e-6)
+    np.testing.assert_allclose(g.poses, q.poses, atol=1e-5)
+    # and χ² of the minimum is about its degrees of freedom (2F + 3E + 3 − 3N − 2M) / 2
+    dof = 2 * g.n_line_factors + 3 * g.n_odometry + 3 - 3 * g.n_poses - 2 * g.n_landmarks
+    assert 2 * st.final_cost == pytest.approx(dof, rel=5 * np.sqrt(2 / dof))
+
+
+def test_solution_is_invariant_to_where_the_world_origin_is():
+    """The anchored chart: the same problem 1 km away converges the same way."""
+    base = synthetic_problem(250, seed=1)
+    BatchSolver().solve(base.graph)
+    off = np.array([1000.0, -1000.0, 0.7])
+    p = synthetic_problem(250, seed=1)
+    g = p.graph
+    lra = g.landmarks_r_alpha.copy()
+    g.poses[:] = pose_compose(off, g.poses)
+    assert g.prior_pose is not None
+    g.set_prior(pose_compose(off, g.prior_pose), g.prior_cov)
+    g.anchors[:] = pose_compose(off, np.column_stack([g.anchors, np.zeros(len(lra))]))[:, :2]
+    lra_w = line_to_parent(np.column_stack([lra, np.zeros(len(lra))]), off, normal_form=False)[0]
+    g.landmarks[:] = anchored_from_r_alpha(lra_w[:, :2], g.anchors)
+    st = BatchSolver().solve(g)
+    assert st.converged and st.iterations <= 6
+    back = pose_compose(np.array(pose_between(off, np.zeros(3))), g.poses)
+    np.testing.assert_allclose(back[:, :2], base.graph.poses[:, :2], atol=1e-6)
+
+
+def test_fast_path_and_custom_factor_reach_the_same_solution():
+    p = synthetic_problem(40, seed=4)
+    g = p.graph
+    # reference: CustomFactors + native odometry, GTSAM's own Levenberg-Marquardt
+    nfg = native_odometry_factors(g)
+    kx = keys_of("x", g.factor_pose)
+    kl = keys_of("l", g.factor_landmark)
+    for f in range(g.n_line_factors):
+        nfg.add(
+            line_custom_factor(
+                kx[f], kl[f], g.anchors[g.factor_landmark[f]], g.factor_z[f], g.factor_cov[f]
+            )
+        )
+    values = gtsam.Values()
+    for key, pose in zip(keys_of("x", np.arange(g.n_poses)), g.poses, strict=True):
+        values.insert(key, gtsam.Pose2(*pose))
+    for key, v in zip(keys_of("l", np.arange(g.n_landmarks)), g.landmarks, strict=True):
+        values.insert(key, gtsam.Point2(*v))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-12)
+    params.setAbsoluteErrorTol(1e-12)
+    ref = gtsam.LevenbergMarquardtOptimizer(nfg, values, params).optimize()
+    ref_poses = gtsam.utilities.extractPose2(ref)
+    st = BatchSolver(SolverConfig(relative_tolerance=1e-12, step_tolerance=1e-10)).solve(g)
+    assert st.final_cost == pytest.approx(nfg.error(ref), rel=1e-8)
+    np.testing.assert_allclose(g.poses[:, :2], ref_poses[:, :2], atol=1e-7)
+    np.testing.assert_allclose(wrap_angle(g.poses[:, 2] - ref_poses[:, 2]), 0.0, atol=1e-8)
+    # the linearised systems agree too: same marginal of the last pose
+    m_ref = gtsam.Marginals(nfg, ref).marginalCovariance(keys_of("x", np.array([39]))[0])
+    m_fast = BatchSolver().marginals(g).marginalCovariance(keys_of("x", np.array([39]))[0])
+    np.testing.assert_allclose(m_fast, m_ref, rtol=1e-5)
+
+
+def test_marginals_are_consistent_monte_carlo():
+    """Pose NEES of the last pose and a middle pose over seeded runs within χ² bounds."""
+    nees = []
+    for seed in range(40):
+        p = synthetic_problem(25, seed=100 + seed, sigma_r_m=0.02, sigma_alpha_rad=0.01)
+        g = p.graph
+        BatchSolver().solve(g)
+        m = BatchSolver().marginals(g)
+        for i in (12, 24):
+            e = pose_errors(g.poses[i], p.poses_true[i])
+            P = m.marginalCovariance(keys_of("x", np.array([i]))[0])
+            nees.append(float(e @ np.linalg.solve(P, e)))
+    nees = np.array(nees)
+    # 80 samples of χ²₃ (two per run, correlated): a generous 99 % band on their mean
+    assert 3.0 * 0.72 < nees.mean() < 3.0 * 1.33
+
+
+def test_robust_kernel_resists_an_outlier():
+    clean = synthetic_problem(60, seed=7)
+    BatchSolver().solve(clean.graph)
+    results = {}
+    for kernel in ("none", "huber", "cauchy"):
+        p = synthetic_problem(60, seed=7)
+        p.graph.factor_z[100, 0] += 1.0  # one gross outlier (≈ 100 σ)
+        BatchSolver(SolverConfig(robust_kernel=kernel, robust_k=2.0)).solve(p.graph)
+        results[kernel] = np.max(np.abs(p.graph.poses[:, :2] - clean.graph.poses[:, :2]))
+    assert results["none"] > 0.02
+    assert results["huber"] < 0.3 * results["none"]
+    assert results["cauchy"] < 0.1 * results["none"]
+
+
+def test_gauge_is_required_and_empty_graph_is_fine():
+    g = LineGraph()
+    assert BatchSolver().solve(g).reason == "empty graph"
+    g.add_pose(np.zeros(3))
+    with pytest.raises(EstimationError, match="prior"):
+        BatchSolver().solve(g)

@@ -1,0 +1,160 @@
+"""iSAM2 back-end: same solution and covariances as batch, relinearisation policy, fusion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from linefit.line import wrap_angle
+from slam.geometry import line_to_parent, pose_compose
+from slam.graph import BatchSolver, Isam2Config, Isam2Solver, LineGraph, synthetic_problem
+from slam.graph.linear import keys_of
+
+
+def close_covariances(P, Q, rel):
+    """|P − Q| within ``rel`` of the scale ``√(P_ii P_jj)`` entry by entry."""
+    d = np.sqrt(np.diag(Q))
+    assert np.all(np.abs(P - Q) <= rel * np.outer(d, d))
+
+
+def feed(src: LineGraph, solver: Isam2Solver | None) -> LineGraph:
+    """Replay ``src`` pose by pose into a new graph (dead reckoning on the current estimate,
+    landmarks initialised from their first measurement), updating ``solver`` after each pose.
+    Landmarks keep their indices only if ``src`` numbers them in order of first observation
+    (``synthetic_problem`` does); others are created when first seen."""
+    g = LineGraph()
+    assert src.prior_pose is not None and src.prior_cov is not None
+    g.set_prior(src.prior_pose, src.prior_cov)
+    n = src.n_poses
+    for i in range(n):
+        if i == 0:
+            g.add_pose(src.prior_pose)
+        else:
+            g.add_pose(pose_compose(g.poses[i - 1], src.odometry_measured[i - 1]))
+            g.add_odometry(i - 1, i, src.odometry_measured[i - 1], src.odometry_cov[i - 1])
+        fs = np.flatnonzero(src.factor_pose == i)
+        lms = src.factor_landmark[fs]
+        new = np.arange(g.n_landmarks, lms.max() + 1)
+        new = new[np.isin(new, lms)]
+        if new.size:
+            assert new[0] == g.n_landmarks, "landmarks must be numbered by first observation"
+            first = np.array([fs[np.flatnonzero(lms == j)[0]] for j in new])
+            z3 = np.column_stack([src.factor_z[first], np.zeros(new.size)])
+            la = line_to_parent(z3, g.poses[i], normal_form=False)[0][:, :2]
+            g.add_landmarks(la, src.anchors[new])
+        g.add_line_factors(i, lms, src.factor_z[fs], src.factor_cov[fs], src.factor_endpoints[fs])
+        if solver is not None:
+            solver.update(g)
+    return g
+
+
+@pytest.fixture(scope="module")
+def incremental():
+    src = synthetic_problem(150, seed=11).graph
+    solver = Isam2Solver()
+    g = feed(src, solver)
+    solver.optimize(g)
+    batch = feed(src, None)
+    BatchSolver().solve(batch)
+    return g, solver, batch
+
+
+def test_isam2_reaches_the_batch_solution(incremental):
+    g, _, batch = incremental
+    np.testing.assert_allclose(g.poses[:, :2], batch.poses[:, :2], atol=2e-3)
+    # iSAM2 linearises up to relinearize_threshold (0.01) away from the estimate: sub-mm effects
+    np.testing.assert_allclose(wrap_angle(g.poses[:, 2] - batch.poses[:, 2]), 0.0, atol=3e-4)
+    np.testing.assert_allclose(g.landmarks, batch.landmarks, atol=2e-3)
+    cost_isam = BatchSolver().cost(g, g.poses, g.landmarks)
+    cost_batch = BatchSolver().cost(batch, batch.poses, batch.landmarks)
+    assert cost_isam == pytest.approx(cost_batch, rel=1e-3)
+
+
+def test_isam2_marginals_match_batch(incremental):
+    _, solver, batch = incremental
+    m = BatchSolver().marginals(batch)
+    for i in (0, 75, 149):
+        P_batch = m.marginalCovariance(keys_of("x", np.array([i]))[0])
+        close_covariances(solver.pose_covariance(i), P_batch, 0.01)
+    J = solver.joint_covariance(np.array([149]), np.array([3, 40]))
+    J_batch = m.jointMarginalCovariance(
+        __import__("gtsam").KeyVector(
+            keys_of("x", np.array([149])) + keys_of("l", np.array([3, 40]))
+        )
+    ).fullMatrix()
+    close_covariances(J, J_batch, 0.01)
+
+
+def test_relinearisation_policy_keeps_blocks_at_isam2s_linearisation_point(incremental):
+    g, solver, _ = incremental
+    st = solver.stats
+    assert st.updates >= 150 and st.variables_relinearized > 0
+    assert st.blocks_relinearized > 0  # blocks were rebuilt because iSAM2 moved θ
+    solver._refresh_theta()
+    assert solver._stale_groups() == set()  # after optimize nothing is left stale
+    # the number of factors in iSAM2 stayed one block per keyframe (+ odometry + prior)
+    n_factors = sum(
+        1
+        for k in range(solver.isam.getFactorsUnsafe().size())
+        if solver.isam.getFactorsUnsafe().exists(k)
+    )
+    assert n_factors == g.n_poses + g.n_odometry + 1
+
+
+def test_coarser_thresholds_trade_accuracy_for_fewer_rebuilds():
+    src = synthetic_problem(80, seed=12).graph
+    fine, coarse = Isam2Solver(), Isam2Solver(Isam2Config(relinearize_threshold=0.1))
+    g_fine, g_coarse = feed(src, fine), feed(src, coarse)
+    fine.optimize(g_fine)
+    coarse.optimize(g_coarse)
+    assert coarse.stats.blocks_built < fine.stats.blocks_built
+    batch = feed(src, None)
+    BatchSolver().solve(batch)
+    err_fine = np.max(np.abs(g_fine.poses[:, :2] - batch.poses[:, :2]))
+    err_coarse = np.max(np.abs(g_coarse.poses[:, :2] - batch.poses[:, :2]))
+    assert err_fine < 2e-3 and err_fine <= err_coarse
+
+
+def test_landmark_fusion_rewires_isam2_blocks():
+    """Split one landmark's observations over a duplicate, then merge: iSAM2 ends where batch
+    ends on the merged graph, and the retired variable keeps only its weak prior."""
+    src = synthetic_problem(60, seed=13).graph
+    dup_of = 5
+    # give the later observations of landmark 5 their own landmark (a duplicate) numbered where
+    # it is first seen: build the source graph again with the duplicate inserted
+    fs = np.flatnonzero(src.factor_landmark == dup_of)
+    late = fs[len(fs) // 2 :]
+    first_late = int(src.factor_pose[late[0]])
+    lm = src.factor_landmark.copy()
+    seen_before = np.unique(lm[src.factor_pose < first_late])
+    dup = int(seen_before.max()) + 1  # the next new index at that pose
+    lm[lm >= dup] += 1
+    lm[late] = dup
+    src2 = LineGraph()
+    assert src.prior_pose is not None and src.prior_cov is not None
+    src2.set_prior(src.prior_pose, src.prior_cov)
+    for p in src.poses:
+        src2.add_pose(p)
+    for e in range(src.n_odometry):
+        src2.add_odometry(e, e + 1, src.odometry_measured[e], src.odometry_cov[e])
+    anchors = np.insert(src.anchors, dup, src.anchors[dup_of], axis=0)
+    la = np.insert(src.landmarks_r_alpha, dup, src.landmarks_r_alpha[dup_of], axis=0)
+    src2.add_landmarks(la, anchors)
+    src2.add_line_factors(0, lm[:0], src.factor_z[:0], src.factor_cov[:0], src.factor_endpoints[:0])
+    for i in range(src.n_poses):
+        f = np.flatnonzero(src.factor_pose == i)
+        src2.add_line_factors(i, lm[f], src.factor_z[f], src.factor_cov[f], src.factor_endpoints[f])
+    src = src2
+    solver = Isam2Solver()
+    g = feed(src, solver)
+    assert g.n_landmarks == src.n_landmarks
+    g.merge_landmarks(dup_of, dup)
+    solver.update(g)
+    solver.optimize(g)
+    assert solver.stats.blocks_merged == len(np.unique(g.factor_pose[late]))
+    batch = feed(src, None)
+    batch.merge_landmarks(dup_of, dup)
+    BatchSolver().solve(batch)
+    np.testing.assert_allclose(g.poses[:, :2], batch.poses[:, :2], atol=2e-3)
+    np.testing.assert_allclose(g.landmarks[dup_of], batch.landmarks[dup_of], atol=2e-3)
+    assert not g.landmark_alive[dup] and np.all(g.factor_landmark != dup)

@@ -1,0 +1,274 @@
+"""LineSlam on simulated line worlds: loop closing, map, consistency, degradation, result files."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+from line_world import (
+    corridor_loop,
+    loop_path,
+    relations_error,
+    simulate_run,
+    straight_corridor,
+)
+
+from linefit.line import Line
+from slam.errors import InputError
+from slam.geometry import pose_between, pose_log
+from slam.graph import (
+    FusionConfig,
+    KeyframeConfig,
+    LineSlam,
+    MotionNoiseConfig,
+    SlamConfig,
+    SlamResult,
+    SlamWarning,
+    SolverConfig,
+)
+from slam.graph.line_slam import WARN_LOST, WARN_NO_LINES, WARN_PARALLEL
+from slam.types import Scan
+
+MOTION = MotionNoiseConfig(sigma_xy_per_m=0.03, sigma_theta_per_m=0.03, sigma_theta_per_rad=0.03)
+
+
+def run_slam(run, config: SlamConfig, lines=None):
+    slam = LineSlam(config)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SlamWarning)
+        reports = [
+            slam.add_scan(s, ls)
+            for s, ls in zip(run.scans, run.lines if lines is None else lines, strict=True)
+        ]
+        slam.optimize()
+    return slam, slam.result(), reports
+
+
+@pytest.fixture(scope="module")
+def loop_runs():
+    """A 16 m × 8 m corridor loop (walls cut by doors) driven 1¼ times, metres of drift."""
+    world = corridor_loop(piece=3.0, door=1.0)
+    path = loop_path(16, 8, 0.4, laps=1.25)
+    run = simulate_run(world, path, seed=1, motion=MOTION)
+    out = {}
+    for backend in ("isam2", "batch"):
+        solver = SolverConfig(batch_interval=5)  # periodic batch solves keep the test short
+        out[backend] = run_slam(run, SlamConfig(backend=backend, motion=MOTION, solver=solver))
+    return world, path, run, out
+
+
+def test_loop_closing_beats_odometry_by_far(loop_runs):
+    _, path, run, out = loop_runs
+    slam, res, _ = out["isam2"]
+    odo_err = np.hypot(*(run.odometry[:, :2] - path[:, :2]).T)
+    assert odo_err.max() > 3.0  # metres of drift
+    err = pose_log(pose_between(path, res.poses_world_laser))
+    ate = np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1)))
+    assert ate < 0.08 and ate < 0.03 * np.sqrt(np.mean(odo_err**2))
+    for gap in (5, 40, 120):  # 2 m, 16 m, 48 m apart along the path
+        rel = relations_error(res.poses_world_laser, path, gap).mean()
+        rel_odo = relations_error(run.odometry, path, gap).mean()
+        assert rel < 0.05 and rel_odo > 0.05 and rel < 0.2 * rel_odo
+    # the start was re-observed at the end: landmarks of the first poses have late factors
+    g = slam.graph
+    early = np.unique(g.factor_landmark[g.factor_pose < 5])
+    late_poses = g.factor_pose[np.isin(g.factor_landmark, early)]
+    assert late_poses.max() > 0.8 * g.n_poses
+
+
+def test_map_lines_match_the_true_walls(loop_runs):
+    """Every map line runs along a true wall piece (its ends within 6 cm of the line, normals
+    within 0.5°), each of its visible segments lies on such a piece (± 0.3 m), and the lines'
+    errors are consistent with their covariances."""
+    world, _, _, out = loop_runs
+    _, res, _ = out["isam2"]
+    walls = world.wall_lines()
+    matched_walls = set()
+    for la, segs in zip(res.landmarks_r_alpha, res.landmark_segments, strict=True):
+        n = np.array([np.cos(la[1]), np.sin(la[1])])
+        d_alpha = np.abs(np.angle(np.exp(1j * (walls[:, 1] - la[1]))))
+        d_alpha = np.minimum(d_alpha, np.pi - d_alpha)
+        dist = np.abs(world.walls @ n - la[0]).max(axis=1)  # both ends of each wall piece
+        on_line = np.flatnonzero((dist < 0.06) & (d_alpha < np.deg2rad(0.5)))
+        assert on_line.size, (la, dist.min())
+        for seg in segs:
+            inside = []
+            for w in on_line:
+                a, b = world.walls[w]
+                t = (b - a) / np.linalg.norm(b - a)
+                sv = (seg - a) @ t
+                inside.append(sv.min() > -0.3 and sv.max() < np.linalg.norm(b - a) + 0.3)
+            assert any(inside)
+            matched_walls.update(int(w) for w, ok in zip(on_line, inside, strict=True) if ok)
+    assert len(matched_walls) >= 0.8 * len(world.walls)  # nearly every wall piece is mapped
+    # normalised errors of the map lines against their walls: about χ²₂ on average
+    d2 = []
+    for la, P in zip(res.landmarks_r_alpha, res.landmark_covariances, strict=True):
+        k = np.argmin(
+            np.abs(walls[:, 0] - la[0]) + 5 * np.abs(np.angle(np.exp(1j * (walls[:, 1] - la[1]))))
+        )
+        e = np.array([la[0] - walls[k, 0], np.angle(np.exp(1j * (la[1] - walls[k, 1])))])
+        d2.append(e @ np.linalg.solve(P, e))
+    assert np.mean(d2) < 2.0 * 2.5 and np.median(d2) < 2.0 * 1.5
+    # landmarks are in normal form, covariances positive definite
+    assert np.all(res.landmarks_r_alpha[:, 0] >= 0)
+    assert np.all(np.linalg.eigvalsh(res.landmark_covariances) > 0)
+
+
+def test_batch_backend_is_as_accurate(loop_runs):
+    """Periodic batch solves (every 5 keyframes) on the same data: same accuracy class."""
+    _, path, _, out = loop_runs
+    (_, res_i, _), (_, res_b, _) = out["isam2"], out["batch"]
+    np.testing.assert_allclose(
+        res_i.poses_world_laser[:, :2], res_b.poses_world_laser[:, :2], atol=0.02
+    )
+    err_b = np.hypot(*(res_b.poses_world_laser[:, :2] - path[:, :2]).T)
+    assert np.sqrt(np.mean(err_b**2)) < 0.08
+
+
+def test_batch_and_isam2_agree_on_the_same_data():
+    """With a solve per keyframe the batch back-end sees the same estimates and covariances as
+    iSAM2 when associating: identical associations, and the same final solution."""
+    world = corridor_loop(length=10.0, width=6.0, piece=3.0, door=1.0)
+    path = loop_path(10, 6, 0.5, laps=0.6)
+    run = simulate_run(world, path, seed=9, motion=MOTION)
+    _, res_i, rep_i = run_slam(run, SlamConfig(motion=MOTION))
+    _, res_b, rep_b = run_slam(run, SlamConfig(backend="batch", motion=MOTION))
+    assert [(r.matched, r.new_landmarks) for r in rep_i] == [
+        (r.matched, r.new_landmarks) for r in rep_b
+    ]
+    np.testing.assert_allclose(
+        res_i.poses_world_laser[:, :2], res_b.poses_world_laser[:, :2], atol=2e-3
+    )
+    np.testing.assert_allclose(res_i.landmarks_r_alpha, res_b.landmarks_r_alpha, atol=2e-3)
+    d = np.sqrt(np.einsum("nii->ni", res_b.pose_covariances))
+    assert np.all(
+        np.abs(res_i.pose_covariances - res_b.pose_covariances)
+        <= 0.03 * d[:, :, None] * d[:, None, :]
+    )
+
+
+def test_pose_nees_within_chi2_bounds_monte_carlo():
+    """Average NEES of the laser pose over seeded runs of a short loop (3 dof)."""
+    world = corridor_loop(length=10.0, width=6.0, piece=3.0, door=1.0)
+    path = loop_path(10, 6, 0.5, laps=1.0)
+    nees = []
+    for seed in range(6):
+        run = simulate_run(world, path, seed=200 + seed, motion=MOTION)
+        _, res, _ = run_slam(run, SlamConfig(motion=MOTION))
+        e = pose_log(pose_between(path, res.poses_world_laser))
+        n = np.einsum("ni,nij,nj->n", e, np.linalg.inv(res.pose_covariances), e)
+        nees.append(n[5::10])  # spaced poses of each run
+    nees = np.concatenate(nees)
+    # χ²₃ mean 3; 6 runs × 7 spaced (correlated) poses: a 99 % band for ~15 independent ones
+    assert 3.0 * 0.45 < nees.mean() < 3.0 * 1.8
+    assert np.mean(nees > 11.34) < 0.1  # χ²₃(0.99): few outliers
+
+
+def test_scan_without_lines_warns_and_rests_on_odometry():
+    world = corridor_loop(length=10.0, width=6.0, piece=3.0, door=1.0)
+    path = loop_path(10, 6, 0.5, laps=0.5)
+    run = simulate_run(world, path, seed=5, motion=MOTION)
+    lines = [list(ls) for ls in run.lines]
+    for k in (10, 11, 12):
+        lines[k] = []
+    slam = LineSlam(SlamConfig(motion=MOTION))
+    with pytest.warns(SlamWarning, match="without usable lines"):
+        for s, ls in zip(run.scans, lines, strict=True):
+            rep = slam.add_scan(s, ls)
+            if s.index in (10, 11, 12):
+                assert rep.warnings == (WARN_NO_LINES,)
+    slam.optimize()
+    res = slam.result()
+    assert slam.counters["keyframes_without_lines"] == 3
+    err = np.hypot(*(res.poses_world_laser[:, :2] - path[:, :2]).T)
+    assert np.isfinite(res.pose_covariances).all() and err.max() < 0.1
+    # the blind poses are less certain than their neighbours
+    tr = np.einsum("nii->n", res.pose_covariances[:, :2, :2])
+    assert tr[11] > tr[8]
+
+
+def test_parallel_walls_warn_and_the_position_along_them_follows_odometry():
+    world = straight_corridor(length=40.0)
+    path = np.column_stack([np.arange(0.0, 30.0, 0.4), np.zeros(75), np.zeros(75)])
+    run = simulate_run(world, path, seed=6, motion=MOTION)
+    slam = LineSlam(SlamConfig(motion=MOTION))
+    with pytest.warns(SlamWarning, match="parallel"):
+        reports = [slam.add_scan(s, ls) for s, ls in zip(run.scans, run.lines, strict=True)]
+    slam.optimize()
+    res = slam.result()
+    assert sum(WARN_PARALLEL in r.warnings for r in reports) > 60
+    err = res.poses_world_laser - path
+    odo_err = run.odometry - path
+    # across the corridor and in heading the walls correct the drift (what is left is the
+    # walls' own angle, known from the first scans: consistent with the covariance) ...
+    sy = np.sqrt(res.pose_covariances[:, 1, 1])
+    assert np.all(np.abs(err[:, 1]) < 3.5 * sy) and np.abs(err[:, 2]).max() < 0.01
+    assert np.abs(err[:, 1]).max() < 0.3 * np.abs(odo_err[:, 1]).max()
+    # ... along it nothing can: the estimate keeps the odometry's forward error, and says so
+    rel_true = pose_between(path[:-1], path[1:])
+    rel_odo = pose_between(run.odometry[:-1], run.odometry[1:])
+    forward_err = np.r_[0.0, np.cumsum(rel_odo[:, 0] - rel_true[:, 0])]
+    assert np.abs(forward_err).max() > 0.1
+    np.testing.assert_allclose(err[:, 0], forward_err, atol=0.03)
+    sx = np.sqrt(res.pose_covariances[:, 0, 0])
+    odo_var = MOTION.covariance(rel_true)[:, 0, 0]
+    np.testing.assert_allclose(sx[1:], np.sqrt(np.cumsum(odo_var)), rtol=0.1)
+
+
+def test_lost_association_warns_starts_landmarks_and_recovers():
+    world = corridor_loop(length=10.0, width=6.0, piece=3.0, door=1.0)
+    path = loop_path(10, 6, 0.5, laps=0.75)
+    run = simulate_run(world, path, seed=7, motion=MOTION)
+    lines = [list(ls) for ls in run.lines]
+    # scan 15 sees something else entirely (a reflection, a crowd): two lines far off
+    lines[15] = [_line(3.5, 0.8), _line(4.0, 2.4)]
+    slam = LineSlam(SlamConfig(motion=MOTION, fusion=FusionConfig(enabled=False)))
+    with pytest.warns(SlamWarning, match="lost association"):
+        reports = [slam.add_scan(s, ls) for s, ls in zip(run.scans, lines, strict=True)]
+    assert reports[15].warnings == (WARN_LOST,) and reports[15].new_landmarks == 2
+    assert all(r.matched > 0 for r in reports[16:])
+    slam.optimize()
+    res = slam.result()
+    err = np.hypot(*(res.poses_world_laser[:, :2] - path[:, :2]).T)
+    assert err.max() < 0.1
+
+
+def _line(r: float, alpha: float) -> Line:
+    cov = np.diag([1e-4, 4e-6, 0.01])
+    return Line(r, alpha, 0.0, cov, np.array([[-1.0, 1.0]]), np.full((1, 2), 1e-4), 100)
+
+
+def test_keyframes_and_result_round_trip(tmp_path):
+    world = corridor_loop(length=10.0, width=6.0, piece=3.0, door=1.0)
+    path = loop_path(10, 6, 0.1, laps=0.3)
+    run = simulate_run(world, path, seed=8, motion=MOTION)
+    cfg = SlamConfig(motion=MOTION, keyframes=KeyframeConfig(min_distance_m=0.5, min_angle_rad=0.3))
+    _, res, reports = run_slam(run, cfg)
+    kf = np.array([r.keyframe for r in reports])
+    assert kf[0] and 0.1 < kf.mean() < 0.35
+    assert res.n_scans == len(run.scans) and res.is_keyframe.tolist() == kf.tolist()
+    # non-keyframe poses are their keyframe's pose composed with the odometry since, with the
+    # odometry's noise added to the covariance: errors consistent with it everywhere
+    err = np.hypot(*(res.poses_world_laser[:, :2] - path[:, :2]).T)
+    assert err[kf].max() < 0.05
+    e = pose_log(pose_between(path, res.poses_world_laser))
+    nees = np.einsum("ni,nij,nj->n", e, np.linalg.inv(res.pose_covariances), e)
+    assert nees.max() < 16.27 and nees.mean() < 3 * 1.6
+    doc = json.loads(json.dumps(res.to_json_dict()))
+    back = SlamResult.from_json_dict(doc)
+    np.testing.assert_array_equal(back.poses_world_laser, res.poses_world_laser)
+    np.testing.assert_array_equal(back.landmark_covariances, res.landmark_covariances)
+    assert [s.shape for s in back.landmark_segments] == [s.shape for s in res.landmark_segments]
+    summary = res.summary_dict()
+    assert summary["scans"] == len(run.scans) and summary["frame"] == "laser"
+    assert summary["keyframes"] == int(kf.sum())
+
+
+def test_scan_without_odometry_is_an_input_error():
+    slam = LineSlam()
+    scan = Scan(index=0, timestamp=0.0, ranges=np.zeros(0), bearings=np.zeros(0), source="x.clf:3")
+    with pytest.raises(InputError, match=r"x\.clf:3.*odometry"):
+        slam.add_scan(scan, [])
