@@ -15,6 +15,7 @@ import typer
 from slam.cli import (  # noqa: F401  (commands register on import)
     cmd_datasets,
     cmd_evaluate,
+    cmd_extract,
     cmd_map,
     cmd_simulate,
     cmd_slam,
