@@ -284,7 +284,8 @@ class SlamConfig:
     min_line_points : int
         Lines with fewer supporting points are ignored (neither matched nor new landmarks).
     min_line_length_m : float
-        Shorter lines are ignored.
+        Shorter lines are ignored (default 0.3 m: shorter stubs have so uncertain an angle that
+        their gates admit unrelated stubs; see ``docs/graph.md``).
     pose_covariances : {"keyframes", "none"}
         Compute the marginal covariance of every keyframe pose for the result (non-keyframe
         scans get their keyframe's covariance compounded with the odometry noise).
@@ -306,7 +307,7 @@ class SlamConfig:
     prior_sigma_theta_rad: float = 1e-5
     pose_base_laser: tuple[float, float, float] = (0.0, 0.0, 0.0)
     min_line_points: int = 5
-    min_line_length_m: float = 0.1
+    min_line_length_m: float = 0.3
     pose_covariances: Literal["keyframes", "none"] = "keyframes"
     map_segment_gap_m: float = 0.3
     map_min_observations: int = 3
