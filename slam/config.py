@@ -13,6 +13,7 @@ from pathlib import Path
 from linefit.config import LineFitConfig, SensorNoiseConfig
 from linefit.errors import ConfigError
 from linefit.tomlconfig import dump_toml, load_toml
+from slam.ekf.config import EkfConfig
 
 __all__ = ["RunConfig"]
 
@@ -27,10 +28,13 @@ class RunConfig:
         Seed of every random choice of the run.
     linefit : LineFitConfig
         Per-scan line extraction.
+    ekf : EkfConfig
+        EKF-SLAM baseline (``lineslam ekf``).
     """
 
     seed: int = 0
     linefit: LineFitConfig = field(default_factory=LineFitConfig)
+    ekf: EkfConfig = field(default_factory=EkfConfig)
 
     def __post_init__(self) -> None:
         if self.seed < 0:
