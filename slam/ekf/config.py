@@ -59,7 +59,10 @@ class EkfConfig:
         reference; same numbers).
     merge_landmarks : bool
         Fuse two landmarks that pass the χ² test on their joint marginal and overlap (an exact
-        EKF constraint update ``l_i − l_j = 0`` followed by deleting ``l_j``).
+        EKF constraint update ``l_i − l_j = 0`` followed by deleting ``l_j``).  Tested for the
+        landmarks observed or created since the last test against all others.  This is how a
+        wall first seen in two pieces (farther apart than ``overlap_margin_m``) becomes one
+        landmark once the pieces meet.
     merge_probability : float
         χ² probability (2 dof) of the landmark merge test.
     merge_every_n_updates : int
@@ -85,9 +88,9 @@ class EkfConfig:
     on_max_landmarks: Literal["stop", "freeze"] = "stop"
     max_runtime_s: float | None = None
     update_impl: Literal["sparse", "filterpy"] = "sparse"
-    merge_landmarks: bool = False
+    merge_landmarks: bool = True
     merge_probability: float = 0.999
-    merge_every_n_updates: int = 10
+    merge_every_n_updates: int = 1
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     min_landmark_observations: int = 1
 

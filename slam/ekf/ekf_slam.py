@@ -166,6 +166,7 @@ class EkfSlam:
         self.K: FloatArray = np.zeros((3, 0))
         self._extents = LandmarkExtents(self.config.segment_gap_m)
         self._n_obs: list[int] = []
+        self._touched: set[int] = set()
         self._prev_odom: FloatArray | None = None
         self._since_update_m = 0.0
         self._since_update_rad = 0.0
@@ -411,12 +412,18 @@ class EkfSlam:
         return matches, ambiguous & ~has
 
     # ------------------------------------------------------------------ merging
-    def merge_landmarks(self) -> int:
+    def merge_landmarks(self, candidates: IntArray | None = None) -> int:
         """Fuse pairs of landmarks that pass the χ² test on their joint marginal and overlap.
 
         The fusion is the EKF update with the exact constraint ``l_i − l_j = 0`` (same
         representative, ``R = 0``), after which ``l_j`` equals ``l_i`` and is deleted
         (marginalised).  Pairs are fused greedily by increasing ``D²``, one at a time.
+
+        Parameters
+        ----------
+        candidates : ndarray of int, optional
+            Test only pairs that involve one of these landmarks (e.g. those observed in the
+            last scan), ``O(len(candidates) · M)``; default: all pairs, ``O(M²)``.
 
         Returns
         -------
@@ -424,26 +431,39 @@ class EkfSlam:
             Number of landmarks removed.
         """
         removed = 0
+        touched = None if candidates is None else {int(c) for c in candidates}
         while self.n_landmarks >= 2:
             M = self.n_landmarks
             lm = self.x[3:].reshape(M, 2)
-            i, j = np.triu_indices(M, 1)
+            if touched is None:
+                i, j = np.triu_indices(M, 1)
+            else:
+                if not touched:
+                    break
+                t = np.array(sorted(c for c in touched if c < M), dtype=np.intp)
+                is_t = np.zeros(M, dtype=bool)
+                is_t[t] = True
+                ii = np.repeat(t, M)
+                jj = np.tile(np.arange(M), t.size)
+                sel = (jj != ii) & (~is_t[jj] | (ii < jj))  # each pair once
+                i, j = ii[sel], jj[sel]
+            if i.size == 0:
+                break
             res, sign = line_residual(lm[i], lm[j])
             Ji = np.zeros((i.size, 2, 2))
             Ji[:, 0, 0] = sign
             Ji[:, 1, 1] = 1.0
-            _, P_ll = self._pose_cross_blocks(np.arange(M))
             base_i, base_j = 3 + 2 * i, 3 + 2 * j
+            P_ii = np.empty((i.size, 2, 2))
+            P_jj = np.empty((i.size, 2, 2))
             P_ij = np.empty((i.size, 2, 2))
             for a in range(2):
                 for b in range(2):
+                    P_ii[:, a, b] = self.P[base_i + a, base_i + b]
+                    P_jj[:, a, b] = self.P[base_j + a, base_j + b]
                     P_ij[:, a, b] = self.P[base_i + a, base_j + b]
-            C = (
-                Ji @ P_ll[i] @ Ji.swapaxes(-1, -2)
-                + P_ll[j]
-                - Ji @ P_ij
-                - (Ji @ P_ij).swapaxes(-1, -2)
-            )
+            JP = Ji @ P_ij
+            C = Ji @ P_ii @ Ji.swapaxes(-1, -2) + P_jj - JP - JP.swapaxes(-1, -2)
             d2, _ = mahalanobis2_2x2(res, C)
             if math.isfinite(self.config.overlap_margin_m):
                 lo, hi = self._extents.intervals(lm[:, 1])
@@ -473,6 +493,10 @@ class EkfSlam:
             self.x = self.x[keep]
             self.P = self.P[np.ix_(keep, keep)]
             removed += 1
+            if touched is not None:
+                if b in touched:
+                    touched.add(a)
+                touched = {c - 1 if c > b else c for c in touched if c != b}
         self.stats["landmarks_merged"] += removed
         return removed
 
@@ -592,12 +616,11 @@ class EkfSlam:
         self.stats["lines_matched"] += report.n_matched
         self.stats["lines_new"] += report.n_new
         self.stats["lines_ambiguous"] += report.n_ambiguous
-        if (
-            self.config.merge_landmarks
-            and k_m.size
-            and self._n_updates % self.config.merge_every_n_updates == 0
-        ):
-            self.merge_landmarks()
+        self._touched.update(int(j) for j in matches[k_m])
+        self._touched.update(range(self.n_landmarks - new.size, self.n_landmarks))
+        if self.config.merge_landmarks and self._n_updates % self.config.merge_every_n_updates == 0:
+            self.merge_landmarks(np.array(sorted(self._touched), dtype=np.intp))
+            self._touched.clear()
 
     def _stop(self, reason: str) -> None:
         if not self.stopped:

@@ -17,6 +17,7 @@ joint covariance of the pose and landmark ``c``.  Joint compatibility of a hypot
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,6 +25,7 @@ from scipy.stats import chi2
 
 __all__ = [
     "AssociationProblem",
+    "chi2_gate",
     "innovation_covariances",
     "jcbb",
     "mahalanobis2_2x2",
@@ -33,6 +35,12 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 BoolArray = NDArray[np.bool_]
+
+
+@lru_cache(maxsize=256)
+def chi2_gate(probability: float, dof: int) -> float:
+    """``χ²_dof`` quantile at ``probability`` (cached: scipy's ppf is slow per call)."""
+    return float(chi2.ppf(probability, dof))
 
 
 def innovation_covariances(
@@ -162,7 +170,7 @@ def nearest_neighbour(problem: AssociationProblem, gate_probability: float) -> I
     out = np.full(K, -1, dtype=np.intp)
     if K == 0 or problem.n_candidates == 0:
         return out
-    gate = float(chi2.ppf(gate_probability, 2))
+    gate = chi2_gate(gate_probability, 2)
     d2 = problem.individual_d2()
     ks, cs = np.nonzero(d2 < gate)
     order = np.argsort(d2[ks, cs], kind="stable")
@@ -208,12 +216,12 @@ def jcbb(
     best = np.full(K, -1, dtype=np.intp)
     if K == 0 or problem.n_candidates == 0:
         return best, True
-    gate = float(chi2.ppf(gate_probability, 2))
+    gate = chi2_gate(gate_probability, 2)
     d2 = problem.individual_d2()
     candidates = [
         [int(c) for c in np.argsort(d2[k], kind="stable") if d2[k, c] < gate] for k in range(K)
     ]
-    joint_gates = chi2.ppf(joint_probability, 2 * np.arange(1, K + 1))
+    joint_gates = [chi2_gate(joint_probability, 2 * h) for h in range(1, K + 1)]
     best_pairs: list[tuple[int, int]] = []
     best_d2 = np.inf
     nodes = 0

@@ -71,6 +71,15 @@ class MeasurementStack:
         return H
 
 
+def _block_diag2(blocks: FloatArray) -> FloatArray:
+    """Block-diagonal matrix ``(2m, 2m)`` from ``(m, 2, 2)`` blocks."""
+    m = blocks.shape[0]
+    out = np.zeros((m, 2, m, 2))
+    idx = np.arange(m)
+    out[idx, :, idx, :] = blocks
+    return out.reshape(2 * m, 2 * m)
+
+
 def line_measurements(
     x: FloatArray, landmark_idx: IntArray, z_r_alpha: FloatArray, R: FloatArray
 ) -> MeasurementStack:
@@ -101,12 +110,9 @@ def line_measurements(
     H_x[:, 0, :] *= sign[:, None]
     H_l = H_l.copy()
     H_l[:, 0, :] *= sign[:, None]
-    H_sub = np.zeros((2 * m, 3 + 2 * m))
-    for i in range(m):
-        H_sub[2 * i : 2 * i + 2, :3] = H_x[i]
-        H_sub[2 * i : 2 * i + 2, 3 + 2 * i : 5 + 2 * i] = H_l[i]
+    H_sub = np.concatenate([H_x.reshape(2 * m, 3), _block_diag2(H_l)], axis=1)
     cols = np.concatenate([np.arange(3), np.stack([3 + 2 * idx, 4 + 2 * idx], -1).reshape(-1)])
-    R_big = scipy.linalg.block_diag(*np.asarray(R, dtype=float).reshape(m, 2, 2))
+    R_big = _block_diag2(np.asarray(R, dtype=float).reshape(m, 2, 2))
     return MeasurementStack(-res.reshape(-1), H_sub, cols.astype(np.intp), R_big)
 
 
@@ -186,7 +192,7 @@ def filterpy_update(
     kf = ExtendedKalmanFilter(dim_x=n, dim_z=2 * idx.shape[0])
     kf.x = x.astype(float).copy()
     kf.P = P.astype(float).copy()
-    R_big = scipy.linalg.block_diag(*R_arr)
+    R_big = _block_diag2(R_arr)
     kf.update(z.reshape(-1), h_jacobian, hx, R=R_big, residual=residual)
     P_post = 0.5 * (kf.P + kf.P.T)
     return np.asarray(kf.x, dtype=float), P_post, np.asarray(kf.S), np.asarray(kf.K)
