@@ -148,10 +148,14 @@ def joseph_update(
         raise EstimationError("EKF update: innovation covariance is not positive definite") from exc
     K = scipy.linalg.cho_solve(factor, PHt.T).T  # (n, 2m)
     x_post = x + K @ meas.y
-    A = P - K @ PHt.T  # (I − KH) P
-    AHt = A[:, cols] @ H_sub.T  # (I − KH) P Hᵀ
-    A -= (AHt - K @ R) @ K.T
-    P_post = 0.5 * (A + A.T)
+    A = K @ PHt.T
+    np.subtract(P, A, out=A)  # A = (I − KH) P
+    D = A[:, cols] @ H_sub.T  # (I − KH) P Hᵀ
+    D -= K @ R
+    A -= D @ K.T  # (I − KH) P (I − KH)ᵀ + K R Kᵀ
+    A += A.T
+    A *= 0.5
+    P_post = A
     return x_post, P_post, S, K
 
 
