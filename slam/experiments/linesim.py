@@ -16,6 +16,7 @@ The full simulator with ray casting and extraction is :mod:`slam.sim`.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -34,9 +35,13 @@ __all__ = [
     "LineSimConfig",
     "LineWorld",
     "corridor_loop_world",
+    "grid_route",
+    "grid_world",
     "loop_trajectory",
     "simulate_line_run",
     "visible_walls",
+    "waypoint_trajectory",
+    "world_and_trajectory",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -96,30 +101,86 @@ def corridor_loop_world(
     return LineWorld(np.asarray(walls, dtype=float), name="corridor_loop")
 
 
+def waypoint_trajectory(waypoints: FloatArray, step_m: float = 0.25) -> FloatArray:
+    """Laser poses driving straight between waypoints, turning on the spot at each one.
+
+    Turns are taken in steps of at most 30°.  Returns shape (N, 3), starting at the first
+    waypoint heading to the second.
+    """
+    wp = np.asarray(waypoints, dtype=float).reshape(-1, 2)
+    poses: list[tuple[float, float, float]] = []
+    heading = math.atan2(wp[1, 1] - wp[0, 1], wp[1, 0] - wp[0, 0])
+    for a, b in itertools.pairwise(wp):
+        new_heading = math.atan2(b[1] - a[1], b[0] - a[0])
+        turn = math.remainder(new_heading - heading, 2 * math.pi)
+        n_turn = math.ceil(abs(turn) / (math.pi / 6.0) - 1e-9)
+        for k in range(1, n_turn):
+            poses.append((a[0], a[1], heading + turn * k / n_turn))
+        heading = new_heading
+        n = max(round(math.hypot(*(b - a)) / step_m), 1)
+        for i in range(n):
+            f = i / n
+            poses.append((a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), heading))
+    poses.append((wp[-1, 0], wp[-1, 1], heading))
+    out = np.asarray(poses, dtype=float)
+    out[:, 2] = np.pi - np.mod(np.pi - out[:, 2], 2 * np.pi)
+    return out
+
+
 def loop_trajectory(
     length_m: float = 20.0, width_m: float = 10.0, step_m: float = 0.25, loops: float = 1.0
 ) -> FloatArray:
     """Laser poses driving counter-clockwise around the rectangle ``[0, L] × [0, W]``.
 
-    Corners are turned on the spot (one pose per 30°).  Returns shape (N, 3), starting at the
+    ``loops`` may be fractional (in quarter loops).  Returns shape (N, 3), starting at the
     origin heading along +x.
     """
-    poses: list[tuple[float, float, float]] = []
-    corners = [(0.0, 0.0), (length_m, 0.0), (length_m, width_m), (0.0, width_m)]
-    total_sides = math.ceil(4 * loops)
-    for side in range(total_sides):
-        (x0, y0), (x1, y1) = corners[side % 4], corners[(side + 1) % 4]
-        heading = math.atan2(y1 - y0, x1 - x0)
-        n = round(math.hypot(x1 - x0, y1 - y0) / step_m)
-        for i in range(n):
-            f = i / n
-            poses.append((x0 + f * (x1 - x0), y0 + f * (y1 - y0), heading))
-        for k in range(3):
-            poses.append((x1, y1, heading + (k + 1) * math.pi / 6.0))
-    poses.append(poses[0] if loops == int(loops) else poses[-1])
-    out = np.asarray(poses, dtype=float)
-    out[:, 2] = np.pi - np.mod(np.pi - out[:, 2], 2 * np.pi)
-    return out
+    corners = np.array([[0.0, 0.0], [length_m, 0.0], [length_m, width_m], [0.0, width_m]])
+    n_sides = math.ceil(4 * loops)
+    wp = np.array([corners[i % 4] for i in range(n_sides + 1)])
+    return waypoint_trajectory(wp, step_m)
+
+
+def grid_world(
+    nx: int = 2, ny: int = 2, block_m: tuple[float, float] = (8.0, 4.0), corridor_m: float = 2.0
+) -> LineWorld:
+    """Corridors around ``nx × ny`` rectangular blocks (an office floor).
+
+    Corridor centre lines run along ``x = i·(bx + c)`` and ``y = j·(by + c)``; blocks fill the
+    rest; an outer wall closes the floor.  Short stubs on the outer wall mark positions along
+    the long corridors.
+    """
+    bx, by = block_m
+    c = corridor_m
+    h = c / 2.0
+    X, Y = nx * (bx + c), ny * (by + c)
+    walls = _rect(-h, -h, X + h, Y + h)
+    for i in range(nx):
+        for j in range(ny):
+            x0, y0 = i * (bx + c) + h, j * (by + c) + h
+            walls += _rect(x0, y0, x0 + bx, y0 + by)
+    for x in np.arange(0.5 * (bx + c), X, bx + c):
+        walls.append([[x - 1.0, -h], [x - 1.0, -h + 0.4]])
+        walls.append([[x + 1.0, Y + h], [x + 1.0, Y + h - 0.4]])
+    return LineWorld(np.asarray(walls, dtype=float), name=f"grid{nx}x{ny}")
+
+
+def grid_route(
+    nx: int = 2, ny: int = 2, block_m: tuple[float, float] = (8.0, 4.0), corridor_m: float = 2.0
+) -> FloatArray:
+    """Waypoints visiting every corridor of :func:`grid_world` and returning to the start."""
+    sx, sy = block_m[0] + corridor_m, block_m[1] + corridor_m
+    nodes: list[tuple[int, int]] = [(0, 0), (nx, 0), (nx, ny), (0, ny), (0, 0)]
+    for i in range(1, nx):  # vertical corridors, up and down alternately
+        nodes += [(i, 0), (i, ny)] if i % 2 else [(i, ny), (i, 0)]
+    last = nodes[-1]
+    for j in range(1, ny):  # horizontal corridors, end to end
+        nodes += [(last[0], j), (nx, j), (0, j)]
+        last = nodes[-1]
+    nodes += [(last[0], 0), (0, 0)]
+    pts = [(i * sx, j * sy) for i, j in nodes]
+    dedup = [pts[0]] + [p for q, p in itertools.pairwise(pts) if p != q]
+    return np.asarray(dedup, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -320,3 +381,22 @@ def simulate_line_run(
             )
         )
     return LineRun(scans, line_sets, poses_true, world)
+
+
+def world_and_trajectory(name: str, loops: float = 1.0) -> tuple[LineWorld, FloatArray]:
+    """A named simulated world and its trajectory: ``"corridor_loop"`` or ``"grid2x2"``.
+
+    ``loops`` repeats the route (corridor loop: around the rectangle; grid: the whole tour).
+    """
+    if name == "corridor_loop":
+        return corridor_loop_world(), loop_trajectory(loops=loops)
+    if name.startswith("grid"):
+        try:
+            nx, ny = (int(v) for v in name[4:].split("x"))
+        except ValueError as exc:
+            raise ConfigError(f"world {name!r}: expected 'gridNxM'") from exc
+        route = grid_route(nx, ny)
+        reps = max(round(loops), 1)
+        wp = np.vstack([route] + [route[1:]] * (reps - 1))
+        return grid_world(nx, ny), waypoint_trajectory(wp)
+    raise ConfigError(f"unknown simulated world {name!r} (corridor_loop, gridNxM)")
