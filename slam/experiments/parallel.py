@@ -37,7 +37,7 @@ def task_seed(base_seed: int, *keys: int) -> int:
 
 
 @contextmanager
-def _client(workers: int, dask_address: str | None) -> Iterator[Any]:
+def _client(workers: int, dask_address: str | None, timeout_s: float) -> Iterator[Any]:
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - depends on the installation
@@ -46,7 +46,7 @@ def _client(workers: int, dask_address: str | None) -> Iterator[Any]:
         ) from exc
     if dask_address is not None:
         try:
-            client = Client(dask_address, timeout="20s")
+            client = Client(dask_address, timeout=f"{timeout_s}s")
         except OSError as exc:
             raise ConfigError(f"cannot reach the Dask scheduler at {dask_address}: {exc}") from exc
         try:
@@ -63,7 +63,7 @@ def _client(workers: int, dask_address: str | None) -> Iterator[Any]:
             n_workers=workers,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=None,
+            dashboard_address=":0",  # the scheduler always serves HTTP; any free port
         )
     finally:
         for v, old in saved.items():
@@ -85,6 +85,7 @@ def map_tasks(
     workers: int = 1,
     dask_address: str | None = None,
     progress: Callable[[int, int], None] | None = None,
+    connect_timeout_s: float = 20.0,
 ) -> list[R]:
     """Apply ``fn`` to every task and return the results in task order.
 
@@ -100,6 +101,8 @@ def map_tasks(
         Address of a running Dask scheduler; overrides ``workers``.
     progress : callable, optional
         Called as ``progress(done, total)`` after each finished task.
+    connect_timeout_s : float
+        How long to wait for the scheduler at ``dask_address``.
 
     Returns
     -------
@@ -116,7 +119,7 @@ def map_tasks(
         return out
     from dask.distributed import as_completed
 
-    with _client(workers, dask_address) as client:
+    with _client(workers, dask_address, connect_timeout_s) as client:
         futures = client.map(fn, list(tasks), pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * total
