@@ -11,6 +11,7 @@ import sys
 
 import click
 
+from slam.cli import cmd_consistency  # noqa: F401  (registers the command)
 from slam.cli._app import app
 from slam.errors import LineslamError
 
