@@ -11,7 +11,7 @@ import sys
 
 import click
 
-from slam.cli import cmd_compare, cmd_consistency  # noqa: F401  (register the commands)
+from slam.cli import cmd_compare, cmd_consistency, cmd_ekf  # noqa: F401  (register the commands)
 from slam.cli._app import app
 from slam.errors import LineslamError
 

@@ -72,6 +72,11 @@ class EkfConfig:
         world frame at it.
     min_landmark_observations : int
         Landmarks seen fewer times are left out of ``map.json`` (they stay in the state).
+    line_sigma_extra : tuple of float
+        Model error ``(σ_r, σ_α)`` (m, rad) added in quadrature to every line's covariance
+        (``R + diag(σ_r², σ_α²)``): real walls are not ideal lines and real range noise is not
+        the fit's model.  Zero (default) trusts the fit's covariance as it is, which is right
+        for simulated data.
     """
 
     odometry: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)
@@ -93,6 +98,7 @@ class EkfConfig:
     merge_every_n_updates: int = 1
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     min_landmark_observations: int = 1
+    line_sigma_extra: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         if self.association not in ("nn", "jcbb"):
@@ -135,6 +141,12 @@ class EkfConfig:
         ):
             raise ConfigError(
                 f"ekf.initial_pose_sigma must be three numbers >= 0, got {self.initial_pose_sigma}"
+            )
+        if len(self.line_sigma_extra) != 2 or not all(
+            math.isfinite(v) and v >= 0.0 for v in self.line_sigma_extra
+        ):
+            raise ConfigError(
+                f"ekf.line_sigma_extra must be two numbers >= 0, got {self.line_sigma_extra}"
             )
         if self.min_landmark_observations < 1:
             raise ConfigError("ekf.min_landmark_observations must be >= 1")

@@ -519,7 +519,7 @@ class EkfSlam:
             return lines
         if lines is None:
             try:
-                from linefit import extract_lines  # type: ignore[attr-defined]
+                from linefit import extract_lines  # type: ignore[attr-defined,unused-ignore]
             except ImportError as exc:  # pragma: no cover - depends on what is installed
                 raise EstimationError(
                     "line extraction (linefit.extract_lines) is not available; pass lines="
@@ -573,6 +573,12 @@ class EkfSlam:
         report.n_invalid = int(np.count_nonzero(~valid))
         self.stats["lines_invalid"] += report.n_invalid
         ls = ls.subset(valid)
+        extra_r, extra_a = self.config.line_sigma_extra
+        if len(ls) and (extra_r > 0.0 or extra_a > 0.0):
+            cov = ls.cov.copy()
+            cov[:, 0, 0] += extra_r**2
+            cov[:, 1, 1] += extra_a**2
+            ls = LineSet(ls.r_alpha, cov, ls.endpoints, ls.ids)
         first_scan = self.stats["scans"] == 1
         due = (
             first_scan
