@@ -8,7 +8,9 @@ matplotlib or CLI code).
 
 from linefit.config import LineFitConfig, SensorNoiseConfig
 from linefit.errors import ConfigError, DegenerateGeometryError, InputError, LineslamError
+from linefit.extract import extract_lines, extract_lines_batch, fit_line, fit_scan_line
 from linefit.line import Line, normal_form, wrap_angle
+from linefit.noise import point_covariances
 
 __all__ = [
     "ConfigError",
@@ -18,6 +20,11 @@ __all__ = [
     "LineFitConfig",
     "LineslamError",
     "SensorNoiseConfig",
+    "extract_lines",
+    "extract_lines_batch",
+    "fit_line",
+    "fit_scan_line",
     "normal_form",
+    "point_covariances",
     "wrap_angle",
 ]

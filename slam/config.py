@@ -10,10 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from linefit.config import LineFitConfig, SensorNoiseConfig
+from linefit.config import LineFitConfig
 from linefit.errors import ConfigError
 from linefit.tomlconfig import dump_toml, load_toml
 from slam.ekf.config import EkfConfig
+from slam.lines.config import MapConfig
 
 __all__ = ["RunConfig"]
 
@@ -28,12 +29,15 @@ class RunConfig:
         Seed of every random choice of the run.
     linefit : LineFitConfig
         Per-scan line extraction.
+    map : MapConfig
+        Merging lines across poses (``lineslam map``; paper Sec. V).
     ekf : EkfConfig
         EKF-SLAM baseline (``lineslam ekf``).
     """
 
     seed: int = 0
     linefit: LineFitConfig = field(default_factory=LineFitConfig)
+    map: MapConfig = field(default_factory=MapConfig)
     ekf: EkfConfig = field(default_factory=EkfConfig)
 
     def __post_init__(self) -> None:
@@ -54,9 +58,9 @@ class RunConfig:
     ) -> RunConfig:
         """Return a copy with the sensor noise (``--sigma-d``, ``--sigma-phi``) overridden."""
         noise = self.linefit.noise
-        noise = SensorNoiseConfig(
+        noise = replace(
+            noise,
             sigma_range_m=noise.sigma_range_m if sigma_d is None else sigma_d,
             sigma_bearing_rad=noise.sigma_bearing_rad if sigma_phi is None else sigma_phi,
-            sigma_range_per_m=noise.sigma_range_per_m,
         )
         return replace(self, linefit=replace(self.linefit, noise=noise))

@@ -9,6 +9,7 @@ __all__ = [
     "DatasetError",
     "DegenerateGeometryError",
     "EstimationError",
+    "EvaluationError",
     "InputError",
     "LineslamError",
     "LogFormatError",
@@ -25,3 +26,7 @@ class DatasetError(LineslamError):
 
 class EstimationError(LineslamError):
     """An estimator could not produce a result (e.g. an indeterminate system)."""
+
+
+class EvaluationError(LineslamError):
+    """An evaluation cannot be trusted (e.g. too many relation timestamps not in the trajectory)."""

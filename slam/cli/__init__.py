@@ -10,12 +10,34 @@ from __future__ import annotations
 import sys
 
 import click
+import typer
 
-from slam.cli import cmd_compare, cmd_consistency, cmd_ekf  # noqa: F401  (register the commands)
+from slam.cli import (  # noqa: F401  (commands register on import)
+    cmd_compare,
+    cmd_consistency,
+    cmd_datasets,
+    cmd_ekf,
+    cmd_evaluate,
+    cmd_map,
+    cmd_simulate,
+)
 from slam.cli._app import app
 from slam.errors import LineslamError
 
 __all__ = ["app", "main"]
+
+
+def _unique(*classes: type[BaseException]) -> tuple[type[BaseException], ...]:
+    return tuple(dict.fromkeys(classes))
+
+
+# typer >= 0.2x vendors its own click: catch its classes as well as click's.
+_EXIT = _unique(click.exceptions.Exit, typer.Exit)
+_ABORT = _unique(click.exceptions.Abort, typer.Abort)
+_CLICK_EXCEPTION = _unique(
+    click.ClickException,
+    *(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException"),
+)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -25,11 +47,11 @@ def main(argv: list[str] | None = None) -> None:
     except LineslamError as exc:
         print(f"lineslam: error: {exc}", file=sys.stderr)
         sys.exit(2)
-    except click.exceptions.Exit as exc:
-        sys.exit(exc.exit_code)
-    except click.exceptions.Abort:
+    except _EXIT as exc:
+        sys.exit(getattr(exc, "exit_code", 0))
+    except _ABORT:
         print("lineslam: aborted", file=sys.stderr)
         sys.exit(130)
-    except click.ClickException as exc:
-        exc.show()
-        sys.exit(exc.exit_code)
+    except _CLICK_EXCEPTION as exc:
+        exc.show()  # type: ignore[attr-defined]
+        sys.exit(getattr(exc, "exit_code", 2))

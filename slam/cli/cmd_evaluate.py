@@ -1,0 +1,88 @@
+"""``lineslam evaluate DIR --relations FILE --ground-truth FILE.tum``: metrics of a results DIR."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from slam.cli._app import app
+from slam.errors import DatasetError
+from slam.evaluation.report import evaluate_results
+from slam.io.catalog import resolve_log
+from slam.io.relations import read_relations
+from slam.io.results import read_results, write_metrics
+from slam.io.tum import read_tum
+
+__all__ = ["evaluate"]
+
+
+def _relations_path(value: str) -> Path:
+    """A relations file, or a dataset name whose catalogue entry has one."""
+    path = Path(value)
+    if path.is_file():
+        return path
+    try:
+        resolved = resolve_log(value)
+    except DatasetError:
+        raise DatasetError(f"--relations {value!r}: no such file or dataset name") from None
+    if resolved.relations is None:
+        raise DatasetError(f"--relations {value!r}: the dataset has no relations file")
+    return resolved.relations
+
+
+@app.command("evaluate")
+def evaluate(
+    results_dir: Annotated[
+        Path, typer.Argument(help="Results folder with trajectory.tum (and summary.json).")
+    ],
+    relations: Annotated[
+        str | None,
+        typer.Option(
+            "--relations", help="Relations file (t1 t2 x y z roll pitch yaw), or a dataset name."
+        ),
+    ] = None,
+    ground_truth: Annotated[
+        Path | None, typer.Option("--ground-truth", help="Ground-truth TUM trajectory.")
+    ] = None,
+    rpe_delta: Annotated[
+        list[float] | None,
+        typer.Option("--rpe-delta", help="RPE distance (m); repeat for several. Default 1."),
+    ] = None,
+    tolerance: Annotated[
+        float, typer.Option("--time-tolerance", help="Largest |dt| (s) of a matching stamp.")
+    ] = 1e-5,
+    max_unmatched: Annotated[
+        float,
+        typer.Option("--max-unmatched", help="Fail if more than this fraction is unmatched."),
+    ] = 0.02,
+    quiet: Annotated[bool, typer.Option("--quiet", help="Do not print the table.")] = False,
+) -> None:
+    """Evaluate DIR/trajectory.tum; print a table and write DIR/metrics.json."""
+    if relations is None and ground_truth is None:
+        raise typer.BadParameter("give --relations and/or --ground-truth")
+    results = read_results(results_dir)
+    sources: dict[str, str] = {"trajectory": str(results_dir / "trajectory.tum")}
+    rel = None
+    if relations is not None:
+        rel_path = _relations_path(relations)
+        rel = read_relations(rel_path)
+        sources["relations_file"] = str(rel_path)
+    gt = None
+    if ground_truth is not None:
+        gt = read_tum(ground_truth)
+        sources["ground_truth_file"] = str(ground_truth)
+    report = evaluate_results(
+        results,
+        relations=rel,
+        ground_truth=gt,
+        rpe_deltas_m=tuple(rpe_delta) if rpe_delta else (1.0,),
+        tolerance_s=tolerance,
+        max_unmatched_fraction=max_unmatched,
+        sources=sources,
+    )
+    path = write_metrics(results_dir, report.to_dict())
+    if not quiet:
+        typer.echo(report.format_table())
+        typer.echo(f"wrote {path}")

@@ -1,0 +1,45 @@
+"""Evaluation of trajectories: the relations metric (Cartographer's), ATE, RPE, NEES.
+
+Main entry points::
+
+    from slam.evaluation import relations_metric, ate, rpe, pose_nees, evaluate_results
+
+    metric = relations_metric(trajectory, read_relations(path))   # Kümmerle et al.
+    print(metric.cartographer_report())
+
+Every result has ``to_dict()`` for ``metrics.json``.
+"""
+
+from slam.evaluation.ate import AteResult, align_se2, ate
+from slam.evaluation.nees import NeesResult, nees_values, pose_nees
+from slam.evaluation.relations_metric import (
+    MeanStd,
+    RelationsMetric,
+    relation_errors,
+    relations_metric,
+)
+from slam.evaluation.report import EvaluationReport, evaluate_results
+from slam.evaluation.rpe import RpeResult, distance_pairs, rpe
+from slam.evaluation.stats import ErrorStats
+from slam.evaluation.timestamps import associate, match_timestamps
+
+__all__ = [
+    "AteResult",
+    "ErrorStats",
+    "EvaluationReport",
+    "MeanStd",
+    "NeesResult",
+    "RelationsMetric",
+    "RpeResult",
+    "align_se2",
+    "associate",
+    "ate",
+    "distance_pairs",
+    "evaluate_results",
+    "match_timestamps",
+    "nees_values",
+    "pose_nees",
+    "relation_errors",
+    "relations_metric",
+    "rpe",
+]

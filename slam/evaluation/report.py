@@ -1,0 +1,134 @@
+"""Evaluate a results folder: the metrics of ``lineslam evaluate`` and ``metrics.json``.
+
+Main entry point::
+
+    report = evaluate_results(results, relations=rel, ground_truth=gt, rpe_deltas_m=(1.0,))
+    report.to_dict()       # metrics.json
+    report.format_table()  # what the CLI prints
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from slam.errors import EvaluationError
+from slam.evaluation.ate import AteResult, ate
+from slam.evaluation.nees import NeesResult, pose_nees
+from slam.evaluation.relations_metric import RelationsMetric, relations_metric
+from slam.evaluation.rpe import RpeResult, rpe
+from slam.io.relations import Relations
+from slam.io.results import Results
+from slam.io.trajectory import Trajectory
+
+__all__ = ["EvaluationReport", "evaluate_results"]
+
+
+@dataclass(frozen=True)
+class EvaluationReport:
+    """Everything ``lineslam evaluate`` computed for one trajectory."""
+
+    n_poses: int
+    frame: str
+    relations: RelationsMetric | None = None
+    ate: AteResult | None = None
+    rpe: tuple[RpeResult, ...] = ()
+    nees: NeesResult | None = None
+    sources: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The content of ``metrics.json``."""
+        out: dict[str, Any] = {"n_poses": self.n_poses, "frame": self.frame, **self.sources}
+        if self.relations is not None:
+            out["relations"] = self.relations.to_dict()
+        if self.ate is not None:
+            out["ate"] = self.ate.to_dict()
+        if self.rpe:
+            out["rpe"] = [r.to_dict() for r in self.rpe]
+        if self.nees is not None:
+            out["nees"] = self.nees.to_dict()
+        return out
+
+    def format_table(self) -> str:
+        """A plain-text table of the metrics."""
+        rows: list[tuple[str, str]] = [("poses", f"{self.n_poses} ({self.frame} frame)")]
+        if self.relations is not None:
+            m = self.relations
+            rows += [
+                ("relations used", f"{m.n_used}/{m.n_relations} (unmatched {m.n_unmatched})"),
+                ("abs trans (m)", str(m.abs_trans_m)),
+                ("sqr trans (m^2)", str(m.sqr_trans_m2)),
+                ("abs rot (deg)", str(m.abs_rot_deg)),
+                ("sqr rot (deg^2)", str(m.sqr_rot_deg2)),
+            ]
+        if self.ate is not None:
+            a = self.ate
+            rows += [
+                ("ATE rmse (m)", f"{a.translation_m.rmse:.5f} (n={a.translation_m.n})"),
+                ("ATE mean/max (m)", f"{a.translation_m.mean:.5f} / {a.translation_m.max:.5f}"),
+                ("ATE rot rmse (deg)", f"{a.rotation_deg.rmse:.5f}"),
+            ]
+        for r in self.rpe:
+            rows += [
+                (
+                    f"RPE {r.delta_m:g} m trans rmse (m)",
+                    f"{r.translation_m.rmse:.5f} (pairs {r.translation_m.n})",
+                ),
+                (f"RPE {r.delta_m:g} m rot rmse (deg)", f"{r.rotation_deg.rmse:.5f}"),
+            ]
+        if self.nees is not None:
+            s = self.nees
+            verdict = "consistent" if s.consistent else "NOT consistent"
+            rows.append(
+                ("pose NEES mean", f"{s.mean:.3f} in [{s.lower:.3f}, {s.upper:.3f}]: {verdict}")
+            )
+        width = max(len(k) for k, _ in rows)
+        return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def evaluate_results(
+    results: Results | Trajectory,
+    *,
+    relations: Relations | None = None,
+    ground_truth: Trajectory | None = None,
+    rpe_deltas_m: Sequence[float] = (1.0,),
+    tolerance_s: float = 1e-5,
+    max_unmatched_fraction: float = 0.02,
+    sources: dict[str, str] | None = None,
+) -> EvaluationReport:
+    """Relations metric (with ``relations``), ATE, RPE and NEES (with ``ground_truth``).
+
+    NEES is computed when ``results`` carries pose covariances and ground truth is given.
+    """
+    if relations is None and ground_truth is None:
+        raise EvaluationError("nothing to evaluate against: give relations and/or ground truth")
+    if isinstance(results, Results):
+        trajectory, frame, cov = results.trajectory, results.frame, results.covariances
+    else:
+        trajectory, frame, cov = results, "laser", None
+    tol, frac = tolerance_s, max_unmatched_fraction
+    rel = None
+    if relations is not None:
+        rel = relations_metric(trajectory, relations, tolerance_s=tol, max_unmatched_fraction=frac)
+    ate_result = nees_result = None
+    rpe_results: tuple[RpeResult, ...] = ()
+    if ground_truth is not None:
+        ate_result = ate(trajectory, ground_truth, tolerance_s=tol, max_unmatched_fraction=frac)
+        rpe_results = tuple(
+            rpe(trajectory, ground_truth, d, tolerance_s=tol, max_unmatched_fraction=frac)
+            for d in rpe_deltas_m
+        )
+        if cov is not None:
+            nees_result = pose_nees(
+                trajectory, cov, ground_truth, tolerance_s=tol, max_unmatched_fraction=frac
+            )
+    return EvaluationReport(
+        n_poses=len(trajectory),
+        frame=frame,
+        relations=rel,
+        ate=ate_result,
+        rpe=rpe_results,
+        nees=nees_result,
+        sources=dict(sources or {}),
+    )

@@ -1,0 +1,135 @@
+"""Paper-style figures of one scan and its fitted lines (Pfister et al., Fig. 3).
+
+Left: the raw points with the 3σ ellipses of their Eq. 8 covariances; right: the fitted line
+segments with their 3σ uncertainty band across the line.  As in the paper, uncertainties are
+drawn magnified (``scale``, default 50) so they are visible at room scale.
+
+The band at tangent position ``s`` has half-width ``3·scale·σ(s)`` with
+``σ(s)² = P_RR − 2 s P_Rα + s² P_αα``: the standard deviation of the fitted line's distance from
+a fixed point at ``s`` (the R-uncertainty of the paper's figure, with the joint ``(R, α)``
+covariance, so it widens away from the foot of the normal where α's uncertainty dominates).
+
+matplotlib is imported here only; nothing in ``linefit`` or the algorithmic parts of ``slam``
+imports this module.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
+
+from linefit import Line, LineFitConfig  # noqa: E402
+from linefit.extract import valid_readings  # noqa: E402
+from linefit.noise import point_covariances  # noqa: E402
+
+__all__ = ["draw_lines", "draw_points", "save_scan_figure"]
+
+FloatArray = NDArray[np.float64]
+
+
+def _ellipse_polygons(centres: FloatArray, covs: FloatArray, k: float, n: int = 24) -> FloatArray:
+    """``(m, n, 2)`` polygons of the ``k``-σ ellipses of 2×2 covariances (vectorised)."""
+    vals, vecs = np.linalg.eigh(covs)
+    t = np.linspace(0.0, 2.0 * np.pi, n)
+    circle = np.stack([np.cos(t), np.sin(t)], axis=1)  # (n, 2)
+    radii = k * np.sqrt(np.maximum(vals, 0.0))  # (m, 2)
+    pts = np.einsum("mij,nj->mni", vecs * radii[:, None, :], circle)
+    return pts + centres[:, None, :]
+
+
+def draw_points(
+    ax: Axes,
+    ranges: FloatArray,
+    bearings: FloatArray,
+    config: LineFitConfig,
+    *,
+    max_range_m: float | None = None,
+    scale: float = 50.0,
+    every: int = 10,
+) -> None:
+    """Raw points, with the magnified 3σ ellipses of every ``every``-th point."""
+    valid = valid_readings(np.asarray(ranges, dtype=float), max_range_m, config)
+    d = np.asarray(ranges, dtype=float)[valid]
+    phi = np.asarray(bearings, dtype=float)[valid]
+    xy = np.stack([d * np.cos(phi), d * np.sin(phi)], axis=1)
+    ax.plot(xy[:, 0], xy[:, 1], ".", ms=2, color="k", label="scan points")
+    if xy.shape[0] and every > 0:
+        sel = np.arange(0, xy.shape[0], every)
+        Q = point_covariances(d[sel], phi[sel], config.noise)
+        polys = _ellipse_polygons(xy[sel], Q * scale**2, 3.0)
+        ax.add_collection(
+            PolyCollection(
+                list(polys),
+                facecolors="tab:orange",
+                edgecolors="tab:red",
+                alpha=0.5,
+                label=f"3σ ellipses ×{scale:g}",
+            )
+        )
+    ax.plot([0.0], [0.0], "^", color="tab:blue", ms=8, label="sensor")
+
+
+def draw_lines(ax: Axes, lines: Sequence[Line], *, scale: float = 50.0) -> None:
+    """Fitted segments, with their magnified 3σ band across the line."""
+    bands = []
+    segs = []
+    for line in lines:
+        n = line.normal
+        for s0, s1 in line.segments_s:
+            s = np.linspace(s0, s1, 16)
+            var = line.cov[0, 0] - 2.0 * s * line.cov[0, 1] + s * s * line.cov[1, 1]
+            half = 3.0 * scale * np.sqrt(np.maximum(var, 0.0))
+            centre = line.point_at(s)
+            upper = centre + half[:, None] * n
+            lower = centre - half[:, None] * n
+            bands.append(np.concatenate([upper, lower[::-1]]))
+            segs.append(line.point_at(np.array([s0, s1])))
+    if bands:
+        ax.add_collection(
+            PolyCollection(bands, facecolors="tab:cyan", edgecolors="none", alpha=0.5)
+        )
+        ax.add_collection(LineCollection(segs, colors="tab:blue", linewidths=1.5))
+    ax.plot([], [], color="tab:blue", label=f"{len(lines)} fitted lines (3σ band ×{scale:g})")
+
+
+def save_scan_figure(
+    path: str | Path,
+    ranges: FloatArray,
+    bearings: FloatArray,
+    lines: Sequence[Line],
+    config: LineFitConfig,
+    *,
+    max_range_m: float | None = None,
+    scale: float = 50.0,
+    title: str = "",
+) -> Path:
+    """Write the two-panel figure (points + ellipses | lines + bands) to ``path`` (PNG/PDF)."""
+    path = Path(path)
+    fig, axes = plt.subplots(1, 2, figsize=(12, 6), sharex=True, sharey=True)
+    draw_points(axes[0], ranges, bearings, config, max_range_m=max_range_m, scale=scale)
+    axes[0].set_title("raw points and 3σ covariances")
+    draw_points(axes[1], ranges, bearings, config, max_range_m=max_range_m, scale=scale, every=0)
+    draw_lines(axes[1], lines, scale=scale)
+    axes[1].set_title("fitted lines and 3σ uncertainty across the line")
+    for ax in axes:
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.legend(loc="upper right", fontsize=7)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("y (m)")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

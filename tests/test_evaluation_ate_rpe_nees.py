@@ -1,0 +1,121 @@
+"""ATE (SE(2) alignment), RPE over distances, pose NEES: known answers and Monte Carlo."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam.errors import EvaluationError
+from slam.evaluation import align_se2, ate, distance_pairs, evaluate_results, pose_nees, rpe
+from slam.geometry import pose_compose, pose_exp, pose_inverse
+from slam.io import Trajectory
+
+
+def random_walk(rng, n):
+    steps = np.column_stack(
+        [rng.uniform(0.1, 0.5, n), rng.normal(0, 0.05, n), rng.normal(0, 0.2, n)]
+    )
+    poses = np.zeros((n, 3))
+    for k in range(1, n):
+        poses[k] = pose_compose(poses[k - 1], steps[k])
+    return poses
+
+
+def test_alignment_recovers_a_rigid_motion_and_ate_is_zero(rng):
+    truth = random_walk(rng, 200)
+    stamps = np.arange(200) * 0.1
+    motion = np.array([3.0, -7.0, 2.5])
+    estimate = pose_compose(pose_inverse(motion), truth)  # truth = motion · estimate
+    result = ate(Trajectory(stamps, estimate), Trajectory(stamps, truth))
+    np.testing.assert_allclose(result.alignment, motion, atol=1e-9)
+    assert result.translation_m.rmse < 1e-9 and result.rotation_deg.max < 1e-7
+    unaligned = ate(Trajectory(stamps, estimate), Trajectory(stamps, truth), align=False)
+    assert unaligned.translation_m.rmse > 1.0
+
+
+def test_ate_with_noise_equals_noise_rms(rng):
+    truth = random_walk(rng, 2000)
+    stamps = np.arange(2000) * 0.1
+    noise = rng.normal(0, 0.05, (2000, 2))
+    estimate = truth.copy()
+    estimate[:, :2] += noise
+    result = ate(Trajectory(stamps, estimate), Trajectory(stamps, truth))
+    # alignment absorbs ~3 of 4000 degrees of freedom
+    assert result.translation_m.rmse == pytest.approx(
+        np.sqrt(np.mean(np.sum(noise**2, 1))), rel=0.01
+    )
+
+
+def test_alignment_of_collapsed_positions_is_an_error():
+    with pytest.raises(EvaluationError, match="undetermined"):
+        align_se2(np.ones((5, 2)), np.ones((5, 2)))
+
+
+def test_rpe_known_answer_for_a_scale_error():
+    n = 101
+    truth = np.column_stack([np.arange(n) * 1.0, np.zeros(n), np.zeros(n)])
+    estimate = truth * [1.1, 1.0, 1.0]
+    stamps = np.arange(n) * 0.5
+    for all_pairs in (False, True):
+        result = rpe(
+            Trajectory(stamps, estimate), Trajectory(stamps, truth), 5.0, all_pairs=all_pairs
+        )
+        assert result.translation_m.mean == pytest.approx(0.5)
+        assert result.translation_m.std == pytest.approx(0.0, abs=1e-9)
+        assert result.translation_m.n == (20 if not all_pairs else 96)
+    pairs = distance_pairs(truth[:, :2], 5.0)
+    assert pairs[0].tolist() == [0, 5] and pairs[-1].tolist() == [95, 100]
+
+
+def test_rpe_ignores_a_global_rigid_motion(rng):
+    truth = random_walk(rng, 300)
+    stamps = np.arange(300) * 0.1
+    estimate = pose_compose(np.array([1.0, 2.0, 0.7]), truth)
+    result = rpe(Trajectory(stamps, estimate), Trajectory(stamps, truth), 2.0, all_pairs=True)
+    assert result.translation_m.max < 1e-9 and result.rotation_deg.max < 1e-7
+
+
+def random_covariances(rng, n):
+    a = rng.normal(0, 1, (n, 3, 3)) * [[0.1], [0.1], [0.02]]
+    return a @ np.swapaxes(a, 1, 2) + np.diag([1e-4, 1e-4, 1e-5])
+
+
+def test_nees_monte_carlo_consistent_and_overconfident(rng):
+    n = 4000
+    truth = random_walk(rng, n)
+    stamps = np.arange(n) * 0.1
+    cov = random_covariances(rng, n)
+    xi = np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.normal(size=(n, 3)))
+    # exact: truth = estimate · Exp(ξ)  ⇔  estimate = truth · Exp(ξ)⁻¹
+    estimate = pose_compose(truth, pose_inverse(pose_exp(xi)))
+    result = pose_nees(Trajectory(stamps, estimate), cov, Trajectory(stamps, truth))
+    assert result.consistent, (result.mean, result.lower, result.upper)
+    assert result.fraction_within == pytest.approx(0.95, abs=0.015)
+    over = pose_nees(Trajectory(stamps, estimate), cov * 0.7, Trajectory(stamps, truth))
+    assert not over.consistent and over.mean > over.upper
+
+
+def test_nees_rejects_a_singular_covariance(rng):
+    truth = random_walk(rng, 5)
+    cov = random_covariances(rng, 5)
+    cov[2] = np.diag([1.0, 0.0, 1.0])
+    with pytest.raises(EvaluationError, match="covariance 2 is not positive definite"):
+        pose_nees(Trajectory(np.arange(5.0), truth), cov, Trajectory(np.arange(5.0), truth))
+
+
+def test_report_of_a_perfect_trajectory(rng):
+    from slam.io import relations_from_trajectory
+
+    truth = random_walk(rng, 300)
+    stamps = np.round(np.arange(300) * 0.1 + 1000, 6)
+    rel = relations_from_trajectory(stamps, truth, rng.integers(0, 300, (100, 2)))
+    report = evaluate_results(
+        Trajectory(stamps, truth),
+        relations=rel,
+        ground_truth=Trajectory(stamps, truth),
+        rpe_deltas_m=(1.0, 5.0),
+    )
+    d = report.to_dict()
+    assert d["relations"]["abs_trans_m"]["mean"] < 1e-9 and d["ate"]["rmse_m"] < 1e-9
+    assert [r["delta_m"] for r in d["rpe"]] == [1.0, 5.0]
+    assert "abs trans (m)" in report.format_table()

@@ -1,0 +1,107 @@
+"""Relations metric: known answers on constructed data, Cartographer's definitions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from slam.errors import EvaluationError
+from slam.evaluation import match_timestamps, relation_errors, relations_metric
+from slam.geometry import pose_compose, wrap_angle
+from slam.io import Relations, Trajectory, relations_from_trajectory
+
+
+def random_poses(rng, n, spread=10.0):
+    return np.column_stack(
+        [rng.normal(0, spread, n), rng.normal(0, spread, n), rng.uniform(-np.pi, np.pi, n)]
+    )
+
+
+def test_error_of_a_left_perturbed_relation_is_the_perturbation(rng):
+    m = 400
+    expected = random_poses(rng, m)
+    delta = random_poses(rng, m, spread=0.5)
+    pose_1 = random_poses(rng, m)
+    # pose_1⁻¹·pose_2 = delta·expected  ⇒  error = delta
+    pose_2 = pose_compose(pose_1, pose_compose(delta, expected))
+    rel = Relations.planar(np.arange(m), np.arange(m) + 0.5, expected)
+    trans, angle = relation_errors(pose_1, pose_2, rel)
+    np.testing.assert_allclose(trans, np.hypot(delta[:, 0], delta[:, 1]), atol=1e-9)
+    np.testing.assert_allclose(angle, np.abs(wrap_angle(delta[:, 2])), atol=1e-9)
+
+
+def test_three_d_relation_matches_a_rigid_transform_library(rng):
+    m = 50
+    pose_1, pose_2 = random_poses(rng, m), random_poses(rng, m)
+    xyz = rng.normal(0, 3, (m, 3))
+    rpy = rng.uniform(-0.3, 0.3, (m, 3))
+    rel = Relations(
+        np.zeros(m),
+        np.ones(m),
+        np.column_stack([xyz[:, :2], rpy[:, 2]]),
+        xyz[:, 2],
+        rpy[:, 0],
+        rpy[:, 1],
+        np.zeros(m, np.int64),
+    )
+    trans, angle = relation_errors(pose_1, pose_2, rel)
+    for k in range(m):
+        r1 = Rotation.from_euler("z", pose_1[k, 2])
+        r2 = Rotation.from_euler("z", pose_2[k, 2])
+        t1 = np.array([pose_1[k, 0], pose_1[k, 1], 0.0])
+        t2 = np.array([pose_2[k, 0], pose_2[k, 1], 0.0])
+        r_rel, t_rel = r1.inv() * r2, r1.inv().apply(t2 - t1)
+        r_exp = Rotation.from_euler("ZYX", [rpy[k, 2], rpy[k, 1], rpy[k, 0]])
+        r_err = r_rel * r_exp.inv()
+        t_err = t_rel - r_err.apply(xyz[k])
+        assert trans[k] == pytest.approx(np.linalg.norm(t_err), abs=1e-9)
+        assert angle[k] == pytest.approx(r_err.magnitude(), abs=1e-9)
+
+
+def test_metric_statistics_are_cartographers(rng):
+    n = 300
+    stamps = np.round(np.cumsum(rng.uniform(0.1, 0.5, n)), 6)
+    truth = np.cumsum(random_poses(rng, n, 0.3), axis=0)
+    pairs = rng.integers(0, n, (500, 2))
+    relations = relations_from_trajectory(stamps, truth, pairs)
+    zero = relations_metric(Trajectory(stamps, truth), relations)
+    assert zero.abs_trans_m.mean < 1e-9 and zero.abs_rot_deg.mean < 1e-7
+    noisy = truth + rng.normal(0, 0.05, truth.shape)
+    metric = relations_metric(Trajectory(stamps, noisy), relations)
+    t, a = metric.trans_errors_m, metric.rot_errors_deg
+    assert metric.abs_trans_m.mean == pytest.approx(t.mean())
+    assert metric.abs_trans_m.std == pytest.approx(t.std(ddof=1))
+    assert metric.sqr_trans_m2.std == pytest.approx((t**2).std(ddof=1))
+    assert metric.sqr_rot_deg2.mean == pytest.approx((a**2).mean())
+    assert metric.n_used == 500 and metric.n_unmatched == 0
+    d = metric.to_dict()
+    assert d["abs_trans_m"]["std"] == metric.abs_trans_m.std and d["n_used"] == 500
+    assert metric.cartographer_report().startswith("Abs translational error ")
+
+
+def test_unmatched_relations_are_counted_and_fail_above_the_limit(rng):
+    n = 200
+    stamps = np.arange(n) * 0.1 + 5.0
+    truth = np.cumsum(random_poses(rng, n, 0.3), axis=0)
+    pairs = np.column_stack([np.arange(n - 1), np.arange(1, n)])
+    relations = relations_from_trajectory(stamps, truth, pairs)
+    keep = np.ones(n, bool)
+    keep[[10]] = False  # 2 of 199 relations lose a stamp: 1 %
+    metric = relations_metric(Trajectory(stamps[keep], truth[keep]), relations)
+    assert metric.n_unmatched == 2 and metric.n_used == 197
+    keep[[50, 90]] = False  # 6 of 199: 3 %
+    with pytest.raises(EvaluationError, match="6 of 199 relations"):
+        relations_metric(Trajectory(stamps[keep], truth[keep]), relations)
+    metric = relations_metric(
+        Trajectory(stamps[keep], truth[keep]), relations, max_unmatched_fraction=0.05
+    )
+    assert metric.n_unmatched == 6
+
+
+def test_matching_works_for_unsorted_stamps_and_respects_tolerance(rng):
+    stamps = rng.permutation(np.arange(100) * 0.01 + 1e9)
+    idx, found = match_timestamps(stamps[[3, 70]] + 4e-6, stamps, 1e-5)
+    assert found.all() and list(idx) == [3, 70]
+    idx, found = match_timestamps(np.array([stamps[5] + 2e-5]), stamps, 1e-5)
+    assert not found.any()
