@@ -21,15 +21,15 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.axes import Axes  # noqa: E402
-from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
-from numpy.typing import NDArray  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection, PolyCollection
+from numpy.typing import NDArray
 
-from linefit import Line, LineFitConfig  # noqa: E402
-from linefit.extract import valid_readings  # noqa: E402
-from linefit.noise import point_covariances  # noqa: E402
+from linefit import Line, LineFitConfig
+from linefit.extract import valid_readings
+from linefit.noise import point_covariances
 
 __all__ = ["draw_lines", "draw_points", "save_scan_figure"]
 

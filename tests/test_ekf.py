@@ -120,10 +120,9 @@ def test_motion_jacobian_and_process_noise(rng):
     scale = np.sqrt(np.outer(np.diag(Q), np.diag(Q)))
     assert np.max(np.abs(np.cov(d.T) - Q) / scale) < 0.03
     # noise per metre / per radian as documented
-    assert Q_u[0, 0] == pytest.approx(1e-3**2 + (0.05 * math.hypot(0.3, 0.05)) ** 2)
-    assert Q_u[2, 2] == pytest.approx(
-        1e-3**2 + (0.05 * 0.2) ** 2 + (0.01 * math.hypot(0.3, 0.05)) ** 2
-    )
+    d = math.hypot(0.3, 0.05)
+    assert Q_u[0, 0] == pytest.approx(0.02**2 * d + 1e-4**2)
+    assert Q_u[2, 2] == pytest.approx(0.02**2 * 0.2 + 0.005**2 * d + 1e-4**2)
 
 
 # -------------------------------------------------------------------------------- augmentation
@@ -457,7 +456,7 @@ def test_run_config_round_trip_with_ekf_table(tmp_path):
             association="jcbb",
             max_landmarks=300,
             max_runtime_s=60.0,
-            odometry=OdometryNoiseConfig(sigma_xy_per_m=0.1),
+            odometry=OdometryNoiseConfig(sigma_trans_per_m=0.1),
             initial_pose_sigma=(0.1, 0.1, 0.01),
         )
     )

@@ -48,6 +48,9 @@ def compare(
         str | None, typer.Option("--dask", help="Dask scheduler address (tcp://host:port).")
     ] = None,
     figures: Annotated[bool, typer.Option("--figures/--no-figures", help="Draw figures.")] = True,
+    max_scans: Annotated[
+        int | None, typer.Option("--max-scans", help="Use only the first scans of the log.")
+    ] = None,
     config: ConfigOpt = None,
     sigma_d: SigmaDOpt = None,
     sigma_phi: SigmaPhiOpt = None,
@@ -87,7 +90,16 @@ def compare(
             bar.n = done
             bar.refresh()
 
-    report = run_compare(data, selected, run_config, workers, dask, progress)
+    report = run_compare(
+        data,
+        selected,
+        run_config,
+        workers,
+        dask,
+        progress,
+        cache_dir=out / ".cache",
+        max_scans=max_scans,
+    )
     if bar is not None:
         bar.close()
     write_report(report, out, figures=figures)

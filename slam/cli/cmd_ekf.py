@@ -49,6 +49,7 @@ def ekf(
     from dataclasses import replace
 
     from slam.ekf import EkfSlam
+    from slam.ekf.threads import blas_threads
     from slam.errors import ConfigError
     from slam.experiments.logdata import load_log
 
@@ -77,14 +78,15 @@ def ekf(
         bar.close()
         bar = tqdm(total=len(data.scans), desc="ekf", unit="scan")
     filt = EkfSlam(run_config.ekf, run_config.linefit)
-    for scan, lines in zip(data.scans, data.lines, strict=True):
-        if filt.stopped:
-            break
-        filt.add_scan(scan, lines)
-        if bar is not None:
-            bar.update(1)
-            if filt.n_landmarks and bar.n % 50 == 0:
-                bar.set_postfix(landmarks=filt.n_landmarks)
+    with blas_threads(run_config.ekf.blas_threads):
+        for scan, lines in zip(data.scans, data.lines, strict=True):
+            if filt.stopped:
+                break
+            filt.add_scan(scan, lines)
+            if bar is not None:
+                bar.update(1)
+                if filt.n_landmarks and bar.n % 50 == 0:
+                    bar.set_postfix(landmarks=filt.n_landmarks)
     if bar is not None:
         bar.close()
     result = filt.result()

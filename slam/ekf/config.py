@@ -72,6 +72,9 @@ class EkfConfig:
         world frame at it.
     min_landmark_observations : int
         Landmarks seen fewer times are left out of ``map.json`` (they stay in the state).
+    blas_threads : int
+        BLAS threads the runners allow while filtering (:mod:`slam.ekf.threads`); 0 leaves the
+        library default.  One is fastest on small shared machines.
     line_sigma_extra : tuple of float
         Model error ``(σ_r, σ_α)`` (m, rad) added in quadrature to every line's covariance
         (``R + diag(σ_r², σ_α²)``): real walls are not ideal lines and real range noise is not
@@ -99,6 +102,7 @@ class EkfConfig:
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     min_landmark_observations: int = 1
     line_sigma_extra: tuple[float, float] = (0.0, 0.0)
+    blas_threads: int = 1
 
     def __post_init__(self) -> None:
         if self.association not in ("nn", "jcbb"):
@@ -148,5 +152,7 @@ class EkfConfig:
             raise ConfigError(
                 f"ekf.line_sigma_extra must be two numbers >= 0, got {self.line_sigma_extra}"
             )
+        if self.blas_threads < 0:
+            raise ConfigError(f"ekf.blas_threads must be >= 0, got {self.blas_threads}")
         if self.min_landmark_observations < 1:
             raise ConfigError("ekf.min_landmark_observations must be >= 1")

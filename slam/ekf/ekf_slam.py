@@ -519,7 +519,7 @@ class EkfSlam:
             return lines
         if lines is None:
             try:
-                from linefit import extract_lines  # type: ignore[attr-defined,unused-ignore]
+                from linefit import extract_lines
             except ImportError as exc:  # pragma: no cover - depends on what is installed
                 raise EstimationError(
                     "line extraction (linefit.extract_lines) is not available; pass lines="

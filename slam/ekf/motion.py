@@ -5,12 +5,14 @@ The filter is driven by the odometry **increment** between consecutive scans,
 right: ``pose_k = pose_{k-1} · u_k · Exp(n_k)`` with ``n_k ~ N(0, Q_u)`` in the tangent space
 of the new pose, the same error model as a GTSAM ``BetweenFactorPose2(u_k, Q_u)``.
 
-Noise per metre and per radian (:class:`OdometryNoiseConfig`): with ``d = ‖(u_x, u_y)‖`` and
-``|Δθ| = |u_θ|`` the standard deviations are
+Noise per metre and per radian (:class:`OdometryNoiseConfig`), the random-walk model of the
+simulator (:mod:`slam.sim.odometry`): with ``Δs = ‖(u_x, u_y)‖`` and ``|Δθ| = |u_θ|``
 
-``σ_xy² = σ_xy,min² + (k_xy·d)²``,  ``σ_θ² = σ_θ,min² + (k_θ·|Δθ|)² + (k_θd·d)²``,
+``σ_xy² = σ_t²·Δs + σ_xy,min²``,  ``σ_θ² = σ_rr²·|Δθ| + σ_rm²·Δs + σ_θ,min²``,
 
-``Q_u = diag(σ_xy², σ_xy², σ_θ²)``.
+``Q_u = diag(σ_xy², σ_xy², σ_θ²)``.  Variances grow linearly with distance and angle, so the
+integrated uncertainty does not depend on how often scans arrive; the small floors keep ``Q_u``
+positive definite when the robot stands still.
 
 State Jacobians for the additive ``(x, y, θ)`` error of :mod:`slam.ekf.conventions`:
 ``F = ∂pose_k/∂pose_{k-1} = [[1, 0, −s u_x − c u_y], [0, 1, c u_x − s u_y], [0, 0, 1]]``
@@ -36,33 +38,33 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class OdometryNoiseConfig:
-    """Odometry noise per metre and per radian (standard deviations of one increment).
+    """Odometry noise per metre and per radian (random walk; field names as in ``slam.sim``).
 
     Attributes
     ----------
-    sigma_xy_per_m : float
-        ``k_xy``: translation σ (m) per metre travelled.
-    sigma_theta_per_rad : float
-        ``k_θ``: heading σ (rad) per radian turned.
-    sigma_theta_per_m : float
-        ``k_θd``: heading σ (rad) per metre travelled.
+    sigma_trans_per_m : float
+        ``σ_t`` (m/√m): standard deviation per axis of the translation error after 1 m.
+    sigma_rot_per_rad : float
+        ``σ_rr`` (rad/√rad): heading error after turning 1 rad.
+    sigma_rot_per_m : float
+        ``σ_rm`` (rad/√m): heading error after 1 m of travel.
     sigma_xy_min_m : float
-        Floor of the translation σ per increment (m); keeps ``Q_u`` positive definite.
+        Floor added to the translation σ of every increment (m).
     sigma_theta_min_rad : float
-        Floor of the heading σ per increment (rad).
+        Floor added to the heading σ of every increment (rad).
     """
 
-    sigma_xy_per_m: float = 0.05
-    sigma_theta_per_rad: float = 0.05
-    sigma_theta_per_m: float = 0.01
-    sigma_xy_min_m: float = 1e-3
-    sigma_theta_min_rad: float = 1e-3
+    sigma_trans_per_m: float = 0.02
+    sigma_rot_per_rad: float = 0.02
+    sigma_rot_per_m: float = 0.005
+    sigma_xy_min_m: float = 1e-4
+    sigma_theta_min_rad: float = 1e-4
 
     def __post_init__(self) -> None:
         for name in (
-            "sigma_xy_per_m",
-            "sigma_theta_per_rad",
-            "sigma_theta_per_m",
+            "sigma_trans_per_m",
+            "sigma_rot_per_rad",
+            "sigma_rot_per_m",
             "sigma_xy_min_m",
             "sigma_theta_min_rad",
         ):
@@ -71,6 +73,16 @@ class OdometryNoiseConfig:
                 raise ConfigError(f"odometry noise {name} must be a number >= 0, got {value!r}")
         if self.sigma_xy_min_m <= 0.0 or self.sigma_theta_min_rad <= 0.0:
             raise ConfigError("odometry noise floors sigma_xy_min_m, sigma_theta_min_rad: > 0")
+
+    def scaled(self, factor: float) -> OdometryNoiseConfig:
+        """The same model with the per-metre and per-radian σ multiplied by ``factor``."""
+        return OdometryNoiseConfig(
+            sigma_trans_per_m=self.sigma_trans_per_m * factor,
+            sigma_rot_per_rad=self.sigma_rot_per_rad * factor,
+            sigma_rot_per_m=self.sigma_rot_per_m * factor,
+            sigma_xy_min_m=self.sigma_xy_min_m,
+            sigma_theta_min_rad=self.sigma_theta_min_rad,
+        )
 
 
 def odometry_covariance(increment: FloatArray, noise: OdometryNoiseConfig) -> FloatArray:
@@ -85,11 +97,11 @@ def odometry_covariance(increment: FloatArray, noise: OdometryNoiseConfig) -> Fl
     """
     u = np.asarray(increment, dtype=float)
     d = np.hypot(u[..., 0], u[..., 1])
-    var_xy = noise.sigma_xy_min_m**2 + (noise.sigma_xy_per_m * d) ** 2
+    var_xy = noise.sigma_trans_per_m**2 * d + noise.sigma_xy_min_m**2
     var_th = (
-        noise.sigma_theta_min_rad**2
-        + (noise.sigma_theta_per_rad * np.abs(u[..., 2])) ** 2
-        + (noise.sigma_theta_per_m * d) ** 2
+        noise.sigma_rot_per_rad**2 * np.abs(u[..., 2])
+        + noise.sigma_rot_per_m**2 * d
+        + noise.sigma_theta_min_rad**2
     )
     Q = np.zeros((*u.shape[:-1], 3, 3))
     Q[..., 0, 0] = var_xy

@@ -30,7 +30,8 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from slam.config import RunConfig
-from slam.errors import ConfigError
+from slam.errors import ConfigError, LineslamError
+from slam.evaluation import align_se2
 from slam.experiments.estimators import ESTIMATORS, EstimateOutput, run_estimator
 from slam.experiments.linesim import LineSimConfig, simulate_line_run, world_and_trajectory
 from slam.experiments.nees import pose_nees
@@ -42,7 +43,6 @@ __all__ = [
     "DataSpec",
     "Variant",
     "VariantOutcome",
-    "align_se2",
     "ate_rmse",
     "default_variants",
     "parse_source",
@@ -153,6 +153,10 @@ class VariantOutcome:
         Position error per scan after alignment (ground truth only).
     nees : ndarray or None
         Pose NEES per scan (ground truth and covariances only).
+    rel_err_m : ndarray or None
+        Translation error of each used relation (logs with relations).
+    rel_scan : ndarray or None
+        Scan index of each used relation's first time stamp (abscissa for plots).
     """
 
     variant: Variant
@@ -160,29 +164,13 @@ class VariantOutcome:
     metrics: dict[str, Any] = field(default_factory=dict)
     pos_err_m: FloatArray | None = None
     nees: FloatArray | None = None
-
-
-def align_se2(poses: FloatArray, reference: FloatArray) -> FloatArray:
-    """The rigid motion ``T`` minimising ``Σ ‖T·p_i − q_i‖²`` over positions (Umeyama, no scale).
-
-    Returns
-    -------
-    ndarray, shape (3,)
-        ``T`` as a pose; apply with ``pose_compose(T, poses)``.
-    """
-    p = np.asarray(poses, dtype=float)[:, :2]
-    q = np.asarray(reference, dtype=float)[:, :2]
-    mp, mq = p.mean(axis=0), q.mean(axis=0)
-    C = (q - mq).T @ (p - mp)
-    angle = math.atan2(C[1, 0] - C[0, 1], C[0, 0] + C[1, 1])
-    c, s = math.cos(angle), math.sin(angle)
-    t = mq - np.array([[c, -s], [s, c]]) @ mp
-    return np.array([t[0], t[1], angle])
+    rel_err_m: FloatArray | None = None
+    rel_scan: FloatArray | None = None
 
 
 def ate_rmse(poses: FloatArray, reference: FloatArray) -> tuple[float, FloatArray]:
-    """Absolute trajectory error (RMSE of positions after SE(2) alignment) and per-pose errors."""
-    T = align_se2(poses, reference)
+    """ATE (RMSE of positions after SE(2) alignment, :func:`slam.evaluation.align_se2`)."""
+    T = align_se2(poses[:, :2], reference[:, :2])
     aligned = pose_compose(np.broadcast_to(T, poses.shape), poses)
     err = np.linalg.norm(aligned[:, :2] - reference[:, :2], axis=1)
     return float(np.sqrt(np.mean(err**2))), err
@@ -196,6 +184,8 @@ class CompareTask:
     variant: Variant
     run_config: RunConfig
     sim: LineSimConfig = field(default_factory=LineSimConfig)
+    cache_dir: str | None = None
+    max_scans: int | None = None
 
 
 def run_variant(task: CompareTask) -> VariantOutcome:
@@ -228,11 +218,70 @@ def run_variant(task: CompareTask) -> VariantOutcome:
     return VariantOutcome(variant, est, metrics, err, nees)
 
 
-def _run_on_log(task: CompareTask) -> VariantOutcome:  # pragma: no cover - needs slam.io
-    raise ConfigError(
-        f"comparison on the log {task.data.name!r} needs slam.io and linefit.extract_lines; "
-        "use a simulated source (sim:WORLD) until they are installed"
-    )
+def _linefit_for(task: CompareTask) -> Any:
+    return replace(task.run_config.linefit, weighted=task.variant.weighted)
+
+
+def _run_on_log(task: CompareTask) -> VariantOutcome:
+    from slam.evaluation import ate, pose_nees, relations_metric
+    from slam.experiments.logdata import cached_log_data
+    from slam.io import Trajectory, read_relations, read_tum
+
+    cache = Path(task.cache_dir) if task.cache_dir else None
+    data = cached_log_data(task.data.name, _linefit_for(task), cache, task.max_scans)
+    rc = replace(task.run_config, linefit=_linefit_for(task))
+    t0 = time.perf_counter()
+    est = run_estimator(task.variant.estimator, data.scans, data.lines, rc, None)
+    wall = time.perf_counter() - t0
+    n = est.poses_world_laser.shape[0]
+    traj = Trajectory.from_arrays(est.timestamps, est.poses_world_laser)
+    metrics: dict[str, Any] = {
+        "runtime_s": wall,
+        "extraction_s": data.extraction_s,
+        "scans": len(data.scans),
+        "scans_processed": n,
+        "landmarks": int(est.landmarks_r_alpha.shape[0]),
+    }
+    out = VariantOutcome(task.variant, est, metrics)
+    if data.relations_path is not None:
+        rel = read_relations(data.relations_path)
+        try:
+            m = relations_metric(traj, rel, max_unmatched_fraction=1.0)
+        except LineslamError as exc:
+            metrics["relations_error"] = str(exc)
+        else:
+            metrics.update(
+                {
+                    "rel_trans_mean_m": m.abs_trans_m.mean,
+                    "rel_trans_std_m": m.abs_trans_m.std,
+                    "rel_rot_mean_deg": m.abs_rot_deg.mean,
+                    "rel_rot_std_deg": m.abs_rot_deg.std,
+                    "relations_used": m.n_used,
+                    "relations_total": m.n_relations,
+                }
+            )
+            scan_of = {float(t): i for i, t in enumerate(est.timestamps)}
+            t1 = rel.t1[np.isin(rel.t1, est.timestamps) & np.isin(rel.t2, est.timestamps)]
+            out = replace(
+                out,
+                rel_err_m=np.asarray(m.trans_errors_m, dtype=float),
+                rel_scan=np.array([scan_of.get(float(t), np.nan) for t in t1], dtype=float),
+            )
+    if data.ground_truth_path is not None:
+        gt = read_tum(data.ground_truth_path)
+        a = ate(traj, gt, max_unmatched_fraction=1.0)
+        metrics["ate_rmse_m"] = a.translation_m.rmse
+        if est.pose_covariances is not None:
+            ok = np.all(np.isfinite(est.pose_covariances), axis=(1, 2)) & (
+                np.linalg.det(est.pose_covariances) > 0.0
+            )
+            sub = Trajectory.from_arrays(est.timestamps[ok], est.poses_world_laser[ok])
+            nr = pose_nees(sub, est.pose_covariances[ok], gt, max_unmatched_fraction=1.0)
+            metrics["nees_mean"] = nr.mean
+            nees = np.full(n, np.nan)
+            nees[np.flatnonzero(ok)[: nr.values.shape[0]]] = nr.values
+            out = replace(out, nees=nees)
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -274,21 +323,36 @@ class CompareReport:
 
     def markdown_table(self) -> str:
         """The one comparison table (GitHub markdown)."""
-        head = (
-            "| variant | ATE RMSE (m) | mean pos. error (m) | mean NEES | landmarks | "
-            "time/scan (ms) | total (s) | note |"
-        )
-        lines = [head, "|---|---:|---:|---:|---:|---:|---:|---|"]
-        for r in self.rows():
+        rows = self.rows()
+        has_rel = any(r.get("rel_trans_mean_m") is not None for r in rows)
+        has_gt = any(r.get("ate_rmse_m") is not None for r in rows)
+        cols = ["variant"]
+        if has_rel:
+            cols += ["relations trans. (m)", "relations rot. (deg)", "relations used"]
+        if has_gt:
+            cols += ["ATE RMSE (m)", "mean NEES"]
+        cols += ["landmarks", "time/scan (ms)", "total (s)", "note"]
+        lines = ["| " + " | ".join(cols) + " |", "|---" + "|---:" * (len(cols) - 2) + "|---|"]
+        for r in rows:
             note = ""
             if r.get("stopped_at_scan") is not None:
                 note = f"stopped at scan {r['stopped_at_scan']}: {r['stop_reason']}"
-            lines.append(
-                f"| {r['variant']} | {_fmt(r.get('ate_rmse_m'), 4)} | "
-                f"{_fmt(r.get('pos_err_mean_m'), 4)} | {_fmt(r.get('nees_mean'), 2)} | "
-                f"{r.get('landmarks', '')} | {_fmt(r.get('runtime_per_scan_ms_mean'), 2)} | "
-                f"{_fmt(r.get('runtime_s'), 1)} | {note} |"
-            )
+            cells = [r["variant"]]
+            if has_rel:
+                cells += [
+                    f"{_fmt(r.get('rel_trans_mean_m'), 3)} ± {_fmt(r.get('rel_trans_std_m'), 3)}",
+                    f"{_fmt(r.get('rel_rot_mean_deg'), 2)} ± {_fmt(r.get('rel_rot_std_deg'), 2)}",
+                    f"{r.get('relations_used', '–')}/{r.get('relations_total', '–')}",
+                ]
+            if has_gt:
+                cells += [_fmt(r.get("ate_rmse_m"), 4), _fmt(r.get("nees_mean"), 2)]
+            cells += [
+                str(r.get("landmarks", "")),
+                _fmt(r.get("runtime_per_scan_ms_mean"), 2),
+                _fmt(r.get("runtime_s"), 1),
+                note,
+            ]
+            lines.append("| " + " | ".join(cells) + " |")
         return "\n".join(lines)
 
 
@@ -306,16 +370,32 @@ def run_compare(
     dask_address: str | None = None,
     progress: Any = None,
     sim: LineSimConfig | None = None,
+    cache_dir: str | Path | None = None,
+    max_scans: int | None = None,
 ) -> CompareReport:
-    """Run every variant on the data (one task each) and collect the outcomes in order."""
+    """Run every variant on the data (one task each) and collect the outcomes in order.
+
+    For a log, the lines are extracted once per line-fit configuration (weighted /
+    unweighted) before the variants run, and cached as pickles in ``cache_dir`` where every
+    worker reads them (a Dask cluster needs ``cache_dir`` on a shared file system).
+    """
     names = [v.name for v in variants]
     if len(set(names)) != len(names):
         raise ConfigError(f"variant names must be unique, got {names}")
     if not variants:
         raise ConfigError("no variants to compare")
     rc = run_config or RunConfig()
-    tasks = [CompareTask(data, v, rc, sim or LineSimConfig()) for v in variants]
+    cache = None if cache_dir is None else str(cache_dir)
+    tasks = [CompareTask(data, v, rc, sim or LineSimConfig(), cache, max_scans) for v in variants]
     t0 = time.perf_counter()
+    if data.kind == "log" and cache_dir is not None:
+        from slam.experiments.logdata import cached_log_data
+
+        seen = set()
+        for task in tasks:  # extract once per line-fit configuration, before the variants
+            if task.variant.weighted not in seen:
+                seen.add(task.variant.weighted)
+                cached_log_data(data.name, _linefit_for(task), Path(cache_dir), max_scans)
     outcomes = map_tasks(run_variant, tasks, workers, dask_address, progress)
     return CompareReport(data, outcomes, time.perf_counter() - t0)
 
@@ -368,8 +448,22 @@ def _figures(report: CompareReport, out: Path) -> list[str]:
     plot_trajectories(trajs, out / "trajectories.png", segments, truth, title=title)
     names.append("trajectories.png")
     errs = {o.variant.name: o.pos_err_m for o in report.outcomes if o.pos_err_m is not None}
+    rel = {
+        o.variant.name: (o.rel_scan, o.rel_err_m)
+        for o in report.outcomes
+        if o.rel_err_m is not None and o.rel_scan is not None
+    }
     if errs:
         plot_errors_over_time(errs, out / "error.png", ylabel="position error after alignment (m)")
+        names.append("error.png")
+    elif rel:
+        plot_errors_over_time(
+            {k: np.maximum(v[1], 1e-4) for k, v in rel.items()},
+            out / "error.png",
+            ylabel="relation translation error (m)",
+            title="Relations error over time (by the scan of each relation's first pose)",
+            x={k: v[0] for k, v in rel.items()},
+        )
         names.append("error.png")
     runtimes = {o.variant.name: o.estimate.scan_runtime_s for o in report.outcomes}
     sizes = {

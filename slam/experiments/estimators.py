@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from slam.config import RunConfig
 from slam.ekf import EkfSlam
+from slam.ekf.threads import blas_threads
 from slam.errors import ConfigError, EstimationError
 from slam.frontend.lineset import LineSet
 from slam.types import Scan
@@ -74,13 +75,14 @@ def _ekf(
 ) -> EstimateOutput:
     ekf_cfg = config.ekf if association is None else replace(config.ekf, association=association)
     ekf = EkfSlam(ekf_cfg, linefit_config=config.linefit, initial_pose_world_laser=initial_pose)
-    for k, scan in enumerate(scans):
-        if ekf.stopped:
-            break
-        if use_lines:
-            ekf.add_scan(scan, None if lines is None else lines[k])
-        else:
-            ekf.add_scan(scan, LineSet.empty())
+    with blas_threads(ekf_cfg.blas_threads):
+        for k, scan in enumerate(scans):
+            if ekf.stopped:
+                break
+            if use_lines:
+                ekf.add_scan(scan, None if lines is None else lines[k])
+            else:
+                ekf.add_scan(scan, LineSet.empty())
     res = ekf.result()
     return EstimateOutput(
         name=name,

@@ -79,8 +79,8 @@ def load_log(
     """
     import time
 
-    from linefit import extract_lines  # type: ignore[attr-defined,unused-ignore]
-    from slam.io import iter_scans, resolve_log  # type: ignore[import-untyped,import-not-found,unused-ignore]
+    from linefit import extract_lines
+    from slam.io import iter_scans, resolve_log
 
     resolved = resolve_log(str(source))
     scans: list[Scan] = []
