@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -80,3 +81,53 @@ def test_bad_arguments_give_one_line_errors(tmp_path, capsys, argv, message):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+DEMO = Path(__file__).resolve().parents[1] / "datasets" / "sim" / "demo"
+
+
+def test_ekf_command_on_the_demo_log_beats_odometry(tmp_path):
+    from slam.evaluation import relations_metric
+    from slam.io import read_relations, read_tum
+
+    out = tmp_path / "ekf"
+    main(["ekf", str(DEMO / "log.clf"), "--out", str(out), "--quiet"])
+    traj = read_tum(out / "trajectory.tum")
+    odo = read_tum(DEMO / "odometry.tum")
+    assert len(traj) == len(odo) == 383
+    np.testing.assert_array_equal(traj.timestamps, odo.timestamps)  # the log's stamps, exactly
+    rel = read_relations(DEMO / "relations.txt")
+    m_ekf, m_odo = relations_metric(traj, rel), relations_metric(odo, rel)
+    assert m_ekf.abs_trans_m.mean < 0.01 < m_odo.abs_trans_m.mean
+    assert m_ekf.abs_trans_m.mean < 0.1 * m_odo.abs_trans_m.mean
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["scans"] == 383 and summary["lines_fit"] > 0 and summary["frame"] == "laser"
+    assert 0.9 < summary["compression"] < 1.0
+    assert RunConfig.from_toml(out / "config.toml") == RunConfig()
+
+
+def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_path):
+    out = tmp_path / "cmp"
+    main(
+        [
+            "compare",
+            str(DEMO / "log.clf"),
+            "--out",
+            str(out),
+            "--quiet",
+            "--max-scans",
+            "200",
+            "--variants",
+            "ekf=ekf-nn,unweighted=ekf-nn/unweighted,odometry",
+        ]
+    )
+    rows = {r["variant"]: r for r in json.loads((out / "report.json").read_text())["variants"]}
+    for name in ("ekf", "unweighted"):
+        assert rows[name]["rel_trans_mean_m"] < 0.2 * rows["odometry"]["rel_trans_mean_m"]
+        assert rows[name]["ate_rmse_m"] < 0.2 * rows["odometry"]["ate_rmse_m"]
+        assert rows[name]["scans_processed"] == 200
+        assert 0.5 < rows[name]["nees_mean"] < 10.0
+    md = (out / "report.md").read_text()
+    assert "relations trans. (m)" in md and "ATE RMSE (m)" in md
+    assert list((out / ".cache").glob("lines-*.pkl"))  # weighted and unweighted fits cached
+    assert len(list((out / ".cache").glob("lines-*.pkl"))) == 2

@@ -38,7 +38,7 @@ class LogData:
     lines : list of LineSet
         Lines of each scan in the laser frame.
     relations_path : Path or None
-        Relations file of the log, if known.
+        Relations file of the log: the catalogue's, or ``relations.txt`` beside the log.
     ground_truth_path : Path or None
         ``ground_truth.tum`` next to a simulated log, if present.
     extraction_s : float
@@ -99,12 +99,15 @@ def load_log(
     if not scans:
         raise DatasetError(f"{resolved.log}: no laser scans in the log")
     gt = resolved.log.parent / "ground_truth.tum"
+    relations = resolved.relations
+    if relations is None and (resolved.log.parent / "relations.txt").is_file():
+        relations = resolved.log.parent / "relations.txt"  # a `lineslam simulate` folder
     return LogData(
         name=resolved.name,
         log_path=Path(resolved.log),
         scans=scans,
         lines=lines,
-        relations_path=resolved.relations,
+        relations_path=relations,
         ground_truth_path=gt if gt.is_file() else None,
         extraction_s=t_extract,
     )
