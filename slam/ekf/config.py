@@ -43,9 +43,10 @@ class EkfConfig:
     segment_gap_m : float
         Seen pieces of a landmark closer than this (m) are merged (``map.json`` segments).
     update_min_distance_m, update_min_angle_rad : float
-        Update policy: lines of a scan are used only once the robot moved at least this far
-        (odometry path length) or turned this much since the last update; 0 and 0 use every
-        scan.  Prediction runs on every scan regardless.
+        Update policy (the graph's keyframe policy): lines of a scan are used only once the
+        robot moved at least this far (odometry path length) or turned this much since the last
+        update; 0 and 0 use every scan.  Prediction runs on every scan regardless, and every
+        scan gets a pose.
     max_landmarks : int
         Guard on the ``O(n²)`` cost per update (``n = 3 + 2·landmarks``).
     on_max_landmarks : {"stop", "freeze"}
@@ -90,8 +91,8 @@ class EkfConfig:
     new_landmark_probability: float = 0.99999
     overlap_margin_m: float = 0.5
     segment_gap_m: float = 0.5
-    update_min_distance_m: float = 0.0
-    update_min_angle_rad: float = 0.0
+    update_min_distance_m: float = 0.2
+    update_min_angle_rad: float = 0.15
     max_landmarks: int = 2000
     on_max_landmarks: Literal["stop", "freeze"] = "stop"
     max_runtime_s: float | None = None
