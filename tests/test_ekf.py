@@ -19,7 +19,7 @@ from slam.ekf.conventions import (
 )
 from slam.ekf.motion import odometry_covariance, predict_pose
 from slam.ekf.update import filterpy_update, joseph_update, line_measurements
-from slam.errors import EstimationError, InputError
+from slam.errors import InputError
 from slam.frontend.lineset import LineSet
 from slam.geometry import (
     line_to_parent,
@@ -408,8 +408,9 @@ def test_max_landmarks_guard_stops_or_freezes():
     res = ekf.result()
     assert res.stats["stopped_at_scan"] == n_fed - 1 and res.n_scans == n_fed
     assert ekf.n_landmarks <= 5
-    with pytest.raises(EstimationError, match="stopped"):
-        ekf.add_scan(run.scans[n_fed], run.lines[n_fed])
+    rep = ekf.add_scan(run.scans[n_fed], run.lines[n_fed])  # ignored after the stop
+    assert rep.skipped and ekf.result().n_scans == n_fed
+    assert ekf.result().stats["scans_after_stop"] == 1
     ekf = EkfSlam(EkfConfig(max_landmarks=5, on_max_landmarks="freeze"))
     for scan, lines in zip(run.scans, run.lines, strict=True):
         ekf.add_scan(scan, lines)

@@ -89,6 +89,8 @@ class ScanReport:
         skipped for a bad covariance.
     updated : bool
         False when the update policy skipped this scan's lines.
+    skipped : bool
+        True when the filter had stopped before this scan (no pose for it).
     runtime_s : float
         Time spent on the scan.
     """
@@ -101,6 +103,7 @@ class ScanReport:
         self.n_ambiguous = 0
         self.n_invalid = 0
         self.updated = False
+        self.skipped = False
         self.runtime_s = 0.0
 
     def __repr__(self) -> str:
@@ -549,12 +552,17 @@ class EkfSlam:
         Raises
         ------
         EstimationError
-            When the filter has stopped (a guard tripped) or an update is indeterminate.
+            When an update is indeterminate (innovation covariance not positive definite).
         InputError
             When the scan has no (finite) odometry pose.
         """
         if self.stopped:
-            raise EstimationError(f"the EKF stopped earlier: {self.stop_reason}")
+            # a guard tripped earlier: the scan is not processed and gets no pose (runners
+            # built for the graph keep feeding; the result says where and why it stopped)
+            self.stats["scans_after_stop"] = self.stats.get("scans_after_stop", 0) + 1
+            report = ScanReport(scan.index)
+            report.skipped = True
+            return report
         t0 = time.perf_counter()
         report = ScanReport(scan.index)
         odom = self._odometry_of(scan)
@@ -649,6 +657,9 @@ class EkfSlam:
             )
 
     # ------------------------------------------------------------------ output
+    def optimize(self) -> None:
+        """Nothing to finish: a filter's estimate is final after each scan (runner protocol)."""
+
     def result(self) -> EkfResult:
         """The trajectory so far, the current map in normal form, and the run statistics."""
         M = self.n_landmarks
