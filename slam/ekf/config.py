@@ -73,6 +73,9 @@ class EkfConfig:
         world frame at it.
     min_landmark_observations : int
         Landmarks seen fewer times are left out of ``map.json`` (they stay in the state).
+    min_line_points, min_line_length_m : int, float
+        Lines (``linefit.Line``) with fewer supporting points or a shorter visible length (m,
+        gaps excluded) are ignored, as in the graph back-end (a ``LineSet`` is used as given).
     blas_threads : int
         BLAS threads the runners allow while filtering (:mod:`slam.ekf.threads`); 0 leaves the
         library default.  One is fastest on small shared machines.
@@ -104,6 +107,8 @@ class EkfConfig:
     min_landmark_observations: int = 1
     line_sigma_extra: tuple[float, float] = (0.0, 0.0)
     blas_threads: int = 1
+    min_line_points: int = 5
+    min_line_length_m: float = 0.1
 
     def __post_init__(self) -> None:
         if self.association not in ("nn", "jcbb"):
@@ -153,6 +158,10 @@ class EkfConfig:
             raise ConfigError(
                 f"ekf.line_sigma_extra must be two numbers >= 0, got {self.line_sigma_extra}"
             )
+        if self.min_line_points < 2:
+            raise ConfigError(f"ekf.min_line_points must be >= 2, got {self.min_line_points}")
+        if not (math.isfinite(self.min_line_length_m) and self.min_line_length_m >= 0.0):
+            raise ConfigError(f"ekf.min_line_length_m must be >= 0, got {self.min_line_length_m}")
         if self.blas_threads < 0:
             raise ConfigError(f"ekf.blas_threads must be >= 0, got {self.blas_threads}")
         if self.min_landmark_observations < 1:

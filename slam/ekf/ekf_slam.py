@@ -192,6 +192,7 @@ class EkfSlam:
             "lines_new": 0,
             "lines_ambiguous": 0,
             "lines_invalid": 0,
+            "lines_too_short": 0,
             "lines_not_added": 0,
             "landmarks_merged": 0,
             "jcbb_incomplete": 0,
@@ -530,9 +531,15 @@ class EkfSlam:
             from linefit.config import LineFitConfig
 
             cfg = self.linefit_config or LineFitConfig()
-            extracted: Sequence[Line] = extract_lines(scan.ranges, scan.bearings, cfg)
-            return LineSet.from_lines(list(extracted))
-        return LineSet.from_lines(list(lines))
+            lines = list(extract_lines(scan.ranges, scan.bearings, cfg))
+        kept = [
+            ln
+            for ln in lines
+            if ln.n_points >= self.config.min_line_points
+            and ln.length >= self.config.min_line_length_m
+        ]
+        self.stats["lines_too_short"] += len(lines) - len(kept)
+        return LineSet.from_lines(kept)
 
     def add_scan(self, scan: Scan, lines: Sequence[Line] | LineSet | None = None) -> ScanReport:
         """Process one scan: predict with its odometry, then associate, update and augment.
@@ -572,11 +579,12 @@ class EkfSlam:
             assert self._prev_odom is not None
             self.predict(pose_between(self._prev_odom, odom))
         self._prev_odom = odom
+        short_before = self.stats["lines_too_short"]
         ls = self._as_lineset(scan, lines)
         report.n_lines = len(ls)
         self.stats["scans"] += 1
         self.stats["points"] += int(np.count_nonzero(scan.valid_mask()))
-        self.stats["lines_fit"] += len(ls)
+        self.stats["lines_fit"] += len(ls) + self.stats["lines_too_short"] - short_before
         valid = _valid_lines(ls) if len(ls) else np.zeros(0, dtype=bool)
         report.n_invalid = int(np.count_nonzero(~valid))
         self.stats["lines_invalid"] += report.n_invalid

@@ -6,6 +6,9 @@ covariances (right-perturbation tangent space) and run times.  Names:
 
 * ``"ekf"`` — :class:`slam.ekf.EkfSlam` with ``RunConfig.ekf`` (association as configured);
 * ``"ekf-nn"``, ``"ekf-jcbb"`` — the same with the association forced;
+Lines per scan are a :class:`~slam.frontend.lineset.LineSet` (line-level simulator) or a list
+of :class:`linefit.Line` (a log's fits; estimators apply their own length/support filters).
+
 * ``"odometry"`` — dead reckoning with the same motion model, covariance propagated (the EKF
   fed no lines), the reference every SLAM estimator must beat.
 
@@ -22,6 +25,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from linefit.line import Line
 from slam.config import RunConfig
 from slam.ekf import EkfSlam
 from slam.ekf.threads import blas_threads
@@ -32,6 +36,7 @@ from slam.types import Scan
 __all__ = ["ESTIMATORS", "EstimateOutput", "run_estimator"]
 
 FloatArray = NDArray[np.float64]
+ScanLines = Sequence[LineSet] | Sequence[Sequence[Line]] | None
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,7 +72,7 @@ class EstimateOutput:
 def _ekf(
     name: str,
     scans: Sequence[Scan],
-    lines: Sequence[LineSet] | None,
+    lines: ScanLines,
     config: RunConfig,
     initial_pose: FloatArray | None,
     association: Literal["nn", "jcbb"] | None = None,
@@ -97,7 +102,13 @@ def _ekf(
 
 
 EstimatorFn = Callable[
-    [Sequence[Scan], Sequence[LineSet] | None, RunConfig, FloatArray | None], EstimateOutput
+    [
+        Sequence[Scan],
+        Sequence[LineSet] | Sequence[Sequence[Line]] | None,
+        RunConfig,
+        FloatArray | None,
+    ],
+    EstimateOutput,
 ]
 
 ESTIMATORS: dict[str, EstimatorFn] = {
@@ -111,7 +122,7 @@ ESTIMATORS: dict[str, EstimatorFn] = {
 def run_estimator(
     name: str,
     scans: Sequence[Scan],
-    lines: Sequence[LineSet] | None,
+    lines: ScanLines,
     config: RunConfig,
     initial_pose_world_laser: FloatArray | None = None,
 ) -> EstimateOutput:

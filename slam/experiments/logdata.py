@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any
 
 from linefit.config import LineFitConfig
+from linefit.line import Line
 from linefit.tomlconfig import config_to_dict, to_toml_string
 from slam.errors import DatasetError
-from slam.frontend.lineset import LineSet
 from slam.types import Scan
 
 __all__ = ["LogData", "cached_log_data", "load_log"]
@@ -35,8 +35,8 @@ class LogData:
         Dataset name or file stem.
     log_path : Path
     scans : list of Scan
-    lines : list of LineSet
-        Lines of each scan in the laser frame.
+    lines : list of list of Line
+        Lines of each scan in the laser frame, as fitted (estimators apply their own filters).
     relations_path : Path or None
         Relations file of the log: the catalogue's, or ``relations.txt`` beside the log.
     ground_truth_path : Path or None
@@ -48,7 +48,7 @@ class LogData:
     name: str
     log_path: Path
     scans: list[Scan]
-    lines: list[LineSet]
+    lines: list[list[Line]]
     relations_path: Path | None
     ground_truth_path: Path | None
     extraction_s: float
@@ -84,7 +84,7 @@ def load_log(
 
     resolved = resolve_log(str(source))
     scans: list[Scan] = []
-    lines: list[LineSet] = []
+    lines: list[list[Line]] = []
     t_extract = 0.0
     for scan in iter_scans(resolved.log):
         if max_scans is not None and len(scans) >= max_scans:
@@ -93,7 +93,7 @@ def load_log(
         fitted = extract_lines(scan.ranges, scan.bearings, linefit_config)
         t_extract += time.perf_counter() - t0
         scans.append(scan)
-        lines.append(LineSet.from_lines(list(fitted)))
+        lines.append(list(fitted))
         if progress is not None and len(scans) % 100 == 0:
             progress(len(scans))
     if not scans:
