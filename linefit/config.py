@@ -117,7 +117,7 @@ class LineFitConfig:
     breakpoint_sigma : float
         Multiple of σ_d added to the breakpoint distance.
     hough_angle_step_rad, hough_range_step_m : float
-        Hough accumulator resolution Δβ (rad) and Δℛ (m); defaults 2° and 10 cm (coarse on
+        Hough accumulator resolution Δβ (rad) and Δℛ (m); defaults 3° and 10 cm (coarse on
         purpose: each peak is refined by a total-least-squares line, see :mod:`linefit.hough`).
     hough_min_votes : int
         Smallest Hough peak that starts a line.
@@ -157,7 +157,7 @@ class LineFitConfig:
     max_missing_beams: int = 2
     breakpoint_lambda_rad: float = math.radians(10.0)
     breakpoint_sigma: float = 3.0
-    hough_angle_step_rad: float = math.radians(2.0)
+    hough_angle_step_rad: float = math.radians(3.0)
     hough_range_step_m: float = 0.1
     hough_min_votes: int = 5
     hough_gather_m: float = 0.05
@@ -214,9 +214,7 @@ class LineFitConfig:
             )
         for name in ("min_length_m", "breakpoint_sigma", "split_threshold_sigma"):
             value = getattr(self, name)
-            _require(
-                math.isfinite(value) and value >= 0.0, f"{name} must be >= 0, got {value!r}"
-            )
+            _require(math.isfinite(value) and value >= 0.0, f"{name} must be >= 0, got {value!r}")
         _require(
             0.0 < self.breakpoint_lambda_rad <= 0.5 * math.pi,
             f"breakpoint_lambda_rad must be in (0, π/2], got {self.breakpoint_lambda_rad!r}",

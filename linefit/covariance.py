@@ -138,7 +138,7 @@ def line_covariances(
     w = fit.w_r
 
     def gsum(values: FloatArray) -> FloatArray:
-        return np.bincount(g, weights=values, minlength=G)
+        return np.asarray(np.bincount(g, weights=values, minlength=G), dtype=float)
 
     # (R, α): δθ = Σ g_k e_k
     W = gsum(w)
@@ -157,13 +157,12 @@ def line_covariances(
         P_aa = gsum(gain_a * gain_a * p_r)
 
     # tangential error moments of each point
-    scan_points = pts.var_range is not None and pts.var_perp is not None
-    if scan_points:
-        d2 = u_r * u_r + u_s * u_s
-        cos_t = u_r / np.sqrt(d2)
-        sin_t = u_s / np.sqrt(d2)
-    if bearing_error == "beam" and scan_points:
-        var_eff = pts.var_range[pidx] + pts.var_perp[pidx] * (u_s * u_s) / (u_r * u_r)
+    var_range_all, var_perp_all = pts.var_range, pts.var_perp
+    d2 = u_r * u_r + u_s * u_s
+    cos_t = u_r / np.sqrt(d2)
+    sin_t = u_s / np.sqrt(d2)
+    if bearing_error == "beam" and var_range_all is not None and var_perp_all is not None:
+        var_eff = var_range_all[pidx] + var_perp_all[pidx] * (u_s * u_s) / (u_r * u_r)
         q_tt = var_eff * sin_t * sin_t
         q_nt = var_eff * sin_t * cos_t
     else:
@@ -181,13 +180,11 @@ def line_covariances(
         kappa = (u_s - fit.s[g]) / WS[g]  # ∂S/∂w^S_k
         # through α: ∂(1/P_S)/∂α = 2 P_RS / P_S² (Eq. 8 cross term)
         c_s = c_s + gsum(2.0 * fit.p_rs * w_s * w_s * kappa)
-        if scan_points:
+        if var_range_all is not None and var_perp_all is not None:
             # through the point's own measured range and bearing (δd = b·δu, δφ = p·δu / d)
-            var_range = pts.var_range[pidx]
-            var_perp = pts.var_perp[pidx]
-            dvar_range = (
-                pts.dvar_range[pidx] if pts.dvar_range is not None else np.zeros_like(u_r)
-            )
+            var_range = var_range_all[pidx]
+            var_perp = var_perp_all[pidx]
+            dvar_range = pts.dvar_range[pidx] if pts.dvar_range is not None else np.zeros_like(u_r)
             d = np.sqrt(d2)
             dps_dd = dvar_range * sin_t * sin_t + 2.0 * var_perp / d * cos_t * cos_t
             dps_dphi = 2.0 * (var_range - var_perp) * sin_t * cos_t

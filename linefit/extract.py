@@ -1,5 +1,7 @@
-"""The public entry points: :func:`extract_lines` for a scan, :func:`extract_lines_batch` for
-many scans at once, :func:`fit_line` and :func:`fit_scan_line` for a given set of points.
+"""The public entry points of line extraction and fitting.
+
+:func:`extract_lines` for a scan, :func:`extract_lines_batch` for many scans at once,
+:func:`fit_line` and :func:`fit_scan_line` for a given set of points.
 
 Every step works on all the scans of a batch together (the points, candidate lines and
 segments of all scans are flat arrays with a scan id); :func:`extract_lines` is a batch of one.
@@ -13,16 +15,22 @@ Pipeline of :func:`extract_lines`
 3. Grouping into candidate lines: Hough transform (:mod:`linefit.hough`) or split-and-merge
    (:mod:`linefit.split_merge`).
 4. For all candidates at once (:mod:`linefit.fit`): the ML fit, then each point's normal
-   residual is tested against its own covariance (``δ_R²/P_R > outlier_chi2``: rejected; in
-   each round only points within a factor 4 of their line's worst are rejected, so one bad
-   point cannot mask the others), each line is cut into segments at gaps and range jumps and
-   pieces with fewer than ``min_segment_points`` points are dropped
-   (:mod:`linefit.segments`); refit until nothing changes (at most ``max_refits`` rounds).
-5. Optionally (``merge_collinear``) lines whose ``(r, α)`` pass a χ² test are joined into one
-   line with several segments and refitted.
-6. Lines with fewer than ``min_points`` points or shorter than ``min_length_m`` are dropped;
+   residual is tested against its own covariance, studentised by its leverage
+   (``δ_R²/(P_R (1 − h)) > outlier_chi2``: rejected; in each round only points within a factor
+   3 (in residual) of their line's worst are rejected, so one bad point cannot mask the
+   others), and refit, at most ``max_refits`` rounds; then each line is cut into segments at
+   gaps and range jumps, pieces with fewer than ``min_segment_points`` points leave it, and it
+   is refitted (:mod:`linefit.segments`).
+5. Hough only (``hough_recover``): the points no line kept are grouped by split-and-merge and
+   those candidates go through step 4 too.
+6. Optionally (``merge_collinear``) lines of one scan whose ``(r, α)`` pass a χ² test are
+   joined into one line with several segments and refitted (step 4).
+7. Lines with fewer than ``min_points`` points or shorter than ``min_length_m`` are dropped;
    covariances (:mod:`linefit.covariance`) and segment ends; normal form; sorted by their
    first beam index.
+
+Lines that are not changed by a later step are never refitted, so a scan's result does not
+depend on the other scans of its batch (tested).
 """
 
 from __future__ import annotations
@@ -158,6 +166,12 @@ def scan_points(
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class _Fitted:
+    """Fitted lines: memberships (``gidx`` ascending), fits, covariances and segments.
+
+    ``order`` sorts the memberships by (line, u_S); ``seg`` numbers the segments along
+    ``order`` (non-decreasing, lines in ascending order).
+    """
+
     pidx: IntArray
     gidx: IntArray
     n_groups: int
@@ -166,6 +180,52 @@ class _Fitted:
     cov: LineCovariances
     order: IntArray
     seg: IntArray
+
+    def select(self, keep_g: NDArray[np.bool_]) -> _Fitted:
+        """Only the lines ``keep_g`` (renumbered in order)."""
+        new_g = np.cumsum(keep_g) - 1
+        keep_m = keep_g[self.gidx]
+        new_m = np.cumsum(keep_m) - 1
+        f, c = self.fit, self.cov
+        kept_sorted = keep_m[self.order]
+        _, seg = np.unique(self.seg[kept_sorted], return_inverse=True)
+        fit = _fit_take(f, keep_g, keep_m)
+        cov = LineCovariances(c.cov[keep_g], c.end_var[keep_m], c.gain_alpha[keep_m])
+        return _Fitted(
+            self.pidx[keep_m],
+            new_g[self.gidx[keep_m]],
+            int(keep_g.sum()),
+            self.gscan[keep_g],
+            fit,
+            cov,
+            new_m[self.order[kept_sorted]],
+            seg.reshape(-1).astype(np.intp),
+        )
+
+    @staticmethod
+    def concat(a: _Fitted, b: _Fitted) -> _Fitted:
+        """The lines of ``a`` followed by those of ``b``."""
+        fit = _fit_cat(a.fit, b.fit)
+        cov = LineCovariances(
+            np.concatenate([a.cov.cov, b.cov.cov]),
+            np.concatenate([a.cov.end_var, b.cov.end_var]),
+            np.concatenate([a.cov.gain_alpha, b.cov.gain_alpha]),
+        )
+        n_seg_a = int(a.seg[-1]) + 1 if a.seg.shape[0] else 0
+        return _Fitted(
+            np.concatenate([a.pidx, b.pidx]),
+            np.concatenate([a.gidx, b.gidx + a.n_groups]),
+            a.n_groups + b.n_groups,
+            np.concatenate([a.gscan, b.gscan]),
+            fit,
+            cov,
+            np.concatenate([a.order, b.order + a.pidx.shape[0]]),
+            np.concatenate([a.seg, b.seg + n_seg_a]),
+        )
+
+
+_PER_LINE = ("r", "alpha", "s", "converged", "iterations")
+_PER_MEMBER = ("u_r", "u_s", "p_r", "p_s", "p_rs", "w_r", "w_s")
 
 
 @dataclass
@@ -177,11 +237,6 @@ class _Groups:
     n: int
     alpha0: FloatArray
     gscan: IntArray
-    gate: NDArray[np.bool_] | None = None  # groups subject to rejection (None: all)
-
-    def __post_init__(self) -> None:
-        if self.gate is None:
-            self.gate = np.ones(self.n, dtype=bool)
 
     def keep_groups(self, keep_g: NDArray[np.bool_]) -> None:
         new_id = np.cumsum(keep_g) - 1
@@ -191,43 +246,71 @@ class _Groups:
         self.n = int(keep_g.sum())
         self.alpha0 = self.alpha0[keep_g]
         self.gscan = self.gscan[keep_g]
-        assert self.gate is not None
-        self.gate = self.gate[keep_g]
 
     def keep_members(self, keep: NDArray[np.bool_]) -> None:
         self.pidx = self.pidx[keep]
         self.gidx = self.gidx[keep]
 
-    @classmethod
-    def from_fitted(cls, fitted: _Fitted) -> _Groups:
-        """The memberships of fitted lines, started from their fitted angles, not re-gated.
+    def subset(self, keep_g: NDArray[np.bool_], keep_m: NDArray[np.bool_] | None = None) -> _Groups:
+        """A copy with only the groups ``keep_g`` (and, if given, only the members ``keep_m``)."""
+        out = _Groups(self.pidx, self.gidx, self.n, self.alpha0, self.gscan)
+        if keep_m is not None:
+            out.keep_members(keep_m)
+        out.keep_groups(keep_g)
+        return out
 
-        Refitting them from their own angle reproduces them exactly (the iteration stops at
-        once), so lines refitted alongside new ones do not depend on what else is in the batch.
-        """
-        return cls(
-            fitted.pidx,
-            fitted.gidx,
-            fitted.n_groups,
-            fitted.fit.alpha,
-            fitted.gscan,
-            np.zeros(fitted.n_groups, dtype=bool),
+    @staticmethod
+    def cat(a: _Groups, b: _Groups) -> _Groups:
+        """The groups of ``a`` followed by those of ``b``."""
+        return _Groups(
+            np.concatenate([a.pidx, b.pidx]),
+            np.concatenate([a.gidx, b.gidx + a.n]),
+            a.n + b.n,
+            np.concatenate([a.alpha0, b.alpha0]),
+            np.concatenate([a.gscan, b.gscan]),
         )
 
-    @classmethod
-    def concat(cls, a: _Groups, b: _Groups) -> _Groups:
-        """Both sets of groups, renumbered by scan (stable) and with memberships sorted."""
-        gscan = np.concatenate([a.gscan, b.gscan])
-        alpha0 = np.concatenate([a.alpha0, b.alpha0])
-        order = np.argsort(gscan, kind="stable")
-        new_id = np.empty_like(order)
-        new_id[order] = np.arange(order.shape[0])
-        gidx = new_id[np.concatenate([a.gidx, b.gidx + a.n])]
-        pidx = np.concatenate([a.pidx, b.pidx])
-        assert a.gate is not None and b.gate is not None
-        gate = np.concatenate([a.gate, b.gate])
-        srt = np.argsort(gidx, kind="stable")
-        return cls(pidx[srt], gidx[srt], a.n + b.n, alpha0[order], gscan[order], gate[order])
+
+def _fit_take(fit: GroupFit, keep_g: NDArray[np.bool_], keep_m: NDArray[np.bool_]) -> GroupFit:
+    """The fits of the lines ``keep_g`` (whose memberships are ``keep_m``)."""
+    return GroupFit(
+        **{k: getattr(fit, k)[keep_g] for k in _PER_LINE},
+        **{k: getattr(fit, k)[keep_m] for k in _PER_MEMBER},
+        weighted=fit.weighted,
+    )
+
+
+def _fit_cat(a: GroupFit, b: GroupFit) -> GroupFit:
+    """The fits of ``a`` followed by those of ``b``."""
+    return GroupFit(
+        **{k: np.concatenate([getattr(a, k), getattr(b, k)]) for k in _PER_LINE},
+        **{k: np.concatenate([getattr(a, k), getattr(b, k)]) for k in _PER_MEMBER},
+        weighted=a.weighted,
+    )
+
+
+def _refit_changed(
+    pts: PointSet,
+    grp: _Groups,
+    fit: GroupFit,
+    changed: NDArray[np.bool_],
+    keep_m: NDArray[np.bool_],
+    cfg: LineFitConfig,
+) -> tuple[_Groups, GroupFit | None, NDArray[np.bool_]]:
+    """Refit only the lines ``changed`` (with the members ``keep_m``); the others stay as they are.
+
+    Returns the groups (unchanged ones first), their fits, and which of them were refitted.
+    """
+    stay = ~changed
+    grp_u = grp.subset(stay)
+    fit_u = _fit_take(fit, stay, stay[grp.gidx])
+    grp_c = grp.subset(changed, keep_m)
+    grp_c.alpha0 = fit.alpha[changed]  # restart from the current fit
+    fit_c = _fit_kept(pts, grp_c, cfg) if grp_c.n else None
+    if fit_c is None:
+        return grp_u, (fit_u if grp_u.n else None), np.zeros(grp_u.n, dtype=bool)
+    refitted = np.concatenate([np.zeros(grp_u.n, dtype=bool), np.ones(grp_c.n, dtype=bool)])
+    return _Groups.cat(grp_u, grp_c), _fit_cat(fit_u, fit_c), refitted
 
 
 def _fit_batch(pts: PointSet, grp: _Groups, cfg: LineFitConfig) -> GroupFit:
@@ -288,45 +371,53 @@ def _fit_kept(pts: PointSet, grp: _Groups, cfg: LineFitConfig) -> GroupFit | Non
         ok = fit.converged & np.isfinite(fit.r) & np.isfinite(fit.alpha)
         if ok.all():
             return fit
-        grp.alpha0 = fit.alpha
+        if not ok.any():
+            break
+        # lines are fitted independently: drop the failures, keep the others' fits
+        fit = _fit_take(fit, ok, ok[grp.gidx])
         grp.keep_groups(ok)
+        return fit
     return None
 
 
 def _refine(
     pts: PointSet, sigma_range: FloatArray, grp: _Groups, cfg: LineFitConfig
 ) -> _Fitted | None:
-    """Fit, reject outliers, cut into segments and refit all candidate lines together."""
-    fit: GroupFit | None = None
-    for round_ in range(cfg.max_refits + 1):
-        fit = _fit_kept(pts, grp, cfg)
-        if fit is None:
-            return None
+    """Fit, reject outliers, cut into segments and refit all candidate lines together.
+
+    After the first fit only the lines that lost points are refitted.
+    """
+    fit = _fit_kept(pts, grp, cfg)
+    if fit is None:
+        return None
+    todo = np.ones(grp.n, dtype=bool)  # lines whose points may still be rejected
+    for _ in range(cfg.max_refits + 1):
         # per-point χ² gate on the normal residual, studentised by the point's leverage
         G, gidx = grp.n, grp.gidx
         chi2 = (fit.u_r - fit.r[gidx]) ** 2 / (fit.p_r * (1.0 - _leverage(fit, gidx, G)))
         worst = np.zeros(G)
         np.maximum.at(worst, gidx, chi2)
-        reject = (chi2 > cfg.outlier_chi2) & (chi2 >= worst[gidx] / 9.0) & grp.gate[gidx]
+        reject = (chi2 > cfg.outlier_chi2) & (chi2 >= worst[gidx] / 9.0) & todo[gidx]
         if not reject.any():
             break
-        grp.keep_members(~reject)
-        grp.alpha0 = fit.alpha
-        if round_ == cfg.max_refits:
-            fit = _fit_kept(pts, grp, cfg)
-    if fit is None:
-        return None
+        changed = np.zeros(G, dtype=bool)
+        changed[gidx[reject]] = True
+        grp, fit_new, todo = _refit_changed(pts, grp, fit, changed, ~reject, cfg)
+        if fit_new is None:
+            return None
+        fit = fit_new
     # segments; pieces with too few points leave the line
     order, seg = _segments(pts, sigma_range, grp, fit, cfg)
     small = np.bincount(seg)[seg] < cfg.min_segment_points
     if small.any():
         keep = np.ones(grp.pidx.shape[0], dtype=bool)
         keep[order[small]] = False
-        grp.keep_members(keep)
-        grp.alpha0 = fit.alpha
-        fit = _fit_kept(pts, grp, cfg)
-        if fit is None:
+        changed = np.zeros(grp.n, dtype=bool)
+        changed[grp.gidx[~keep]] = True
+        grp, fit_new, _ = _refit_changed(pts, grp, fit, changed, keep, cfg)
+        if fit_new is None:
             return None
+        fit = fit_new
         order, seg = _segments(pts, sigma_range, grp, fit, cfg)
     cov = line_covariances(fit, pts, grp.pidx, grp.gidx, grp.n, cfg.noise.bearing_error)
     return _Fitted(grp.pidx, grp.gidx, grp.n, grp.gscan, fit, cov, order, seg)
@@ -339,19 +430,20 @@ def _merge_collinear(
     G = fitted.n_groups
     if G < 2:
         return fitted
-    gscan = fitted.gscan  # non-decreasing
+    perm = np.argsort(fitted.gscan, kind="stable")  # lines by scan
+    gscan = fitted.gscan[perm]
     first_g = np.searchsorted(gscan, gscan, side="left")
     per_scan = np.searchsorted(gscan, gscan, side="right") - first_g
     k_max = int(per_scan.max())
     if k_max < 2:
         return fitted
-    # all pairs (i < j) within each scan
+    # all pairs (i < j) of lines within each scan
     ti, tj = np.triu_indices(k_max, 1)
     starts = np.unique(first_g)
     sizes = np.searchsorted(gscan, gscan[starts], side="right") - starts
     ok = tj[None, :] < sizes[:, None]
-    i = (starts[:, None] + ti[None, :])[ok]
-    j = (starts[:, None] + tj[None, :])[ok]
+    i = perm[(starts[:, None] + ti[None, :])[ok]]
+    j = perm[(starts[:, None] + tj[None, :])[ok]]
     r, alpha = fitted.fit.r, fitted.fit.alpha
     flip = r < 0.0
     rn = np.abs(r)
@@ -382,25 +474,33 @@ def _merge_collinear(
         if a != b:
             parent[max(a, b)] = min(a, b)
     roots = np.array([find(a) for a in range(G)])
-    _, new_g = np.unique(roots, return_inverse=True)
-    n_new = int(new_g.max()) + 1
-    if n_new == G:
+    joined = np.bincount(roots, minlength=G)[roots] > 1
+    if not joined.any():
         return fitted
-    gidx = new_g[fitted.gidx].astype(np.intp)
-    # a point shared by two merged lines counts once; memberships sorted by new group
-    key = gidx.astype(np.int64) * (len(pts) + 1) + fitted.pidx
+    # only the joined lines are refitted (from the angle of the set's first line)
+    _, new_g = np.unique(roots[joined], return_inverse=True)
+    new_g = new_g.reshape(-1)
+    n_new = int(new_g.max()) + 1
+    g_of = np.full(G, -1, dtype=np.intp)
+    g_of[joined] = new_g
+    members = joined[fitted.gidx]
+    gidx = g_of[fitted.gidx[members]]
+    pidx = fitted.pidx[members]
+    # a point shared by two joined lines counts once; memberships sorted by new line
+    key = gidx.astype(np.int64) * (len(pts) + 1) + pidx
     _, first = np.unique(key, return_index=True)
-    _, first_of_set, set_size = np.unique(new_g, return_index=True, return_counts=True)
+    joined_ids = np.flatnonzero(joined)
+    _, first_of_set = np.unique(new_g, return_index=True)
     grp = _Groups(
-        pidx=fitted.pidx[first],
+        pidx=pidx[first],
         gidx=gidx[first],
         n=n_new,
-        alpha0=alpha[first_of_set],
-        gscan=gscan[first_of_set],
-        gate=set_size > 1,  # only joined lines are re-gated
+        alpha0=alpha[joined_ids[first_of_set]],
+        gscan=fitted.gscan[joined_ids[first_of_set]],
     )
     refined = _refine(pts, sigma_range, grp, cfg)
-    return refined if refined is not None else fitted
+    rest = fitted.select(~joined)
+    return rest if refined is None else _Fitted.concat(rest, refined)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -444,24 +544,19 @@ def _lines_from_fit(
     out: list[list[Line]] = [[] for _ in range(n_scans)]
     sel = np.flatnonzero(keep)
     sel = sel[np.lexsort((first_beam[sel], fitted.gscan[sel]))]
+    # per line: python scalars and array slices, then the trusted constructor
+    r_l, a_l, s_l = r_n.tolist(), a_n.tolist(), s_n.tolist()
+    flip_l, scan_l = flip.tolist(), fitted.gscan.tolist()
+    sb, mb = seg_bounds.tolist(), mem_bounds.tolist()
     for g in sel.tolist():
-        segs = segs_all[seg_bounds[g] : seg_bounds[g + 1]]
-        svar = vars_all[seg_bounds[g] : seg_bounds[g + 1]]
-        if flip[g]:
+        segs = segs_all[sb[g] : sb[g + 1]]
+        svar = vars_all[sb[g] : sb[g + 1]]
+        if flip_l[g]:
             segs = -segs[::-1, ::-1]
             svar = svar[::-1, ::-1]
-        idx = sorted_beams[mem_bounds[g] : mem_bounds[g + 1]]
-        out[int(fitted.gscan[g])].append(
-            Line(
-                r=float(r_n[g]),
-                alpha=float(a_n[g]),
-                s=float(s_n[g]),
-                cov=cov_n[g],
-                segments_s=segs,
-                segments_var=svar,
-                n_points=int(idx.shape[0]),
-                indices=idx,
-            )
+        idx = sorted_beams[mb[g] : mb[g + 1]]
+        out[scan_l[g]].append(
+            Line._trusted(r_l[g], a_l[g], s_l[g], cov_n[g], segs, svar, mb[g + 1] - mb[g], idx)
         )
     return out
 
@@ -513,6 +608,7 @@ def extract_lines_batch(
     pts = scan_points(d.ravel()[flat], phi.ravel()[flat], beam_of, cfg, sigma_range_fn)
     assert pts.var_range is not None
     sigma_range = np.sqrt(pts.var_range)
+
     def split_merge_of(sub: IntArray) -> _Groups:
         """Split-and-merge candidates among the valid points ``sub`` (sorted)."""
         grouping = split_merge_groups(
@@ -567,8 +663,11 @@ def extract_lines_batch(
                 used[fitted.pidx] = True
             extra = split_merge_of(all_points[~used])
             if extra.n:
-                grp = extra if fitted is None else _Groups.concat(_Groups.from_fitted(fitted), extra)
-                fitted = _refine(pts, sigma_range, grp, cfg) or fitted
+                new = _refine(pts, sigma_range, extra, cfg)
+                if fitted is None:
+                    fitted = new
+                elif new is not None:
+                    fitted = _Fitted.concat(fitted, new)
     else:
         fitted = _refine(pts, sigma_range, split_merge_of(all_points), cfg)
     if fitted is None:

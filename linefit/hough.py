@@ -42,7 +42,7 @@ BoolArray = NDArray[np.bool_]
 
 def hough_accumulator(
     x: FloatArray, y: FloatArray, valid: BoolArray, angle_step_rad: float, range_step_m: float
-) -> tuple[NDArray[np.int32], IntArray, FloatArray, FloatArray, float]:
+) -> tuple[NDArray[np.int32], IntArray, FloatArray, float]:
     """Vote the valid points of ``N`` scans into one ``(β, ℛ)`` accumulator per scan.
 
     Parameters
@@ -59,9 +59,8 @@ def hough_accumulator(
     acc : ndarray of int32, shape (N, n_β · n_ℛ)
         Vote counts; cell ``j·n_ℛ + i`` for angle bin ``j`` and distance bin ``i``.
     cells : ndarray of int, shape (N, n_β, n)
-        The cell each point voted for at each angle (meaningless where not valid).
-    rho : ndarray of float32, shape (N, n_β, n)
-        The ``ℛ`` of each vote (m).
+        The cell each point voted for at each angle, as an index into ``acc.reshape(-1)``
+        (scan · n_β · n_ℛ + j · n_ℛ + i; meaningless where not valid).
     betas : ndarray, shape (n_β,)
         The angle bins ``β_j`` (rad).
     r_max : float
@@ -70,27 +69,35 @@ def hough_accumulator(
     """
     n_scans = x.shape[0]
     n_beta = max(1, round(np.pi / angle_step_rad))
-    betas = np.arange(n_beta) * (np.pi / n_beta)
+    betas = np.arange(n_beta, dtype=float) * (np.pi / n_beta)
     d2 = np.where(valid, x * x + y * y, 0.0)
     # bins anchored at ℛ = 0 (bin edges k·Δℛ), so a scan's cells do not depend on the batch
     half = int(np.ceil(np.sqrt(d2.max()) / range_step_m)) + 1 if d2.size else 1
     r_max = half * range_step_m
     n_rho = 2 * half
     # float32 is ample for bins of centimetres and halves the memory traffic
-    # layout (scan, angle, point): the votes of one angle row are adjacent in memory
-    x32 = x.astype(np.float32)[:, None, :]
-    y32 = y.astype(np.float32)[:, None, :]
-    rho = np.cos(betas).astype(np.float32)[None, :, None] * x32
-    rho += np.sin(betas).astype(np.float32)[None, :, None] * y32
-    # |ℛ| ≤ range < (half − 1)·Δℛ, so the shifted value is positive and truncation is floor
-    shifted = rho * np.float32(1.0 / range_step_m)
-    shifted += (np.arange(n_beta) * n_rho + half).astype(np.float32)[None, :, None]
-    cells = shifted.astype(np.intp)
+    # layout (scan, angle, point): the votes of one angle row are adjacent in memory.
+    # |ℛ| ≤ range < (half − 1)·Δℛ, so the shifted bin coordinate is positive and truncation
+    # is floor; float32 is ample for bins of centimetres and halves the memory traffic.
+    inv = 1.0 / range_step_m
+    shifted = (np.cos(betas) * inv).astype(np.float32)[None, :, None] * x.astype(np.float32)[
+        :, None, :
+    ]
+    shifted += (np.sin(betas) * inv).astype(np.float32)[None, :, None] * y.astype(np.float32)[
+        :, None, :
+    ]
+    shifted += np.float32(half)
     n_cells = n_beta * n_rho
-    votes = cells + (np.arange(n_scans, dtype=np.intp) * n_cells)[:, None, None]
+    # flat cell index: scan · n_cells + angle bin · n_ℛ + distance bin
+    votes = shifted.astype(np.intp)
+    votes += (
+        np.arange(n_scans, dtype=np.intp)[:, None, None] * n_cells
+        + np.arange(n_beta, dtype=np.intp)[None, :, None] * n_rho
+    )
     acc = np.zeros(n_scans * n_cells, dtype=np.int32)
-    np.add.at(acc, votes[np.broadcast_to(valid[:, None, :], votes.shape)], np.int32(1))
-    return acc.reshape(n_scans, n_cells), cells, rho, betas, r_max
+    weight = np.broadcast_to(valid.astype(np.int32)[:, None, :], votes.shape)
+    np.add.at(acc, votes.reshape(-1), weight.reshape(-1))  # invalid points add 0
+    return acc.reshape(n_scans, n_cells), votes, betas, r_max
 
 
 def hough_groups(
@@ -132,7 +139,8 @@ def hough_groups(
     n_scans, n = x.shape
     if n_scans == 0 or n < 2 or not valid.any():
         return Grouping.empty(), np.zeros(0, dtype=np.intp)
-    acc, cells, rho, betas, r_max = hough_accumulator(x, y, valid, angle_step_rad, range_step_m)
+    acc, cells, betas, r_max = hough_accumulator(x, y, valid, angle_step_rad, range_step_m)
+    cos_b, sin_b = np.cos(betas), np.sin(betas)
     n_rho = acc.shape[1] // betas.shape[0]
     alive = valid.copy()
     tol_peak = max(gather_m, range_step_m)
@@ -141,11 +149,14 @@ def hough_groups(
     out_group_scan: list[IntArray] = []
     out_alpha: list[FloatArray] = []
     active = np.ones(n_scans, dtype=bool)
+    # per point: 1, x, y, x², xy, y² (the TLS sums of any subset are one matrix product)
+    moments = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
     for _ in range(max_peaks):
         rows = np.flatnonzero(active)
         if rows.shape[0] == 0:
             break
-        best = acc.argmax(axis=1)[rows]
+        few = 2 * rows.shape[0] < n_scans  # then copying the active rows is cheaper
+        best = acc[rows].argmax(axis=1) if few else acc.argmax(axis=1)[rows]
         votes = acc[rows, best]
         go = votes >= min_votes
         active[rows[~go]] = False
@@ -155,27 +166,23 @@ def hough_groups(
         j, i = np.divmod(best, n_rho)
         rho_c = (i + 0.5) * range_step_m - r_max
         # candidate: unassigned points near the cell's line
-        rho_j = rho[rows, j]
+        rho_j = x[rows] * cos_b[j][:, None] + y[rows] * sin_b[j][:, None]
         cand = alive[rows] & (np.abs(rho_j - rho_c[:, None]) <= tol_peak)
         # refine twice: total least squares through the current set, recruit along it
         xs, ys, alive_r = x[rows], y[rows], alive[rows]
+        moments_r = moments[rows]
         grp = cand
         alpha = betas[j]
         for _ in range(2):
-            cnt = grp.sum(axis=1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                mx = np.where(grp, xs, 0.0).sum(axis=1) / cnt
-                my = np.where(grp, ys, 0.0).sum(axis=1) / cnt
-            dx = np.where(grp, xs - mx[:, None], 0.0)
-            dy = np.where(grp, ys - my[:, None], 0.0)
-            cxx = (dx * dx).sum(axis=1)
-            cyy = (dy * dy).sum(axis=1)
-            cxy = (dx * dy).sum(axis=1)
+            m = np.matmul(grp[:, None, :].astype(float), moments_r)[:, 0, :]
+            cnt = np.maximum(m[:, 0], 1.0)
+            mx, my = m[:, 1] / cnt, m[:, 2] / cnt
+            cxx = m[:, 3] - cnt * mx * mx
+            cxy = m[:, 4] - cnt * mx * my
+            cyy = m[:, 5] - cnt * my * my
             alpha = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy) + 0.5 * np.pi
-            dist = np.abs(
-                (xs - mx[:, None]) * np.cos(alpha)[:, None]
-                + (ys - my[:, None]) * np.sin(alpha)[:, None]
-            )
+            ca, sa = np.cos(alpha), np.sin(alpha)
+            dist = np.abs(xs * ca[:, None] + ys * sa[:, None] - (mx * ca + my * sa)[:, None])
             grp = alive_r & (dist <= gather_m)
         ok = grp.sum(axis=1) >= min_votes
         # a peak whose refined line keeps too few points is suppressed, its points stay free
@@ -190,8 +197,8 @@ def hough_groups(
         out_group_scan.append(rows)
         out_alpha.append(alpha)
         alive[rows[g_row], g_pt] = False
-        flat = (cells[rows[g_row], :, g_pt] + (rows[g_row] * acc.shape[1])[:, None]).ravel()
-        np.add.at(acc.reshape(-1), flat, np.int32(-1))
+        flat = cells[rows[g_row], :, g_pt].ravel()
+        np.add.at(acc.reshape(-1), flat, np.full(flat.shape[0], -1, dtype=np.int32))
     if not out_group_scan:
         return Grouping.empty(), np.zeros(0, dtype=np.intp)
     # number the groups scan by scan, and sort memberships by group

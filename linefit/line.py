@@ -114,6 +114,36 @@ class Line:
         object.__setattr__(self, "segments_var", var)
         object.__setattr__(self, "indices", np.asarray(self.indices, dtype=np.intp))
 
+    @classmethod
+    def _trusted(
+        cls,
+        r: float,
+        alpha: float,
+        s: float,
+        cov: FloatArray,
+        segments_s: FloatArray,
+        segments_var: FloatArray,
+        n_points: int,
+        indices: NDArray[np.intp],
+    ) -> Line:
+        """Build from arrays that already have the right dtypes and shapes (no conversions).
+
+        For :mod:`linefit.extract`, which creates many lines per scan; user code should call
+        the normal constructor.
+        """
+        line = object.__new__(cls)
+        line.__dict__.update(
+            r=r,
+            alpha=alpha,
+            s=s,
+            cov=cov,
+            segments_s=segments_s,
+            segments_var=segments_var,
+            n_points=n_points,
+            indices=indices,
+        )
+        return line
+
     # -- derived geometry -------------------------------------------------------------------
     @property
     def normal(self) -> FloatArray:

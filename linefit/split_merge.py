@@ -100,7 +100,9 @@ def _assign_corners(
     """
     shared = np.flatnonzero(ends[:-1] == starts[1:])
     # only pieces that keep at least two points without the shared one
-    shared = shared[(ends[shared] - starts[shared] >= 2) & (ends[shared + 1] - starts[shared + 1] >= 2)]
+    shared = shared[
+        (ends[shared] - starts[shared] >= 2) & (ends[shared + 1] - starts[shared + 1] >= 2)
+    ]
     if shared.shape[0] == 0:
         return starts, ends
     k = ends[shared]

@@ -8,7 +8,15 @@ import sys
 import pytest
 
 FORBIDDEN_FOR_LINEFIT = ["gtsam", "filterpy", "matplotlib", "typer", "click", "tqdm", "slam"]
-FORBIDDEN_FOR_ALGORITHMS = ["matplotlib", "typer", "click", "tqdm", "slam.cli", "slam.plotting"]
+FORBIDDEN_FOR_ALGORITHMS = [
+    "matplotlib",
+    "typer",
+    "click",
+    "tqdm",
+    "slam.cli",
+    "slam.plotting",
+    "slam.plotting_scan",
+]
 
 # Algorithmic modules of slam; a module listed here that does not exist yet is skipped.
 SLAM_ALGORITHM_MODULES = [

@@ -14,8 +14,15 @@ from slam.evaluation import relations_metric
 from slam.io.carmen import iter_scans
 from slam.io.relations import read_relations
 from slam.io.tum import read_tum
-from slam.sim import LaserConfig, LaserNoiseConfig, SimConfig, TrajectoryConfig, cast_scan
-from slam.sim import get_world, read_world
+from slam.sim import (
+    LaserConfig,
+    LaserNoiseConfig,
+    SimConfig,
+    TrajectoryConfig,
+    cast_scan,
+    get_world,
+    read_world,
+)
 from slam.sim.simulate import simulate
 from slam.sim.write import SIM_FILES, write_simulation
 

@@ -1,0 +1,161 @@
+"""``lineslam extract LOG --out FILE.jsonl``: the weighted-fit lines of every scan of a log.
+
+Output (``../shared/INTERFACES.md``): one JSON object per scan, in log order,
+``{"scan": i, "t": timestamp, "lines": [{"r", "alpha", "s", "cov", "endpoints", "n_points",
+"segments", "segments_var"}, ...]}`` in the sensor (laser) frame.  ``cov`` is the full 3×3
+covariance of ``(r, alpha, s)``; its ``s`` row and column are not zero (see docs/linefit.md).
+``segments`` (the visible pieces, ``[[x1, y1], [x2, y2]]`` each) and ``segments_var`` (variances
+of their ends along the line, m²) are extra fields.
+
+Because ``--out`` is a file here, the configuration used is written beside it as
+``FILE.config.toml`` (``out.jsonl`` → ``out.config.toml``), reloadable with ``--config``.
+``--plot DIR`` draws paper-style figures (Fig. 3) of a few scans spread over the log.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from dataclasses import replace
+from itertools import islice
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+import typer
+
+from linefit import Line, LineFitConfig, extract_lines_batch
+from slam.cli._app import app
+from slam.cli.common import ConfigOpt, QuietOpt, SeedOpt, SigmaDOpt, SigmaPhiOpt, build_config
+from slam.errors import InputError
+from slam.io.carmen import iter_scans
+from slam.io.catalog import resolve_log
+from slam.types import Scan
+
+__all__ = ["config_path_for", "extract", "scan_record"]
+
+BATCH_SCANS = 64
+
+
+def config_path_for(out: Path) -> Path:
+    """Where the configuration of ``--out FILE.jsonl`` goes: ``FILE.config.toml``."""
+    return (
+        out.with_name(out.stem + ".config.toml")
+        if out.suffix
+        else out.with_name(out.name + ".config.toml")
+    )
+
+
+def scan_record(scan: Scan, lines: list[Line]) -> dict[str, object]:
+    """The INTERFACES.md JSON object of one scan."""
+    return {
+        "scan": int(scan.index),
+        "t": float(scan.timestamp),
+        "lines": [ln.to_json_dict() for ln in lines],
+    }
+
+
+def _batches(scans: Iterator[Scan], size: int) -> Iterator[list[Scan]]:
+    while True:
+        chunk = list(islice(scans, size))
+        if not chunk:
+            return
+        yield chunk
+
+
+def _extract_chunk(chunk: list[Scan], config: LineFitConfig) -> list[list[Line]]:
+    """Lines of a chunk of scans; scans of one beam layout are extracted together."""
+    out: list[list[Line]] = [[] for _ in chunk]
+    layouts: dict[tuple[int, bytes], list[int]] = {}
+    for k, scan in enumerate(chunk):
+        layouts.setdefault((scan.n_beams, scan.bearings.tobytes()), []).append(k)
+    for members in layouts.values():
+        ranges = np.stack([chunk[k].ranges for k in members])
+        max_range = np.array([chunk[k].max_range_m for k in members])
+        try:
+            lines = extract_lines_batch(
+                ranges, chunk[members[0]].bearings, config, max_range_m=max_range
+            )
+        except InputError as exc:
+            first = chunk[members[0]]
+            raise InputError(f"{exc.reason} (scans from {first.source or first.index})") from None
+        for k, ln in zip(members, lines, strict=True):
+            out[k] = ln
+    return out
+
+
+@app.command("extract")
+def extract(
+    log: Annotated[
+        str, typer.Argument(help="CARMEN log file, or a dataset name (intel, aces, fr079).")
+    ],
+    out: Annotated[
+        Path, typer.Option("--out", help="Output FILE.jsonl (one JSON object per scan).")
+    ],
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="Directory for paper-style figures of some scans.")
+    ] = None,
+    plot_every: Annotated[
+        int,
+        typer.Option("--plot-every", help="Plot every N-th scan (default: about 12 figures)."),
+    ] = 0,
+    grouping: Annotated[
+        Literal["hough", "split_merge"] | None,
+        typer.Option("--grouping", help="Override the grouping of the configuration."),
+    ] = None,
+    limit: Annotated[
+        int | None, typer.Option("--limit", help="Only the first N scans.", min=1)
+    ] = None,
+    config_file: ConfigOpt = None,
+    sigma_d: SigmaDOpt = None,
+    sigma_phi: SigmaPhiOpt = None,
+    seed: SeedOpt = None,
+    quiet: QuietOpt = False,
+) -> None:
+    """Fit lines to every scan of LOG (Pfister et al. 2003, Secs. II-IV) and write FILE.jsonl."""
+    config = build_config(config_file, sigma_d, sigma_phi, seed)
+    if grouping is not None:
+        config = replace(config, linefit=replace(config.linefit, grouping=grouping))
+    resolved = resolve_log(log)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    config.to_toml(config_path_for(out))
+    total = resolved.manifest.scans if resolved.manifest is not None else None
+    if limit is not None:
+        total = min(total, limit) if total is not None else limit
+    every = plot_every if plot_every > 0 else max(1, (total or 1200) // 12)
+    scans: Iterator[Scan] = iter_scans(resolved.log)
+    if limit is not None:
+        scans = islice(scans, limit)
+
+    from tqdm import tqdm
+
+    n_scans = n_lines = 0
+    with (
+        out.open("w", encoding="utf-8") as handle,
+        tqdm(total=total, unit="scan", desc="extract", disable=quiet) as bar,
+    ):
+        for chunk in _batches(scans, BATCH_SCANS):
+            results = _extract_chunk(chunk, config.linefit)
+            for scan, lines in zip(chunk, results, strict=True):
+                handle.write(json.dumps(scan_record(scan, lines)) + "\n")
+                n_lines += len(lines)
+                if plot is not None and scan.index % every == 0:
+                    from slam.plotting_scan import save_scan_figure
+
+                    save_scan_figure(
+                        plot / f"scan_{scan.index:06d}.png",
+                        scan.ranges,
+                        scan.bearings,
+                        lines,
+                        config.linefit,
+                        max_range_m=scan.max_range_m,
+                        title=f"{resolved.name} scan {scan.index}: {len(lines)} lines",
+                    )
+            n_scans += len(chunk)
+            bar.update(len(chunk))
+    if not quiet:
+        per_scan = n_lines / max(n_scans, 1)
+        typer.echo(
+            f"{n_scans} scans, {n_lines} lines ({per_scan:.2f} per scan) -> {out}; "
+            f"configuration: {config_path_for(out)}"
+        )
