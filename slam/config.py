@@ -13,6 +13,7 @@ from pathlib import Path
 from linefit.config import LineFitConfig
 from linefit.errors import ConfigError
 from linefit.tomlconfig import dump_toml, load_toml
+from slam.ekf.config import EkfConfig
 from slam.graph.config import SlamConfig
 from slam.lines.config import MapConfig
 
@@ -34,12 +35,15 @@ class RunConfig:
     slam : SlamConfig
         Factor-graph SLAM (``lineslam slam``): back-end, motion noise, keyframes,
         association, fusion, solver.
+    ekf : EkfConfig
+        EKF-SLAM baseline (``lineslam ekf``).
     """
 
     seed: int = 0
     linefit: LineFitConfig = field(default_factory=LineFitConfig)
     map: MapConfig = field(default_factory=MapConfig)
     slam: SlamConfig = field(default_factory=SlamConfig)
+    ekf: EkfConfig = field(default_factory=EkfConfig)
 
     def __post_init__(self) -> None:
         if self.seed < 0:

@@ -13,7 +13,10 @@ import click
 import typer
 
 from slam.cli import (  # noqa: F401  (commands register on import)
+    cmd_compare,
+    cmd_consistency,
     cmd_datasets,
+    cmd_ekf,
     cmd_evaluate,
     cmd_extract,
     cmd_map,

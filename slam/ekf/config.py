@@ -1,0 +1,168 @@
+"""Configuration of the EKF-SLAM baseline (frozen dataclass, TOML table ``[ekf]``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+from slam.ekf.motion import OdometryNoiseConfig
+from slam.errors import ConfigError
+
+__all__ = ["EkfConfig", "OdometryNoiseConfig"]
+
+
+def _probability(name: str, value: float) -> None:
+    if not (isinstance(value, float | int) and 0.0 < value < 1.0):
+        raise ConfigError(f"ekf.{name} must be a probability in (0, 1), got {value!r}")
+
+
+@dataclass(frozen=True)
+class EkfConfig:
+    """Settings of :class:`slam.ekf.EkfSlam`.
+
+    Attributes
+    ----------
+    odometry : OdometryNoiseConfig
+        Motion model (noise per metre and per radian) of the prediction.
+    association : {"nn", "jcbb"}
+        Nearest neighbour with the individual χ² gate, or joint compatibility branch and bound.
+    gate_probability : float
+        Individual χ² gate (2 dof) of a measurement-landmark pair.
+    joint_gate_probability : float
+        JCBB's joint gate (``2h`` dof for ``h`` pairs).
+    jcbb_max_nodes : int
+        Node budget of JCBB per scan; when exhausted the best hypothesis so far is used
+        (counted in the result's ``stats``).
+    new_landmark_probability : float
+        An unmatched line starts a new landmark only if no overlapping landmark passes the χ²
+        gate at this (looser) probability; otherwise it is ambiguous and dropped.
+    overlap_margin_m : float
+        A pair must overlap along the landmark (measured segment vs the landmark's seen extent,
+        at the predicted pose) with a gap below this (m); ``inf`` disables the test.
+    segment_gap_m : float
+        Seen pieces of a landmark closer than this (m) are merged (``map.json`` segments).
+    update_min_distance_m, update_min_angle_rad : float
+        Update policy (the graph's keyframe policy): lines of a scan are used only once the
+        robot moved at least this far (odometry path length) or turned this much since the last
+        update; 0 and 0 use every scan.  Prediction runs on every scan regardless, and every
+        scan gets a pose.
+    max_landmarks : int
+        Guard on the ``O(n²)`` cost per update (``n = 3 + 2·landmarks``).
+    on_max_landmarks : {"stop", "freeze"}
+        When the map is full: ``"stop"`` ends the run at that scan (the result says where and
+        why); ``"freeze"`` keeps filtering with the existing landmarks and starts no new ones.
+    max_runtime_s : float or None
+        Wall-clock budget; when exceeded the run stops at that scan (recorded in the result).
+    update_impl : {"sparse", "filterpy"}
+        ``"sparse"``: Joseph form on the columns ``H`` touches, ``O(n² m)``.  ``"filterpy"``:
+        ``filterpy.kalman.ExtendedKalmanFilter.update`` on the dense state, ``O(n³)`` (the
+        reference; same numbers).
+    merge_landmarks : bool
+        Fuse two landmarks that pass the χ² test on their joint marginal and overlap (an exact
+        EKF constraint update ``l_i − l_j = 0`` followed by deleting ``l_j``).  Tested for the
+        landmarks observed or created since the last test against all others.  This is how a
+        wall first seen in two pieces (farther apart than ``overlap_margin_m``) becomes one
+        landmark once the pieces meet.
+    merge_probability : float
+        χ² probability (2 dof) of the landmark merge test.
+    merge_every_n_updates : int
+        How often the merge test runs (in measurement updates).
+    initial_pose_sigma : tuple of float
+        Standard deviations ``(σ_x, σ_y, σ_θ)`` (m, m, rad) of the first pose; zeros anchor the
+        world frame at it.
+    min_landmark_observations : int
+        Landmarks seen fewer times are left out of ``map.json`` (they stay in the state).
+    min_line_points, min_line_length_m : int, float
+        Lines (``linefit.Line``) with fewer supporting points or a shorter visible length (m,
+        gaps excluded) are ignored, as in the graph back-end (a ``LineSet`` is used as given).
+    blas_threads : int
+        BLAS threads the runners allow while filtering (:mod:`slam.ekf.threads`); 0 leaves the
+        library default.  One is fastest on small shared machines.
+    line_sigma_extra : tuple of float
+        Model error ``(σ_r, σ_α)`` (m, rad) added in quadrature to every line's covariance
+        (``R + diag(σ_r², σ_α²)``): real walls are not ideal lines and real range noise is not
+        the fit's model.  Zero (default) trusts the fit's covariance as it is, which is right
+        for simulated data.
+    """
+
+    odometry: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)
+    association: Literal["nn", "jcbb"] = "nn"
+    gate_probability: float = 0.999
+    joint_gate_probability: float = 0.999
+    jcbb_max_nodes: int = 2000
+    new_landmark_probability: float = 0.99999
+    overlap_margin_m: float = 0.5
+    segment_gap_m: float = 0.5
+    update_min_distance_m: float = 0.2
+    update_min_angle_rad: float = 0.15
+    max_landmarks: int = 2000
+    on_max_landmarks: Literal["stop", "freeze"] = "stop"
+    max_runtime_s: float | None = None
+    update_impl: Literal["sparse", "filterpy"] = "sparse"
+    merge_landmarks: bool = True
+    merge_probability: float = 0.999
+    merge_every_n_updates: int = 1
+    initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    min_landmark_observations: int = 1
+    line_sigma_extra: tuple[float, float] = (0.0, 0.0)
+    blas_threads: int = 1
+    min_line_points: int = 5
+    min_line_length_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.association not in ("nn", "jcbb"):
+            raise ConfigError(f"ekf.association must be 'nn' or 'jcbb', got {self.association!r}")
+        for name in (
+            "gate_probability",
+            "joint_gate_probability",
+            "new_landmark_probability",
+            "merge_probability",
+        ):
+            _probability(name, getattr(self, name))
+        if self.new_landmark_probability < self.gate_probability:
+            raise ConfigError("ekf.new_landmark_probability must be >= ekf.gate_probability")
+        if self.jcbb_max_nodes < 1:
+            raise ConfigError(f"ekf.jcbb_max_nodes must be >= 1, got {self.jcbb_max_nodes}")
+        if not (self.overlap_margin_m >= 0.0):
+            raise ConfigError(f"ekf.overlap_margin_m must be >= 0, got {self.overlap_margin_m}")
+        if not (math.isfinite(self.segment_gap_m) and self.segment_gap_m >= 0.0):
+            raise ConfigError(f"ekf.segment_gap_m must be >= 0, got {self.segment_gap_m}")
+        for name in ("update_min_distance_m", "update_min_angle_rad"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ConfigError(f"ekf.{name} must be >= 0, got {v!r}")
+        if self.max_landmarks < 1:
+            raise ConfigError(f"ekf.max_landmarks must be >= 1, got {self.max_landmarks}")
+        if self.on_max_landmarks not in ("stop", "freeze"):
+            raise ConfigError(
+                f"ekf.on_max_landmarks must be 'stop' or 'freeze', got {self.on_max_landmarks!r}"
+            )
+        if self.max_runtime_s is not None and not self.max_runtime_s > 0.0:
+            raise ConfigError(f"ekf.max_runtime_s must be > 0, got {self.max_runtime_s}")
+        if self.update_impl not in ("sparse", "filterpy"):
+            raise ConfigError(
+                f"ekf.update_impl must be 'sparse' or 'filterpy', got {self.update_impl!r}"
+            )
+        if self.merge_every_n_updates < 1:
+            raise ConfigError("ekf.merge_every_n_updates must be >= 1")
+        if len(self.initial_pose_sigma) != 3 or not all(
+            math.isfinite(s) and s >= 0.0 for s in self.initial_pose_sigma
+        ):
+            raise ConfigError(
+                f"ekf.initial_pose_sigma must be three numbers >= 0, got {self.initial_pose_sigma}"
+            )
+        if len(self.line_sigma_extra) != 2 or not all(
+            math.isfinite(v) and v >= 0.0 for v in self.line_sigma_extra
+        ):
+            raise ConfigError(
+                f"ekf.line_sigma_extra must be two numbers >= 0, got {self.line_sigma_extra}"
+            )
+        if self.min_line_points < 2:
+            raise ConfigError(f"ekf.min_line_points must be >= 2, got {self.min_line_points}")
+        if not (math.isfinite(self.min_line_length_m) and self.min_line_length_m >= 0.0):
+            raise ConfigError(f"ekf.min_line_length_m must be >= 0, got {self.min_line_length_m}")
+        if self.blas_threads < 0:
+            raise ConfigError(f"ekf.blas_threads must be >= 0, got {self.blas_threads}")
+        if self.min_landmark_observations < 1:
+            raise ConfigError("ekf.min_landmark_observations must be >= 1")

@@ -1,0 +1,1 @@
+"""Experiment machinery: simulated line runs, Monte-Carlo consistency, comparison runs."""

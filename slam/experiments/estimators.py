@@ -1,0 +1,147 @@
+"""Estimators behind one call, for experiments that feed them the same scans and lines.
+
+:func:`run_estimator` takes a name from :data:`ESTIMATORS`, the scans, their lines (laser frame)
+and the run configuration, and returns an :class:`EstimateOutput`: the trajectory with pose
+covariances (right-perturbation tangent space) and run times.  Names:
+
+* ``"ekf"`` — :class:`slam.ekf.EkfSlam` with ``RunConfig.ekf`` (association as configured);
+* ``"ekf-nn"``, ``"ekf-jcbb"`` — the same with the association forced;
+Lines per scan are a :class:`~slam.frontend.lineset.LineSet` (line-level simulator) or a list
+of :class:`linefit.Line` (a log's fits; estimators apply their own length/support filters).
+
+* ``"odometry"`` — dead reckoning with the same motion model, covariance propagated (the EKF
+  fed no lines), the reference every SLAM estimator must beat.
+
+The graph back-end registers ``"graph-batch"`` and ``"graph-isam2"`` here once it is on main.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from linefit.line import Line
+from slam.config import RunConfig
+from slam.ekf import EkfSlam
+from slam.ekf.threads import blas_threads
+from slam.errors import ConfigError, EstimationError
+from slam.frontend.lineset import LineSet
+from slam.types import Scan
+
+__all__ = ["ESTIMATORS", "EstimateOutput", "run_estimator"]
+
+FloatArray = NDArray[np.float64]
+ScanLines = Sequence[LineSet] | Sequence[Sequence[Line]] | None
+
+
+@dataclass(frozen=True, eq=False)
+class EstimateOutput:
+    """A trajectory estimate with what experiments compare.
+
+    Attributes
+    ----------
+    name : str
+        Estimator name.
+    timestamps : ndarray, shape (N,)
+    poses_world_laser : ndarray, shape (N, 3)
+    pose_covariances : ndarray, shape (N, 3, 3) or None
+        Tangent-space covariances (None where the estimator gives none).
+    scan_runtime_s : ndarray, shape (N,)
+    landmarks_r_alpha : ndarray, shape (M, 2)
+    stats : dict
+        Estimator counters; ``stopped_at_scan`` / ``stop_reason`` when it stopped early.
+    result : object
+        The estimator's own result object (e.g. :class:`slam.ekf.EkfResult`), for writing files.
+    """
+
+    name: str
+    timestamps: FloatArray
+    poses_world_laser: FloatArray
+    pose_covariances: FloatArray | None
+    scan_runtime_s: FloatArray
+    landmarks_r_alpha: FloatArray
+    stats: dict[str, Any] = field(default_factory=dict)
+    result: Any = None
+
+
+def _ekf(
+    name: str,
+    scans: Sequence[Scan],
+    lines: ScanLines,
+    config: RunConfig,
+    initial_pose: FloatArray | None,
+    association: Literal["nn", "jcbb"] | None = None,
+    use_lines: bool = True,
+) -> EstimateOutput:
+    ekf_cfg = config.ekf if association is None else replace(config.ekf, association=association)
+    ekf = EkfSlam(ekf_cfg, linefit_config=config.linefit, initial_pose_world_laser=initial_pose)
+    with blas_threads(ekf_cfg.blas_threads):
+        for k, scan in enumerate(scans):
+            if ekf.stopped:
+                break
+            if use_lines:
+                ekf.add_scan(scan, None if lines is None else lines[k])
+            else:
+                ekf.add_scan(scan, LineSet.empty())
+    res = ekf.result()
+    return EstimateOutput(
+        name=name,
+        timestamps=res.timestamps,
+        poses_world_laser=res.poses_world_laser,
+        pose_covariances=res.pose_covariances,
+        scan_runtime_s=res.scan_runtime_s,
+        landmarks_r_alpha=res.landmarks_r_alpha,
+        stats=res.stats,
+        result=res,
+    )
+
+
+EstimatorFn = Callable[
+    [
+        Sequence[Scan],
+        Sequence[LineSet] | Sequence[Sequence[Line]] | None,
+        RunConfig,
+        FloatArray | None,
+    ],
+    EstimateOutput,
+]
+
+ESTIMATORS: dict[str, EstimatorFn] = {
+    "ekf": lambda s, ln, c, p: _ekf("ekf", s, ln, c, p),
+    "ekf-nn": lambda s, ln, c, p: _ekf("ekf-nn", s, ln, c, p, association="nn"),
+    "ekf-jcbb": lambda s, ln, c, p: _ekf("ekf-jcbb", s, ln, c, p, association="jcbb"),
+    "odometry": lambda s, ln, c, p: _ekf("odometry", s, ln, c, p, use_lines=False),
+}
+
+
+def run_estimator(
+    name: str,
+    scans: Sequence[Scan],
+    lines: ScanLines,
+    config: RunConfig,
+    initial_pose_world_laser: FloatArray | None = None,
+) -> EstimateOutput:
+    """Run the estimator ``name`` on scans (with their lines, or None to extract them).
+
+    Raises
+    ------
+    ConfigError
+        For an unknown estimator name.
+    """
+    try:
+        fn = ESTIMATORS[name]
+    except KeyError as exc:
+        raise ConfigError(
+            f"unknown estimator {name!r}; known: {', '.join(sorted(ESTIMATORS))}"
+        ) from exc
+    t0 = time.perf_counter()
+    out = fn(scans, lines, config, initial_pose_world_laser)
+    if out.poses_world_laser.shape[0] == 0:
+        raise EstimationError(f"estimator {name} produced no poses")
+    out.stats.setdefault("wall_time_s", time.perf_counter() - t0)
+    return out

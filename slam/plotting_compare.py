@@ -1,0 +1,140 @@
+"""Figures of the comparison and consistency experiments (matplotlib, imported only to draw).
+
+Every function writes one PNG and returns its path; none of them shows a window (Agg backend).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "plot_errors_over_time",
+    "plot_nees_over_time",
+    "plot_runtime_per_scan",
+    "plot_trajectories",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+def plot_nees_over_time(
+    anees: Mapping[str, FloatArray],
+    bounds: tuple[float, float],
+    path: str | Path,
+    dof: int = 3,
+    title: str = "",
+    n_runs: int | None = None,
+) -> Path:
+    """Average pose NEES over time per estimator with the χ² band of a consistent estimator."""
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    for name, values in anees.items():
+        ax.plot(np.arange(values.shape[0]), values, lw=1.2, label=name)
+    lo, hi = bounds
+    n = max(v.shape[0] for v in anees.values())
+    ax.fill_between([0, n - 1], lo, hi, color="0.85", label=f"95% bounds ({dof} dof)")
+    ax.axhline(dof, color="0.4", lw=0.8, ls="--")
+    ax.set_yscale("log")
+    ax.set_xlabel("scan")
+    ax.set_ylabel("average pose NEES")
+    runs = f", {n_runs} runs" if n_runs else ""
+    ax.set_title(title or f"Pose NEES over time{runs}")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def plot_trajectories(
+    trajectories: Mapping[str, FloatArray],
+    path: str | Path,
+    segments: Sequence[FloatArray] | None = None,
+    truth: FloatArray | None = None,
+    title: str = "Trajectories over the map",
+) -> Path:
+    """Trajectories (N, 3) over map segments (each (k, 2, 2), world frame)."""
+    fig, ax = plt.subplots(figsize=(7, 7))
+    if segments:
+        segs = np.concatenate([np.asarray(s).reshape(-1, 2, 2) for s in segments], axis=0)
+        for (x1, y1), (x2, y2) in segs:
+            ax.plot([x1, x2], [y1, y2], color="0.2", lw=1.0)
+    if truth is not None:
+        ax.plot(truth[:, 0], truth[:, 1], color="k", lw=1.5, ls="--", label="ground truth")
+    for name, traj in trajectories.items():
+        ax.plot(traj[:, 0], traj[:, 1], lw=1.0, label=name)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def plot_errors_over_time(
+    errors: Mapping[str, FloatArray],
+    path: str | Path,
+    ylabel: str = "position error (m)",
+    title: str = "Error over time",
+    x: Mapping[str, FloatArray] | None = None,
+    xlabel: str = "scan",
+) -> Path:
+    """One error curve per estimator (log scale), against scan index or given abscissae."""
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    for name, err in errors.items():
+        xs = x[name] if x is not None and name in x else np.arange(err.shape[0])
+        ax.plot(xs, err, lw=1.0, label=name)
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def plot_runtime_per_scan(
+    runtimes: Mapping[str, FloatArray],
+    path: str | Path,
+    map_sizes: Mapping[str, FloatArray] | None = None,
+    title: str = "Run time per scan",
+) -> Path:
+    """Run time per scan (ms, log scale), and the map size on a second axis where given."""
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    for name, t in runtimes.items():
+        ax.plot(np.arange(t.shape[0]), 1e3 * np.maximum(t, 1e-6), lw=0.6, label=name)
+    ax.set_yscale("log")
+    ax.set_xlabel("scan")
+    ax.set_ylabel("time per scan (ms)")
+    ax.grid(True, which="both", alpha=0.3)
+    if map_sizes:
+        ax2 = ax.twinx()
+        for name, m in map_sizes.items():
+            ax2.plot(np.arange(m.shape[0]), m, lw=1.2, ls=":", label=f"{name} landmarks")
+        ax2.set_ylabel("landmarks")
+        ax2.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(title)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out

@@ -1,0 +1,133 @@
+"""``lineslam compare`` and ``lineslam consistency`` end to end on the line-level simulator."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from slam.cli import main
+from slam.config import RunConfig
+
+
+def test_compare_on_a_simulated_loop_writes_report_and_variant_folders(tmp_path):
+    out = tmp_path / "cmp"
+    main(
+        [
+            "compare",
+            "sim:corridor_loop:0.5:3",
+            "--out",
+            str(out),
+            "--quiet",
+            "--variants",
+            "ekf=ekf-nn,jcbb=ekf-jcbb,odometry",
+        ]
+    )
+    report = json.loads((out / "report.json").read_text())
+    rows = {r["variant"]: r for r in report["variants"]}
+    assert set(rows) == {"ekf", "jcbb", "odometry"}
+    assert rows["ekf"]["ate_rmse_m"] < 0.1 * rows["odometry"]["ate_rmse_m"]
+    assert rows["ekf"]["landmarks"] >= 8 and rows["odometry"]["landmarks"] == 0
+    for name in rows:
+        traj = np.loadtxt(out / name / "trajectory.tum")
+        assert traj.shape == (rows[name]["scans"], 8)
+        assert (out / name / "map.json").is_file() and (out / name / "summary.json").is_file()
+    md = (out / "report.md").read_text()
+    assert "| ekf |" in md and "nees.png" in md
+    for fig in report["figures"]:
+        assert (out / fig).stat().st_size > 1000
+    assert RunConfig.from_toml(out / "config.toml") == RunConfig()
+
+
+def test_consistency_command_writes_summary(tmp_path):
+    out = tmp_path / "mc"
+    main(
+        [
+            "consistency",
+            "--out",
+            str(out),
+            "--runs",
+            "3",
+            "--loops",
+            "0.5",
+            "--quiet",
+            "--estimators",
+            "odometry",
+        ]
+    )
+    doc = json.loads((out / "consistency.json").read_text())
+    odo = doc["estimators"]["odometry"]
+    assert odo["n_runs"] == 3 and len(odo["run_mean_nees"]) == 3
+    assert (out / "nees.png").is_file() and (out / "error.png").is_file()
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["compare", "sim:moon", "--out", "X"], "unknown simulated world"),
+        (
+            ["compare", "sim:corridor_loop", "--out", "X", "--variants", "a=kalman"],
+            "unknown estimator",
+        ),
+        (["consistency", "--out", "X", "--runs", "0"], "n_runs"),
+    ],
+)
+def test_bad_arguments_give_one_line_errors(tmp_path, capsys, argv, message):
+    argv = [a if a != "X" else str(tmp_path / "o") for a in argv]
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+DEMO = Path(__file__).resolve().parents[1] / "datasets" / "sim" / "demo"
+
+
+def test_ekf_command_on_the_demo_log_beats_odometry(tmp_path):
+    from slam.evaluation import relations_metric
+    from slam.io import read_relations, read_tum
+
+    out = tmp_path / "ekf"
+    main(["ekf", str(DEMO / "log.clf"), "--out", str(out), "--quiet"])
+    traj = read_tum(out / "trajectory.tum")
+    odo = read_tum(DEMO / "odometry.tum")
+    assert len(traj) == len(odo) == 383
+    np.testing.assert_array_equal(traj.timestamps, odo.timestamps)  # the log's stamps, exactly
+    rel = read_relations(DEMO / "relations.txt")
+    m_ekf, m_odo = relations_metric(traj, rel), relations_metric(odo, rel)
+    assert m_ekf.abs_trans_m.mean < 0.01 < m_odo.abs_trans_m.mean
+    assert m_ekf.abs_trans_m.mean < 0.1 * m_odo.abs_trans_m.mean
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["scans"] == 383 and summary["lines_fit"] > 0 and summary["frame"] == "laser"
+    assert 0.9 < summary["compression"] < 1.0
+    assert RunConfig.from_toml(out / "config.toml") == RunConfig()
+
+
+def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_path):
+    out = tmp_path / "cmp"
+    main(
+        [
+            "compare",
+            str(DEMO / "log.clf"),
+            "--out",
+            str(out),
+            "--quiet",
+            "--max-scans",
+            "200",
+            "--variants",
+            "ekf=ekf-nn,unweighted=ekf-nn/unweighted,odometry",
+        ]
+    )
+    rows = {r["variant"]: r for r in json.loads((out / "report.json").read_text())["variants"]}
+    for name in ("ekf", "unweighted"):
+        assert rows[name]["rel_trans_mean_m"] < 0.2 * rows["odometry"]["rel_trans_mean_m"]
+        assert rows[name]["ate_rmse_m"] < 0.2 * rows["odometry"]["ate_rmse_m"]
+        assert rows[name]["scans_processed"] == 200
+        assert 0.5 < rows[name]["nees_mean"] < 10.0
+    md = (out / "report.md").read_text()
+    assert "relations trans. (m)" in md and "ATE RMSE (m)" in md
+    assert list((out / ".cache").glob("lines-*.pkl"))  # weighted and unweighted fits cached
+    assert len(list((out / ".cache").glob("lines-*.pkl"))) == 2
