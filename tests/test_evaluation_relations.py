@@ -7,7 +7,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from slam.errors import EvaluationError
-from slam.evaluation import match_timestamps, relation_errors, relations_metric
+from slam.evaluation import (
+    match_timestamps,
+    relation_errors,
+    relations_metric,
+    relations_within,
+)
 from slam.geometry import pose_compose, wrap_angle
 from slam.io import Relations, Trajectory, relations_from_trajectory
 
@@ -105,3 +110,23 @@ def test_matching_works_for_unsorted_stamps_and_respects_tolerance(rng):
     assert found.all() and list(idx) == [3, 70]
     idx, found = match_timestamps(np.array([stamps[5] + 2e-5]), stamps, 1e-5)
     assert not found.any()
+
+
+def test_relations_within_keeps_exactly_those_inside_a_partial_run(rng):
+    # A run over the first 60 of 100 scans: relations with either stamp after scan 59 are left
+    # out, the others kept in file order, and the metric then counts no unmatched relation.
+    n = 100
+    stamps = rng.permutation(np.arange(n) * 0.1 + 1000.0)  # any order, as Intel's
+    poses = random_poses(rng, n)
+    pairs = np.column_stack([rng.integers(0, n, 300), rng.integers(0, n, 300)])
+    rel = relations_from_trajectory(stamps, poses, pairs)
+    run = Trajectory.from_arrays(stamps[:60], poses[:60])
+    inside = relations_within(rel, run.timestamps)
+    keep = (pairs[:, 0] < 60) & (pairs[:, 1] < 60)
+    assert len(inside) == int(keep.sum()) and 0 < len(inside) < len(rel)
+    np.testing.assert_array_equal(inside.t1, rel.t1[keep])
+    np.testing.assert_array_equal(inside.poses, rel.poses[keep])
+    metric = relations_metric(run, inside)
+    assert metric.n_unmatched == 0 and metric.abs_trans_m.mean < 1e-9
+    with pytest.raises(EvaluationError):
+        relations_metric(run, rel)  # the whole file would be a time stamp mistake

@@ -17,6 +17,7 @@ from slam.evaluation.relations_metric import (
     RelationsMetric,
     relation_errors,
     relations_metric,
+    relations_within,
 )
 from slam.evaluation.report import EvaluationReport, evaluate_results
 from slam.evaluation.rpe import RpeResult, distance_pairs, rpe
@@ -41,5 +42,6 @@ __all__ = [
     "pose_nees",
     "relation_errors",
     "relations_metric",
+    "relations_within",
     "rpe",
 ]

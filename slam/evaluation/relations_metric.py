@@ -42,6 +42,7 @@ __all__ = [
     "match_timestamps",
     "relation_errors",
     "relations_metric",
+    "relations_within",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -171,6 +172,20 @@ def relation_errors(
     sin_angle = 0.5 * np.sqrt(np.sum(vee**2, axis=1))
     cos_angle = 0.5 * (np.trace(r_err, axis1=1, axis2=2) - 1.0)
     return trans, np.arctan2(sin_angle, cos_angle)
+
+
+def relations_within(
+    relations: Relations, timestamps: FloatArray, *, tolerance_s: float = 1e-5
+) -> Relations:
+    """The relations whose ``t1`` and ``t2`` are both time stamps in ``timestamps``.
+
+    For runs over part of a log (``--max-scans``, excerpts in tests): the relations outside
+    the run are left out *deliberately* here, so that :func:`relations_metric`'s unmatched
+    count keeps meaning a time stamp mistake.
+    """
+    _, found1 = match_timestamps(relations.t1, timestamps, tolerance_s)
+    _, found2 = match_timestamps(relations.t2, timestamps, tolerance_s)
+    return relations.subset(found1 & found2)
 
 
 def relations_metric(

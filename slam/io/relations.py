@@ -59,6 +59,21 @@ class Relations:
     def __len__(self) -> int:
         return int(self.t1.shape[0])
 
+    def subset(self, mask: ArrayLike) -> Relations:
+        """The relations where ``mask`` (boolean, shape ``(m,)``) is true, in file order."""
+        m = np.asarray(mask, dtype=bool)
+        if m.shape != self.t1.shape:
+            raise InputError(f"relations mask has shape {m.shape}, expected {self.t1.shape}")
+        return Relations(
+            self.t1[m],
+            self.t2[m],
+            self.poses[m],
+            self.z[m],
+            self.roll[m],
+            self.pitch[m],
+            self.line_numbers[m],
+        )
+
     @classmethod
     def planar(cls, t1: ArrayLike, t2: ArrayLike, poses: ArrayLike) -> Relations:
         """Planar relations (``z = roll = pitch = 0``) from arrays, validated."""
