@@ -41,6 +41,8 @@ from linefit.line import wrap_angle
 
 __all__ = ["LoopClosure", "LoopLines", "search_loop_closure"]
 
+LAST_REASON = ""
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
@@ -56,6 +58,7 @@ class LoopConfig(Protocol):
     min_matches: int
     min_direction_angle_rad: float
     max_ambiguity: float
+    corridor_closures: bool
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,12 +136,16 @@ class LoopClosure:
         Overlapping length of the pairs (m).
     runner_up : float
         Score of the best distinct other hypothesis.
+    single_direction : bool
+        All paired lines are (nearly) parallel: a corridor, where the position along it is not
+        constrained (the correction's component along it is arbitrary).
     """
 
     correction: FloatArray
     pairs: list[tuple[int, int]]
     score: float
     runner_up: float
+    single_direction: bool = False
 
 
 def _pairs_at(
@@ -203,11 +210,45 @@ def _refine(
     return corr, i, j, w
 
 
-def _two_directions(alpha: FloatArray, min_angle: float) -> bool:
-    if alpha.size < 2:
-        return False
-    d = np.abs(np.sin(alpha[:, None] - alpha[None, :]))
-    return bool(d.max() >= np.sin(min_angle))
+class _Hypothesis:
+    """A refined correction with its pairs, score and constrained directions."""
+
+    def __init__(
+        self,
+        corr: FloatArray,
+        i: IntArray,
+        j: IntArray,
+        score: float,
+        alpha: FloatArray,
+        w: FloatArray,
+        config: LoopConfig,
+    ) -> None:
+        self.corr, self.i, self.j, self.score = corr, i, j, score
+        # translation information of the pairs: Σ w n nᵀ; one direction when the lines' normals
+        # all lie within min_direction_angle of each other
+        if alpha.size:
+            d = np.abs(np.sin(alpha[:, None] - alpha[None, :]))
+            self.single = bool(d.max() < np.sin(config.min_direction_angle_rad))
+            k = int(np.argmax(w))
+            self.normal = np.array([np.cos(alpha[k]), np.sin(alpha[k])])
+        else:
+            self.single = True
+            self.normal = np.array([1.0, 0.0])
+        need = config.min_matched_length_m * (1.0 if not self.single else 1.5)
+        self.valid = (
+            i.size >= config.min_matches
+            and score >= need
+            and (config.corridor_closures or not self.single)
+        )
+
+    def distinct(self, other: _Hypothesis, config: LoopConfig) -> bool:
+        """Whether ``other`` is a different solution (not this one moved along a corridor)."""
+        if abs(float(wrap_angle(other.corr[2] - self.corr[2]))) > 2.0 * config.angle_tolerance_rad:
+            return True
+        dt = other.corr[:2] - self.corr[:2]
+        if self.single:
+            return bool(abs(dt @ self.normal) > 2.0 * config.offset_tolerance_m)
+        return bool(np.hypot(dt[0], dt[1]) > 2.0 * config.offset_tolerance_m)
 
 
 def _rotation_candidates(
@@ -330,10 +371,12 @@ def search_loop_closure(
     LoopClosure or None
         None when no hypothesis passes the verification or the best is ambiguous.
     """
+    global LAST_REASON
+    LAST_REASON = "too few lines"
     if len(local) < 2 or len(old) < 2:
         return None
     c = np.asarray(center, dtype=float).reshape(2)
-    hyps: list[tuple[float, FloatArray, IntArray, IntArray]] = []
+    hyps: list[_Hypothesis] = []
     for dth in _rotation_candidates(
         local, old, window_theta, config.angle_tolerance_rad, n_rotations
     ):
@@ -341,28 +384,22 @@ def search_loop_closure(
             corr, i, j, w = _refine(local, old, c, peak, config)
             if np.hypot(corr[0], corr[1]) > window_xy * 1.5 or abs(corr[2]) > window_theta * 1.5:
                 continue
-            ok = (
-                i.size >= config.min_matches
-                and float(w.sum()) >= config.min_matched_length_m
-                and _two_directions(old.alpha[j], config.min_direction_angle_rad)
-            )
-            hyps.append((float(w.sum()) if ok else -float(w.sum()), corr, i, j))
+            hyps.append(_Hypothesis(corr, i, j, float(w.sum()), old.alpha[j], w, config))
+    LAST_REASON = "no hypothesis"
     if not hyps:
         return None
-    hyps.sort(key=lambda h: -abs(h[0]))
-    valid = [h for h in hyps if h[0] > 0]
+    valid = [h for h in hyps if h.valid]
+    top = max(hyps, key=lambda h: h.score)
+    LAST_REASON = (
+        f"none verified (best {top.score:.1f} m, {top.i.size} pairs, "
+        f"{'one direction' if top.single else 'two directions'})"
+    )
     if not valid:
         return None
-    best = max(valid, key=lambda h: h[0])
-    runner = 0.0
-    for score, corr, _, _ in hyps:
-        distinct = (
-            np.hypot(*(corr[:2] - best[1][:2])) > 2.0 * config.offset_tolerance_m
-            or abs(float(wrap_angle(corr[2] - best[1][2]))) > 2.0 * config.angle_tolerance_rad
-        )
-        if distinct:
-            runner = max(runner, abs(score))
-    if runner > config.max_ambiguity * best[0]:
+    best = max(valid, key=lambda h: h.score)
+    runner = max((h.score for h in hyps if best.distinct(h, config)), default=0.0)
+    LAST_REASON = f"ambiguous ({best.score:.1f} vs {runner:.1f})"
+    if runner > config.max_ambiguity * best.score:
         return None
-    pairs = [(int(a), int(b)) for a, b in zip(best[2], best[3], strict=True)]
-    return LoopClosure(best[1], pairs, best[0], runner)
+    pairs = [(int(a), int(b)) for a, b in zip(best.i, best.j, strict=True)]
+    return LoopClosure(best.corr, pairs, best.score, runner, best.single)

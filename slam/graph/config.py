@@ -142,6 +142,9 @@ class FusionConfig:
     retest_growth : float
         A pair that failed the test is tested again once its landmarks have this many times the
         measurements (together) they had then.
+    audit_max_median_chi2 : float
+        A merge (fusion or loop closure) is undone when, some keyframes later, the median
+        whitened squared residual of either side's line factors exceeds this (χ²₂ 99 %: 9.21).
     """
 
     enabled: bool = True
@@ -151,6 +154,7 @@ class FusionConfig:
     max_angle_rad: float = 0.2
     max_distance_m: float = 0.5
     retest_growth: float = 2.0
+    audit_max_median_chi2: float = 9.21
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
@@ -159,6 +163,7 @@ class FusionConfig:
         _nonneg("max_gap_m", self.max_gap_m)
         _pos("max_angle_rad", self.max_angle_rad)
         _pos("max_distance_m", self.max_distance_m)
+        _pos("audit_max_median_chi2", self.audit_max_median_chi2)
 
 
 @dataclass(frozen=True)
@@ -198,7 +203,7 @@ class SolverConfig:
     lambda_initial: float = 1e-3
     lambda_min: float = 1e-7
     lambda_max: float = 1e10
-    robust_kernel: Literal["none", "huber", "cauchy"] = "none"
+    robust_kernel: Literal["none", "huber", "cauchy"] = "cauchy"
     robust_k: float = 3.0
     ordering: Literal["colamd", "metis"] = "colamd"
 
@@ -385,6 +390,10 @@ class LoopClosureConfig:
     max_ambiguity : float
         A distinct runner-up hypothesis with more than this fraction of the winner's score
         makes the closure ambiguous (rejected).
+    corridor_closures : bool
+        Accept closures whose paired lines are all parallel (a corridor: they fix the
+        rotation and the offset across it, not the position along it) if their matched length
+        is 1.5 × ``min_matched_length_m``; ambiguity is then judged across the corridor only.
     max_chi2_per_factor : float
         Acceptance after merging and optimising: mean whitened squared residual of the line
         factors on the merged landmarks (2 dof each).
@@ -407,6 +416,7 @@ class LoopClosureConfig:
     min_matches: int = 4
     min_direction_angle_rad: float = 0.5
     max_ambiguity: float = 0.7
+    corridor_closures: bool = True
     max_chi2_per_factor: float = 6.0
 
     def __post_init__(self) -> None:

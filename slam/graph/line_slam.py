@@ -223,6 +223,7 @@ class LineSlam:
         self._kf_since_fusion = 0
         self._kf_since_closure = 0
         self._closure_log: list[dict[str, Any]] = []
+        self._to_audit: list[Any] = []
         self._base_laser = np.asarray(self.config.pose_base_laser, dtype=float)
         self.counters: dict[str, int] = {
             "points": 0,
@@ -233,6 +234,7 @@ class LineSlam:
             "lines_ambiguous": 0,
             "lines_rejected": 0,
             "landmarks_merged": 0,
+            "merges_undone": 0,
             "tentative_started": 0,
             "tentative_promoted": 0,
             "tentative_expired": 0,
@@ -751,6 +753,51 @@ class LineSlam:
         self._lm_last_kf.data[keep] = max(self._lm_last_kf.data[keep], self._lm_last_kf.data[drop])
         g.merge_landmarks(keep, drop)
 
+    def _merge_consistent(self, rec: Any) -> bool | None:
+        """Whether a merge is explained by the current estimate (None: no longer checkable).
+
+        Both sides of the merged landmark (the factors that came with the dropped landmark and
+        the kept landmark's others) must have a median whitened squared residual below
+        ``audit_max_median_chi2``: after a wrong merge the optimum sits on one side and the
+        other side's measurements are all off.
+        """
+        g = self.graph
+        if rec.undo or not g.landmark_alive[rec.keep] or g.landmark_alive[rec.drop]:
+            return None
+        if not np.all(g.factor_landmark[rec.factors] == rec.keep):
+            return None
+        f_keep = np.flatnonzero(g.factor_landmark == rec.keep)
+        other = np.setdiff1d(f_keep, rec.factors)
+        if other.size == 0 or rec.factors.size == 0:
+            return None
+        lm = g.factor_landmark[f_keep]
+        ew = line_factor_residuals(
+            g.poses[g.factor_pose[f_keep]],
+            g.landmarks[lm],
+            g.anchors[lm],
+            g.factor_z[f_keep],
+            g.factor_sqrt_info[f_keep],
+        )
+        c2 = np.sum(ew**2, axis=1)
+        side = np.isin(f_keep, rec.factors)
+        limit = self.config.fusion.audit_max_median_chi2
+        return bool(np.median(c2[side]) <= limit and np.median(c2[~side]) <= limit)
+
+    def _audit(self, records: list[Any]) -> int:
+        """Undo the merges among ``records`` that the estimate does not explain; return how
+        many were undone."""
+        g = self.graph
+        undone = []
+        for rec in records:
+            if self._merge_consistent(rec) is False:
+                g.unmerge(rec)
+                undone.append(rec)
+        if undone:
+            self._recompute_info(np.array(sorted({r.keep for r in undone} | {r.drop for r in undone})))
+            self._extents = g.landmark_extents()
+            self.counters["merges_undone"] += len(undone)
+        return len(undone)
+
     def _fusion_round(self, x_now: FloatArray, everywhere: bool = False) -> int:
         """Merge pairs of graph landmarks that are one wall (near the robot, or everywhere).
 
@@ -766,6 +813,10 @@ class LineSlam:
         t0 = time.perf_counter()
         cfg = self.config
         g = self.graph
+        if self._to_audit:
+            self._audit(self._to_audit)
+            self._to_audit = []
+        n_log = len(g.merge_log)
         alive = g.landmark_alive & np.isfinite(self._extents).all(axis=1)
         if everywhere:
             subset = np.flatnonzero(alive)
@@ -824,6 +875,7 @@ class LineSlam:
         if merged:
             self.counters["landmarks_merged"] += merged
             self._extents = g.landmark_extents()
+            self._to_audit = list(g.merge_log[n_log:])
         self.time_s["fusion"] += time.perf_counter() - t0
         return merged
 
@@ -872,6 +924,12 @@ class LineSlam:
                 lcc,
             )
             if found is None:
+                import slam.frontend.loop_closure as _lc
+
+                self._closure_log.append(
+                    {"keyframe": int(pose), "local": int(local.size), "old": int(near.size),
+                     "window": [wxy, wth], "accepted": False, "reason": _lc.LAST_REASON}
+                )
                 return 0
             self.counters["loop_closure_candidates"] += 1
             return self._apply_closure(local, near, found, pose)
@@ -887,15 +945,26 @@ class LineSlam:
         return LoopLines.from_anchored(v, c, self._extents[lms], self._lm_side.data[lms])
 
     def _apply_closure(self, local: IntArray, old: IntArray, found: Any, pose: int) -> int:
-        """Merge the verified pairs, optimise, keep the closure only if the graph explains it."""
+        """Spread the correction, merge the verified pairs, optimise, and keep the closure only
+        if the graph explains it (else undo everything)."""
         g = self.graph
         lcc = self.config.loop_closure
-        pairs = [(int(old[j]), int(local[i])) for i, j in found.pairs]
-        # one old landmark per local one; several locals may go into one old landmark
+        saved = (g.poses.copy(), g.landmarks.copy())
+        old_last = self._lm_last_kf.data[old[[j for _, j in found.pairs]]]
+        corr = np.asarray(found.correction, dtype=float).copy()
+        if found.single_direction:
+            # along a corridor the correction's component along it is arbitrary: drop it
+            a = self._loop_lines(old[[found.pairs[0][1]]]).alpha[0]
+            n = np.array([np.cos(a), np.sin(a)])
+            corr[:2] = (corr[:2] @ n) * n
+        big = bool(np.hypot(corr[0], corr[1]) > 0.1 or abs(corr[2]) > 0.01)
+        if big:
+            self._spread_correction(corr, g.poses[pose, :2].copy(), int(np.median(old_last)), pose)
         n_log = len(g.merge_log)
         done: set[int] = set()
         merged_into: set[int] = set()
-        for keep, drop in pairs:
+        for i, j in found.pairs:
+            keep, drop = int(old[j]), int(local[i])
             if drop in done or not (g.landmark_alive[keep] and g.landmark_alive[drop]):
                 continue
             self._merge(keep, drop)
@@ -903,39 +972,101 @@ class LineSlam:
             merged_into.add(keep)
         if not done:
             return 0
-        # a good initial guess for the poses since the old landmarks were seen: the correction
-        # applies to the recent part of the trajectory (the back-end spreads it properly)
-        self.backend.update(g)
-        self.backend.optimize(g)
-        self._extents = g.landmark_extents()
-        f = g.factors_of_landmarks(np.array(sorted(merged_into)))
-        lm = g.factor_landmark[f]
-        ew = line_factor_residuals(
-            g.poses[g.factor_pose[f]], g.landmarks[lm], g.anchors[lm], g.factor_z[f], g.factor_sqrt_info[f]
-        )
-        chi2 = float(np.mean(np.sum(ew**2, axis=1)))
-        entry = {
+        self._converge(reset=big)
+        records = list(g.merge_log[n_log:])
+        verdict = [self._merge_consistent(r) for r in records]
+        good = sum(v is True for v in verdict)
+        entry: dict[str, Any] = {
             "keyframe": int(pose),
             "pairs": len(done),
+            "consistent_pairs": good,
             "correction": [float(v) for v in found.correction],
+            "single_direction": bool(found.single_direction),
             "score": float(found.score),
-            "chi2_per_factor": chi2,
+            "runner_up": float(found.runner_up),
         }
-        if chi2 <= lcc.max_chi2_per_factor:
+        if good >= max(lcc.min_matches - 1, 2) and good >= 0.6 * len(records):
+            # explained (up to a few wrong pairs, which are undone)
+            if self._audit(records):
+                self._converge(reset=False)
             entry["accepted"] = True
             self._closure_log.append(entry)
             self.counters["loop_closures"] += 1
             return 1
-        # not explained: undo the merges (newest first) and converge again
-        for rec in reversed(g.merge_log[n_log:]):
+        # not explained: undo the merges (newest first), restore the estimate, converge again
+        for rec in reversed(records):
             g.unmerge(rec)
-        self.backend.update(g)
-        self.backend.optimize(g)
-        self._extents = g.landmark_extents()
+        self._recompute_info(np.array(sorted(merged_into | done)))
+        g.poses[:] = saved[0]
+        g.landmarks[:] = saved[1]
+        self._converge(reset=True)
         entry["accepted"] = False
         self._closure_log.append(entry)
         self.counters["loop_closures_undone"] += 1
         return 0
+
+    def _converge(self, reset: bool) -> None:
+        """Bring the back-end to the graph (rebuilding iSAM2 from the graph's estimate after a
+        large change of it), converge, and refresh the extents."""
+        g = self.graph
+        t0 = time.perf_counter()
+        if reset:
+            self.backend.reset(g)
+        else:
+            self.backend.update(g)
+        self.backend.optimize(g)
+        self._extents = g.landmark_extents()
+        self.time_s["backend"] += time.perf_counter() - t0
+
+    def _spread_correction(
+        self, correction: FloatArray, center: FloatArray, k_old: int, pose: int
+    ) -> None:
+        """Move the estimate towards a loop closure before optimising (a good starting point).
+
+        The local submap (the last ``local_keyframes`` keyframes) moves by the whole correction
+        ``T`` (``p → R(dθ)(p − c) + c + t``), poses since ``k_old`` (when the old landmarks were
+        last seen) by the fraction ``f`` of the path driven since then, ``T_f = (f t, f dθ)``;
+        landmarks move with the fraction of their last sighting.
+        """
+        g = self.graph
+        lcc = self.config.loop_closure
+        path = self._kf_path.data
+        start = max(pose - lcc.local_keyframes, 0)
+        span = max(path[start] - path[k_old], 1e-9)
+
+        def fraction(kf: IntArray) -> FloatArray:
+            return np.clip((path[kf] - path[k_old]) / span, 0.0, 1.0)
+
+        tx, ty, dth = (float(v) for v in correction)
+        f = fraction(np.arange(g.n_poses))
+        ang = f * dth
+        cs, sn = np.cos(ang), np.sin(ang)
+        d = g.poses[:, :2] - center
+        g.poses[:, 0] = cs * d[:, 0] - sn * d[:, 1] + center[0] + f * tx
+        g.poses[:, 1] = sn * d[:, 0] + cs * d[:, 1] + center[1] + f * ty
+        g.poses[:, 2] = np.asarray(wrap_angle(g.poses[:, 2] + ang))
+        alive = np.flatnonzero(g.landmark_alive)
+        fl = fraction(self._lm_last_kf.data[alive])
+        la = g.landmarks_r_alpha[alive]
+        a_new = la[:, 1] + fl * dth
+        n_old = np.stack([np.cos(la[:, 1]), np.sin(la[:, 1])], -1)
+        n_new = np.stack([np.cos(a_new), np.sin(a_new)], -1)
+        r_new = la[:, 0] - n_old @ center + n_new @ center + n_new @ np.array([tx, ty]) * fl
+        g.set_landmarks_r_alpha(alive, np.column_stack([r_new, a_new]))
+
+    def _recompute_info(self, lms: IntArray) -> None:
+        """Front-end information of ``lms`` from their factors (after undoing merges)."""
+        g = self.graph
+        for j in lms:
+            f = np.flatnonzero(g.factor_landmark == j)
+            if f.size == 0:
+                continue
+            poses = g.poses[g.factor_pose[f]]
+            _, P = observe_anchored(
+                g.factor_z[f], g.factor_cov[f], poses, np.broadcast_to(g.anchors[j], (f.size, 2))
+            )
+            self._lm_info.data[j] = np.linalg.inv(P).sum(axis=0)
+            self._lm_last_kf.data[j] = int(g.factor_pose[f].max())
 
     # -- finishing ---------------------------------------------------------------------------
     def optimize(self) -> dict[str, Any]:
