@@ -25,6 +25,7 @@ __all__ = [
     "KeyframeConfig",
     "LoopClosureConfig",
     "MotionNoiseConfig",
+    "RelocalisationConfig",
     "SlamConfig",
     "SolverConfig",
     "TentativeConfig",
@@ -277,6 +278,55 @@ class Isam2Config:
 
 
 @dataclass(frozen=True)
+class RelocalisationConfig:
+    """Fallback of the front end when the registration pairs too few lines (wheel slip, a
+    fast turn: the odometry prediction is too far off for the χ² gates): the scan's lines are
+    searched for in the local map over a window with :func:`slam.frontend.loop_closure.
+    search_loop_closure` (same meaning of the fields as in :class:`LoopClosureConfig`), and the
+    registration is run again from the correction found.
+
+    Attributes
+    ----------
+    enabled : bool
+    min_matched_fraction : float
+        Relocalise when the registration paired fewer than this fraction of the lines (and
+        fewer than all of them).
+    window_xy_m, window_theta_rad : float
+        Search window around the odometry prediction.
+    """
+
+    enabled: bool = True
+    min_matched_fraction: float = 0.5
+    window_xy_m: float = 0.5
+    window_theta_rad: float = 0.4
+    cell_m: float = 0.05
+    angle_tolerance_rad: float = 0.04
+    offset_tolerance_m: float = 0.1
+    overlap_margin_m: float = 0.3
+    min_matched_length_m: float = 1.0
+    min_matches: int = 2
+    min_direction_angle_rad: float = 0.5
+    max_ambiguity: float = 0.8
+    corridor_closures: bool = True
+
+    def __post_init__(self) -> None:
+        _require(0.0 <= self.min_matched_fraction <= 1.0, "min_matched_fraction in [0, 1]")
+        for name in (
+            "window_xy_m",
+            "window_theta_rad",
+            "cell_m",
+            "angle_tolerance_rad",
+            "offset_tolerance_m",
+            "min_direction_angle_rad",
+        ):
+            _pos(name, getattr(self, name))
+        _nonneg("overlap_margin_m", self.overlap_margin_m)
+        _nonneg("min_matched_length_m", self.min_matched_length_m)
+        _require(self.min_matches >= 2, "min_matches must be >= 2")
+        _require(0.0 < self.max_ambiguity <= 1.0, "max_ambiguity must be in (0, 1]")
+
+
+@dataclass(frozen=True)
 class FrontendConfig:
     """Registration of each keyframe's lines against the local map (initial guess, association).
 
@@ -291,6 +341,8 @@ class FrontendConfig:
     ----------
     registration : RegistrationConfig
         Gates, iterations, kernel of :func:`slam.frontend.register_lines`.
+    relocalisation : RelocalisationConfig
+        Fallback search when the registration pairs too few lines.
     prior_sigma_xy_m, prior_sigma_theta_rad : float
         Added (in quadrature) to the odometry covariance of the prediction used as the
         registration's prior, so that a bad odometry step (wheel slip) can be corrected.
@@ -310,6 +362,7 @@ class FrontendConfig:
     """
 
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+    relocalisation: RelocalisationConfig = field(default_factory=RelocalisationConfig)
     prior_sigma_xy_m: float = 0.02
     prior_sigma_theta_rad: float = 0.01
     drift_xy_per_m: float = 0.01

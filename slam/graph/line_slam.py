@@ -172,6 +172,15 @@ class _LocalMap:
     kind: IntArray
     index: IntArray
     lines: LineSet
+    rho_phi: FloatArray
+    anchors: FloatArray
+    extents: FloatArray
+    side: FloatArray
+
+    @classmethod
+    def empty(cls) -> _LocalMap:
+        z2 = np.zeros((0, 2))
+        return cls(np.zeros(0, np.intp), np.zeros(0, np.intp), LineSet.empty(), z2, z2, z2, np.zeros(0))
 
 
 class LineSlam:
@@ -239,6 +248,8 @@ class LineSlam:
             "tentative_promoted": 0,
             "tentative_expired": 0,
             "registrations_failed": 0,
+            "relocalisations": 0,
+            "relocalisations_used": 0,
             "loop_closure_attempts": 0,
             "loop_closure_candidates": 0,
             "loop_closures": 0,
@@ -465,6 +476,10 @@ class LineSlam:
         ra: list[FloatArray] = []
         cov: list[FloatArray] = []
         ends: list[FloatArray] = []
+        vals: list[FloatArray] = []
+        anch: list[FloatArray] = []
+        exts: list[FloatArray] = []
+        sides: list[FloatArray] = []
         if g.n_landmarks:
             cand = candidate_landmarks(
                 x_pred,
@@ -488,6 +503,10 @@ class LineSlam:
                 ra.append(r_alpha_from_anchored(v, c))
                 cov.append(J @ P @ np.swapaxes(J, -1, -2))
                 ends.append(self._endpoints(v, c, self._extents[cand]))
+                vals.append(v)
+                anch.append(c)
+                exts.append(self._extents[cand])
+                sides.append(self._lm_side.data[cand])
         tp = self.tentative
         if len(tp):
             t_ra = r_alpha_from_anchored(tp.rho_phi, tp.anchors)
@@ -507,14 +526,26 @@ class LineSlam:
                 ra.append(t_ra[near_t])
                 cov.append(J @ P @ np.swapaxes(J, -1, -2))
                 ends.append(self._endpoints(v, c, tp.extents[near_t]))
+                vals.append(v)
+                anch.append(c)
+                exts.append(tp.extents[near_t])
+                sides.append(tp.side[near_t])
         if not kinds:
-            return _LocalMap(np.zeros(0, np.intp), np.zeros(0, np.intp), LineSet.empty())
+            return _LocalMap.empty()
         kind = np.concatenate(kinds)
         index = np.concatenate(idx)
         lines = LineSet(
             np.concatenate(ra), np.concatenate(cov), np.concatenate(ends), np.arange(kind.size)
         )
-        return _LocalMap(kind, index, lines)
+        return _LocalMap(
+            kind,
+            index,
+            lines,
+            np.concatenate(vals),
+            np.concatenate(anch),
+            np.concatenate(exts),
+            np.concatenate(sides),
+        )
 
     # -- one keyframe ------------------------------------------------------------------------
     def _keyframe(
@@ -539,7 +570,7 @@ class LineSlam:
         x0 = x_pred
         matches = np.full(K, -1, dtype=np.int64)
         n_compat = np.zeros(K, dtype=np.int64)
-        local = _LocalMap(np.zeros(0, np.intp), np.zeros(0, np.intp), LineSet.empty())
+        local = _LocalMap.empty()
         reg_cov: FloatArray | None = None
         if K and not first:
             local = self._local_map(x_pred)
@@ -550,6 +581,14 @@ class LineSlam:
                 )
                 scan_set = LineSet(obs.z, obs.R, obs.endpoints, np.arange(K))
                 reg = register_lines(scan_set, local.lines, x_pred, P0, fc.registration)
+                rc = fc.relocalisation
+                if (
+                    rc.enabled
+                    and reg.n_matches < K
+                    and reg.n_matches < rc.min_matched_fraction * K
+                    and len(local.lines) >= rc.min_matches
+                ):
+                    reg = self._relocalise(scan_set, obs, local, x_pred, P0, reg)
                 matches, n_compat = reg.matches, reg.n_compatible
                 if reg.matched:
                     x0 = reg.pose_world_laser
@@ -634,6 +673,42 @@ class LineSlam:
             loop_closures=closures,
             warnings=tuple(warned),
         )
+
+    def _relocalise(
+        self,
+        scan_set: LineSet,
+        obs: _Lines,
+        local: _LocalMap,
+        x_pred: FloatArray,
+        P0: FloatArray,
+        reg: Any,
+    ) -> Any:
+        """Search the scan's lines in the local map around ``x_pred`` and register again from
+        the correction found; the better of the two registrations (more pairs) is returned."""
+        from slam.frontend.loop_closure import LoopLines, search_loop_closure
+
+        rc = self.config.frontend.relocalisation
+        z = obs.z
+        a_w = np.asarray(wrap_angle(z[:, 1] + x_pred[2]))
+        r_w = z[:, 0] + x_pred[0] * np.cos(a_w) + x_pred[1] * np.sin(a_w)
+        ends = scan_set.endpoints_in(x_pred)
+        scan_ll = LoopLines(a_w, r_w, ends)
+        map_ll = LoopLines.from_anchored(local.rho_phi, local.anchors, local.extents, local.side)
+        found = search_loop_closure(
+            scan_ll, map_ll, x_pred[:2], rc.window_xy_m, rc.window_theta_rad, rc
+        )
+        self.counters["relocalisations"] += 1
+        if found is None:
+            return reg
+        t = found.correction
+        x_new = np.array([x_pred[0] + t[0], x_pred[1] + t[1], float(wrap_angle(x_pred[2] + t[2]))])
+        fc = self.config.frontend
+        P1 = np.diag([fc.prior_sigma_xy_m**2, fc.prior_sigma_xy_m**2, fc.prior_sigma_theta_rad**2])
+        reg2 = register_lines(scan_set, local.lines, x_new, P1 + 0.1 * P0, fc.registration)
+        if reg2.n_matches > reg.n_matches:
+            self.counters["relocalisations_used"] += 1
+            return reg2
+        return reg
 
     def _add_registration_factor(
         self, prev: int, i: int, x_reg: FloatArray, reg_cov: FloatArray
