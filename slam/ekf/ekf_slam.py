@@ -531,7 +531,9 @@ class EkfSlam:
             from linefit.config import LineFitConfig
 
             cfg = self.linefit_config or LineFitConfig()
-            lines = list(extract_lines(scan.ranges, scan.bearings, cfg))
+            lines = list(
+                extract_lines(scan.ranges, scan.bearings, cfg, max_range_m=scan.max_range_m)
+            )
         kept = [
             ln
             for ln in lines

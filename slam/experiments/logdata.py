@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import pickle
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -79,23 +79,26 @@ def load_log(
     """
     import time
 
-    from linefit import extract_lines
+    from slam.extraction import iter_scan_lines
     from slam.io import iter_scans, resolve_log
 
     resolved = resolve_log(str(source))
     scans: list[Scan] = []
     lines: list[list[Line]] = []
-    t_extract = 0.0
-    for scan in iter_scans(resolved.log):
-        if max_scans is not None and len(scans) >= max_scans:
-            break
-        t0 = time.perf_counter()
-        fitted = extract_lines(scan.ranges, scan.bearings, linefit_config)
-        t_extract += time.perf_counter() - t0
-        scans.append(scan)
+    t0 = time.perf_counter()
+
+    def limited() -> Iterator[Scan]:
+        for scan in iter_scans(resolved.log):
+            if max_scans is not None and len(scans) >= max_scans:
+                return
+            scans.append(scan)
+            yield scan
+
+    for _scan, fitted in iter_scan_lines(limited(), linefit_config):
         lines.append(list(fitted))
-        if progress is not None and len(scans) % 100 == 0:
-            progress(len(scans))
+        if progress is not None and len(lines) % 100 == 0:
+            progress(len(lines))
+    t_extract = time.perf_counter() - t0  # includes reading (streamed together)
     if not scans:
         raise DatasetError(f"{resolved.log}: no laser scans in the log")
     gt = resolved.log.parent / "ground_truth.tum"
@@ -113,8 +116,19 @@ def load_log(
     )
 
 
+# Bump when what a cache file holds changes meaning (2: max-range readings excluded).
+_CACHE_VERSION = 2
+
+
 def _cache_key(source: str | Path, linefit_config: LineFitConfig, max_scans: int | None) -> str:
-    text = to_toml_string(config_to_dict(linefit_config)) + f"{source}|{max_scans}"
+    from slam.io import resolve_log
+
+    log = Path(resolve_log(str(source)).log)
+    stat = log.stat()
+    text = (
+        to_toml_string(config_to_dict(linefit_config))
+        + f"{_CACHE_VERSION}|{log.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{max_scans}"
+    )
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

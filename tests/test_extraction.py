@@ -1,0 +1,38 @@
+"""slam.extraction: the batch path equals one extract_lines call per scan, max range honoured."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from linefit import LineFitConfig, extract_lines
+from slam.extraction import extract_scan_lines, iter_scan_lines
+from slam.types import Scan
+
+
+def room_scan(index: int, n_beams: int, max_range: float, rng: np.random.Generator) -> Scan:
+    """A wall 3 m ahead on the right half; the left half sees nothing (max-range readings)."""
+    bearings = np.linspace(-np.pi / 2, np.pi / 2, n_beams)
+    ranges = np.full(n_beams, max_range)
+    right = bearings < -0.1
+    ranges[right] = 3.0 / np.cos(bearings[right] + 0.6) + rng.normal(0, 0.005, right.sum())
+    ranges[right & (ranges > max_range)] = max_range
+    return Scan(index, float(index), ranges, bearings, max_range_m=max_range)
+
+
+def test_batches_equal_single_calls_and_skip_no_return_readings():
+    rng = np.random.default_rng(3)
+    scans = [room_scan(i, 180 if i < 5 else 361, 81.83, rng) for i in range(9)]
+    cfg = LineFitConfig()
+    out = list(iter_scan_lines(iter(scans), cfg, batch_size=4))
+    assert [s.index for s, _ in out] == list(range(9))
+    for scan, lines in out:
+        single = extract_lines(scan.ranges, scan.bearings, cfg, max_range_m=scan.max_range_m)
+        assert len(lines) == len(single) >= 1
+        for a, b in zip(lines, single, strict=True):
+            np.testing.assert_allclose([a.r, a.alpha], [b.r, b.alpha], atol=1e-9)
+        # no line is made of the max-range arc: every supporting reading is a real return
+        for line in lines:
+            assert np.all(scan.ranges[line.indices] < scan.max_range_m)
+        np.testing.assert_allclose(
+            [ln.r for ln in extract_scan_lines(scan, cfg)], [ln.r for ln in lines], atol=1e-12
+        )
