@@ -459,7 +459,7 @@ class LoopClosureConfig:
     window_theta_per_m: float = 0.005
     min_window_xy_m: float = 0.5
     min_window_theta_rad: float = 0.05
-    max_window_xy_m: float = 5.0
+    max_window_xy_m: float = 10.0
     max_window_theta_rad: float = 0.5
     cell_m: float = 0.1
     angle_tolerance_rad: float = 0.04
