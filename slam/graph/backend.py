@@ -84,8 +84,10 @@ class Isam2Backend:
         self.resets = 0
 
     def reset(self, graph: LineGraph) -> None:
-        """Start iSAM2 afresh from the graph's current estimate (after a large correction of
-        it, e.g. a loop closure spread over the trajectory)."""
+        """Start iSAM2 afresh from the graph's current estimate.
+
+        Used after a large correction of it, e.g. a loop closure spread over the trajectory.
+        """
         stats = self.solver.stats
         self.solver = Isam2Solver(self.solver.config, self.solver.solver)
         self.solver.stats = stats

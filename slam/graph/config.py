@@ -279,11 +279,12 @@ class Isam2Config:
 
 @dataclass(frozen=True)
 class RelocalisationConfig:
-    """Fallback of the front end when the registration pairs too few lines (wheel slip, a
-    fast turn: the odometry prediction is too far off for the χ² gates): the scan's lines are
-    searched for in the local map over a window with :func:`slam.frontend.loop_closure.
-    search_loop_closure` (same meaning of the fields as in :class:`LoopClosureConfig`), and the
-    registration is run again from the correction found.
+    """Relocalisation: the front end's fallback when the registration pairs too few lines.
+
+    After wheel slip or a fast turn the odometry prediction is too far off for the χ² gates:
+    the scan's lines are then searched for in the local map over a window with
+    :func:`slam.frontend.loop_closure.search_loop_closure` (same meaning of the fields as in
+    :class:`LoopClosureConfig`), and the registration is run again from the correction found.
 
     Attributes
     ----------
@@ -580,9 +581,7 @@ class SlamConfig:
             len(self.pose_base_laser) == 3 and all(math.isfinite(v) for v in self.pose_base_laser),
             "pose_base_laser must be three finite numbers (x, y, theta)",
         )
-        _require(
-            self.laser_odometry in ("logged", "base"), "laser_odometry must be logged or base"
-        )
+        _require(self.laser_odometry in ("logged", "base"), "laser_odometry must be logged or base")
         _require(
             self.mount_source in ("catalog", "config"), "mount_source must be catalog or config"
         )
