@@ -145,7 +145,8 @@ class FusionConfig:
         measurements (together) they had then.
     audit_max_median_chi2 : float
         A merge (fusion or loop closure) is undone when, some keyframes later, the median
-        whitened squared residual of either side's line factors exceeds this (χ²₂ 99 %: 9.21).
+        whitened squared residual of either side's line factors exceeds this (χ²₂ 99 %: 9.21);
+        fusion never merges an undone pair again.
     """
 
     enabled: bool = True
