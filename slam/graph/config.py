@@ -452,6 +452,9 @@ class LoopClosureConfig:
     max_chi2_per_factor : float
         Acceptance after merging and optimising: mean whitened squared residual of the line
         factors on the merged landmarks (2 dof each).
+    max_updates : int
+        Most iSAM2 updates (``Isam2Solver.optimize``) run to converge a candidate closure and
+        to return from a rejected one (the batch back-end always solves to convergence).
     """
 
     enabled: bool = True
@@ -473,10 +476,12 @@ class LoopClosureConfig:
     max_ambiguity: float = 0.7
     corridor_closures: bool = True
     max_chi2_per_factor: float = 6.0
+    max_updates: int = 20
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
         _require(self.local_keyframes >= 1, "local_keyframes must be >= 1")
+        _require(self.max_updates >= 1, "max_updates must be >= 1")
         _require(self.min_matches >= 2, "min_matches must be >= 2")
         for name in (
             "window_xy_per_m",

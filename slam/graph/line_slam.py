@@ -1138,7 +1138,7 @@ class LineSlam:
             self.backend.reset(g)
         else:
             self.backend.update(g)
-        self.backend.optimize(g)
+        self.backend.optimize(g, self.config.loop_closure.max_updates)
         self._extents = g.landmark_extents()
         self.time_s["backend"] += time.perf_counter() - t0
 
