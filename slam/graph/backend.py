@@ -50,7 +50,10 @@ class Backend(Protocol):
     def update(self, graph: LineGraph) -> None:
         """Take in what was added to ``graph`` since the last call; refresh its estimate."""
 
-    def optimize(self, graph: LineGraph) -> dict[str, Any]:
+    def reset(self, graph: LineGraph) -> None:
+        """Take in a graph whose estimate was changed from outside."""
+
+    def optimize(self, graph: LineGraph, max_updates: int | None = None) -> dict[str, Any]:
         """Converge the whole problem; return statistics."""
 
     def joint_covariance(
@@ -78,6 +81,19 @@ class Isam2Backend:
         self.estimate_moved = False
         self._last_full = 0
         self.optimize_updates = 0
+        self.resets = 0
+
+    def reset(self, graph: LineGraph) -> None:
+        """Start iSAM2 afresh from the graph's current estimate.
+
+        Used after a large correction of it, e.g. a loop closure spread over the trajectory.
+        """
+        stats = self.solver.stats
+        self.solver = Isam2Solver(self.solver.config, self.solver.solver)
+        self.solver.stats = stats
+        self.resets += 1
+        self.update(graph)
+        self.estimate_moved = True
 
     def update(self, graph: LineGraph) -> None:
         """One ``ISAM2.update``."""
@@ -86,10 +102,10 @@ class Isam2Backend:
         self.estimate_moved = full != self._last_full
         self._last_full = full
 
-    def optimize(self, graph: LineGraph) -> dict[str, Any]:
-        """Extra updates until iSAM2 settles."""
+    def optimize(self, graph: LineGraph, max_updates: int | None = None) -> dict[str, Any]:
+        """Extra updates until iSAM2 settles (at most ``max_updates``, default the config's)."""
         t0 = time.perf_counter()
-        runs = self.solver.optimize(graph)
+        runs = self.solver.optimize(graph, max_updates)
         self.optimize_updates += runs
         self.estimate_moved = True
         return {"updates": runs, "time_s": time.perf_counter() - t0}
@@ -122,6 +138,7 @@ class Isam2Backend:
             "blocks_merged": s.blocks_merged,
             "variables_relinearized": s.variables_relinearized,
             "full_refreshes": s.full_refreshes,
+            "resets": self.resets,
             "time_s": dict(s.time_s),
         }
 
@@ -143,6 +160,11 @@ class BatchBackend:
         self.iterations = 0
         self.time_s = {"solve": 0.0, "marginals": 0.0}
 
+    def reset(self, graph: LineGraph) -> None:
+        """The estimate was changed from outside: the marginals are stale."""
+        self._marginals = None
+        self.estimate_moved = True
+
     def update(self, graph: LineGraph) -> None:
         """Solve every ``batch_interval`` keyframes."""
         self._since_solve += 1
@@ -160,8 +182,8 @@ class BatchBackend:
         self._marginals = None
         self.estimate_moved = True
 
-    def optimize(self, graph: LineGraph) -> dict[str, Any]:
-        """A full solve to convergence."""
+    def optimize(self, graph: LineGraph, max_updates: int | None = None) -> dict[str, Any]:
+        """A full solve to convergence (``max_updates`` is for iSAM2 and ignored here)."""
         t0 = time.perf_counter()
         st = self.solver.solve(graph)
         self.solves += 1
