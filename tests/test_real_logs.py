@@ -1,0 +1,71 @@
+"""Line SLAM on excerpts of the public logs, against their Kümmerle relations (regression).
+
+Each case runs ``lineslam slam``'s pipeline (:func:`slam.runner.run_slam`, default
+configuration, the same for every log) on the first scans of a log and evaluates the relations
+whose two time stamps both fall inside the excerpt.  The bounds are the errors measured when
+the test was written plus a margin of about a quarter (see ``docs/real-logs.md``): a change that
+makes the estimate worse on real data fails here.  The Intel excerpt contains the first loop
+(scans ~300 and ~1980 see the same room), so it also guards loop closing; there the estimate
+must beat odometry by far.
+"""
+
+from __future__ import annotations
+
+from itertools import islice
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from slam.config import RunConfig
+from slam.evaluation import relations_metric, relations_within
+from slam.io.carmen import iter_scans
+from slam.io.catalog import resolve_log
+from slam.io.relations import read_relations
+from slam.io.trajectory import Trajectory
+from slam.io.tum import read_tum
+from slam.runner import run_slam
+
+# (log, scans, bound on the mean abs translational error (m), on the rotational error (deg),
+#  required ratio odometry error / our error)
+CASES = [
+    # measured 2026-11-29: 0.0219 m, 0.517° (odometry 0.189 m, 3.94°), 246 relations
+    pytest.param("intel", 2000, 0.028, 0.65, 5.0, id="intel-2000"),
+    # measured: 0.0386 m, 0.659° (odometry 0.0356 m, 0.731°), 189 relations
+    pytest.param("aces", 1200, 0.048, 0.82, None, id="aces-1200"),
+    # measured: 0.0381 m, 0.929° (odometry 0.0461 m, 1.518°), 169 relations
+    pytest.param("fr079", 800, 0.048, 1.16, None, id="fr079-800"),
+]
+
+
+def odometry_trajectory(log: Path, n_scans: int) -> Trajectory:
+    """The odometry poses stored with the first ``n_scans`` laser scans (the relations' frame)."""
+    scans = list(islice(iter_scans(log), n_scans))
+    poses = [s.pose_odom_base if s.pose_odom_base is not None else s.pose_odom_laser for s in scans]
+    return Trajectory.from_arrays([s.timestamp for s in scans], np.asarray(poses))
+
+
+@pytest.mark.parametrize(("name", "scans", "max_trans_m", "max_rot_deg", "min_gain"), CASES)
+def test_excerpt_relations_error_stays_within_its_bound(
+    shared_data, tmp_path, monkeypatch, name, scans, max_trans_m, max_rot_deg, min_gain
+):
+    monkeypatch.setenv("LINESLAM_DATA", str(shared_data))
+    resolved = resolve_log(name, root=shared_data)
+    assert resolved.relations is not None
+    summary = run_slam(name, tmp_path, RunConfig(), max_scans=scans)
+    assert summary["scans"] == scans
+
+    ours = read_tum(tmp_path / "trajectory.tum")
+    relations = relations_within(read_relations(resolved.relations), ours.timestamps)
+    assert len(relations) >= 50, "too few relations inside the excerpt to measure anything"
+    metric = relations_metric(ours, relations)
+    odometry = relations_metric(odometry_trajectory(resolved.log, scans), relations)
+    print(
+        f"{name}[:{scans}] {metric.n_used} relations: ours {metric.abs_trans_m} m, "
+        f"{metric.abs_rot_deg} deg; odometry {odometry.abs_trans_m} m, {odometry.abs_rot_deg} deg"
+    )
+    assert metric.n_unmatched == 0
+    assert metric.abs_trans_m.mean <= max_trans_m
+    assert metric.abs_rot_deg.mean <= max_rot_deg
+    if min_gain is not None:
+        assert odometry.abs_trans_m.mean >= min_gain * metric.abs_trans_m.mean
