@@ -108,6 +108,8 @@ def test_ekf_command_on_the_demo_log_beats_odometry(tmp_path):
 
 def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_path):
     out = tmp_path / "cmp"
+    # the simulated fits' covariances are exact: no model-error floor, so NEES means something
+    (tmp_path / "exact.toml").write_text("[ekf]\nline_sigma_extra = [0.0, 0.0]\n")
     main(
         [
             "compare",
@@ -115,6 +117,8 @@ def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_p
             "--out",
             str(out),
             "--quiet",
+            "--config",
+            str(tmp_path / "exact.toml"),
             "--max-scans",
             "200",
             "--variants",

@@ -10,7 +10,7 @@ import pytest
 
 from linefit.errors import ConfigError
 from slam.config import RunConfig
-from slam.ekf import EkfConfig, EkfSlam, OdometryNoiseConfig
+from slam.ekf import EkfConfig, EkfSlam, MotionNoiseConfig
 from slam.ekf.augment import augment_state, landmark_from_measurement
 from slam.ekf.conventions import (
     cov_state_to_tangent,
@@ -104,7 +104,7 @@ def test_covariance_conversion_round_trip_and_first_order_equivalence(rng):
 def test_motion_jacobian_and_process_noise(rng):
     pose = np.array([0.5, 1.0, 2.8])
     u = np.array([0.3, -0.05, 0.2])
-    Q_u = odometry_covariance(u, OdometryNoiseConfig())
+    Q_u = odometry_covariance(u, MotionNoiseConfig())
     new, F, Q = predict_pose(pose, u, Q_u)
 
     def f(p):
@@ -121,8 +121,13 @@ def test_motion_jacobian_and_process_noise(rng):
     assert np.max(np.abs(np.cov(d.T) - Q) / scale) < 0.03
     # noise per metre / per radian as documented
     d = math.hypot(0.3, 0.05)
-    assert Q_u[0, 0] == pytest.approx(0.02**2 * d + 1e-4**2)
-    assert Q_u[2, 2] == pytest.approx(0.02**2 * 0.2 + 0.005**2 * d + 1e-4**2)
+    m = MotionNoiseConfig()
+    assert Q_u[0, 0] == pytest.approx(
+        m.sigma_xy_per_m**2 * d + m.sigma_xy_per_rad**2 * 0.2 + m.sigma_xy_min_m**2
+    )
+    assert Q_u[2, 2] == pytest.approx(
+        m.sigma_theta_per_rad**2 * 0.2 + m.sigma_theta_per_m**2 * d + m.sigma_theta_min_rad**2
+    )
 
 
 # -------------------------------------------------------------------------------- augmentation
@@ -385,7 +390,7 @@ def test_bad_input_gives_clear_errors():
         with pytest.raises(ConfigError):
             EkfConfig(**kwargs)
     with pytest.raises(ConfigError):
-        OdometryNoiseConfig(sigma_xy_min_m=0.0)
+        MotionNoiseConfig(sigma_xy_min_m=0.0)
 
 
 def _line_run(seed=3, loops=1.0):
@@ -457,7 +462,7 @@ def test_run_config_round_trip_with_ekf_table(tmp_path):
             association="jcbb",
             max_landmarks=300,
             max_runtime_s=60.0,
-            odometry=OdometryNoiseConfig(sigma_trans_per_m=0.1),
+            odometry=MotionNoiseConfig(sigma_xy_per_m=0.1),
             initial_pose_sigma=(0.1, 0.1, 0.01),
         )
     )

@@ -6,10 +6,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-from slam.ekf.motion import OdometryNoiseConfig
 from slam.errors import ConfigError
+from slam.graph.config import MotionNoiseConfig
 
-__all__ = ["EkfConfig", "OdometryNoiseConfig"]
+__all__ = ["EkfConfig", "MotionNoiseConfig"]
 
 
 def _probability(name: str, value: float) -> None:
@@ -23,8 +23,10 @@ class EkfConfig:
 
     Attributes
     ----------
-    odometry : OdometryNoiseConfig
-        Motion model (noise per metre and per radian) of the prediction.
+    odometry : MotionNoiseConfig
+        Motion model of the prediction: the graph back-end's class
+        (:class:`slam.graph.config.MotionNoiseConfig`) with its defaults, so both estimators
+        assume the same odometry noise unless told otherwise.
     association : {"nn", "jcbb"}
         Nearest neighbour with the individual χ² gate, or joint compatibility branch and bound.
     gate_probability : float
@@ -40,13 +42,18 @@ class EkfConfig:
     overlap_margin_m : float
         A pair must overlap along the landmark (measured segment vs the landmark's seen extent,
         at the predicted pose) with a gap below this (m); ``inf`` disables the test.
+    overlap_sigma_factor : float
+        The margin grows by this many standard deviations of the segment's end points in the
+        world from the predicted pose covariance (as the graph's association,
+        :func:`slam.association.overlap_mask`), so a wall revisited after drift still overlaps.
     segment_gap_m : float
         Seen pieces of a landmark closer than this (m) are merged (``map.json`` segments).
     update_min_distance_m, update_min_angle_rad : float
-        Update policy (the graph's keyframe policy): lines of a scan are used only once the
-        robot moved at least this far (odometry path length) or turned this much since the last
-        update; 0 and 0 use every scan.  Prediction runs on every scan regardless, and every
-        scan gets a pose.
+        Update policy (the graph's keyframe policy): a scan is predicted to and its lines are
+        used only when the odometry since the last update (straight-line distance, heading
+        change) reaches this distance or this angle; 0 and 0 use every scan.  Other scans get
+        the last update's pose composed with their odometry offset and its covariance
+        compounded with the motion noise (as the graph's non-keyframe scans).
     max_landmarks : int
         Guard on the ``O(n²)`` cost per update (``n = 3 + 2·landmarks``).
     on_max_landmarks : {"stop", "freeze"}
@@ -80,20 +87,23 @@ class EkfConfig:
         BLAS threads the runners allow while filtering (:mod:`slam.ekf.threads`); 0 leaves the
         library default.  One is fastest on small shared machines.
     line_sigma_extra : tuple of float
-        Model error ``(σ_r, σ_α)`` (m, rad) added in quadrature to every line's covariance
-        (``R + diag(σ_r², σ_α²)``): real walls are not ideal lines and real range noise is not
-        the fit's model.  Zero (default) trusts the fit's covariance as it is, which is right
-        for simulated data.
+        Model-error floor ``(σ_offset, σ_angle)`` (m, rad) added to every line's covariance,
+        specified at the segment's mid-point (:func:`slam.ekf.model_error.model_error_covariance`):
+        real walls are not ideal lines and real range noise is not the fit's model.  The
+        default (0.02 m, 0.01 rad) is the graph back-end's ``line_model_sigma_*``; zero trusts
+        the fit's covariance as it is (right for simulated data whose fit covariances are
+        exact, e.g. the consistency study).
     """
 
-    odometry: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)
-    association: Literal["nn", "jcbb"] = "nn"
+    odometry: MotionNoiseConfig = field(default_factory=MotionNoiseConfig)
+    association: Literal["nn", "jcbb"] = "jcbb"
     gate_probability: float = 0.999
     joint_gate_probability: float = 0.999
     jcbb_max_nodes: int = 2000
     new_landmark_probability: float = 0.99999
     overlap_margin_m: float = 0.5
-    segment_gap_m: float = 0.5
+    overlap_sigma_factor: float = 3.0
+    segment_gap_m: float = 0.3
     update_min_distance_m: float = 0.2
     update_min_angle_rad: float = 0.15
     max_landmarks: int = 2000
@@ -104,11 +114,11 @@ class EkfConfig:
     merge_probability: float = 0.999
     merge_every_n_updates: int = 1
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    min_landmark_observations: int = 1
-    line_sigma_extra: tuple[float, float] = (0.0, 0.0)
+    min_landmark_observations: int = 3
+    line_sigma_extra: tuple[float, float] = (0.02, 0.01)
     blas_threads: int = 1
     min_line_points: int = 5
-    min_line_length_m: float = 0.1
+    min_line_length_m: float = 0.3
 
     def __post_init__(self) -> None:
         if self.association not in ("nn", "jcbb"):
@@ -126,6 +136,10 @@ class EkfConfig:
             raise ConfigError(f"ekf.jcbb_max_nodes must be >= 1, got {self.jcbb_max_nodes}")
         if not (self.overlap_margin_m >= 0.0):
             raise ConfigError(f"ekf.overlap_margin_m must be >= 0, got {self.overlap_margin_m}")
+        if not (math.isfinite(self.overlap_sigma_factor) and self.overlap_sigma_factor >= 0.0):
+            raise ConfigError(
+                f"ekf.overlap_sigma_factor must be >= 0, got {self.overlap_sigma_factor}"
+            )
         if not (math.isfinite(self.segment_gap_m) and self.segment_gap_m >= 0.0):
             raise ConfigError(f"ekf.segment_gap_m must be >= 0, got {self.segment_gap_m}")
         for name in ("update_min_distance_m", "update_min_angle_rad"):

@@ -60,6 +60,7 @@ from slam.ekf.gating import (
     mahalanobis2_2x2,
     nearest_neighbour,
 )
+from slam.ekf.model_error import model_error_covariance
 from slam.ekf.motion import odometry_covariance, predict_pose
 from slam.ekf.result import EkfResult
 from slam.ekf.update import MeasurementStack, filterpy_update, joseph_update, line_measurements
@@ -170,9 +171,7 @@ class EkfSlam:
         self._extents = LandmarkExtents(self.config.segment_gap_m)
         self._n_obs: list[int] = []
         self._touched: set[int] = set()
-        self._prev_odom: FloatArray | None = None
-        self._since_update_m = 0.0
-        self._since_update_rad = 0.0
+        self._update_odom: FloatArray | None = None
         self._n_updates = 0
         self._started = False
         self.stopped = False
@@ -300,8 +299,6 @@ class EkfSlam:
         if P.shape[0] > 3:
             P[:3, 3:] = F @ P[:3, 3:]
             P[3:, :3] = P[:3, 3:].T
-        self._since_update_m += math.hypot(u[0], u[1])
-        self._since_update_rad += abs(u[2])
 
     def update(self, landmark_idx: IntArray, z_r_alpha: FloatArray, R: FloatArray) -> None:
         """Update with lines ``z`` (laser frame, covariances ``R`` (m, 2, 2)) of known landmarks."""
@@ -355,6 +352,24 @@ class EkfSlam:
         P_ll[:, 1, 1] = self.P[base + 1, base + 1]
         return np.transpose(P_xl, (1, 0, 2)), P_ll
 
+    def _overlap_margins(self, lines: LineSet) -> FloatArray:
+        """Overlap margin per line, as the graph's association computes it.
+
+        ``overlap_margin_m`` + ``overlap_sigma_factor`` σ of the segment's end points in the
+        world from the pose covariance: ``√(λ_max(P_xy) + d² P_θθ)``, ``d`` the end point's
+        distance from the laser.
+        """
+        cfg = self.config
+        margin = np.full(len(lines), cfg.overlap_margin_m)
+        if cfg.overlap_sigma_factor > 0.0 and len(lines):
+            Pp = self.P[:3, :3]
+            var_xy = float(np.max(np.linalg.eigvalsh(0.5 * (Pp[:2, :2] + Pp[:2, :2].T))))
+            reach2 = np.max(np.sum(lines.endpoints**2, axis=-1), axis=-1)
+            margin += cfg.overlap_sigma_factor * np.sqrt(
+                max(var_xy, 0.0) + reach2 * max(float(Pp[2, 2]), 0.0)
+            )
+        return margin
+
     def associate(self, lines: LineSet) -> tuple[IntArray, NDArray[np.bool_]]:
         """Match scan lines to landmarks at the current (predicted) state.
 
@@ -384,7 +399,7 @@ class EkfSlam:
         if math.isfinite(self.config.overlap_margin_m):
             lo, hi = self._extents.intervals(lm[:, 1])
             allowed = overlap_mask(
-                lines.endpoints_in(pose), lm[:, 1], lo, hi, self.config.overlap_margin_m
+                lines.endpoints_in(pose), lm[:, 1], lo, hi, self._overlap_margins(lines)
             )
             d2 = np.where(allowed, d2, np.inf)
         ambiguous = np.any(d2 < self._new_gate, axis=1)
@@ -575,17 +590,33 @@ class EkfSlam:
         t0 = time.perf_counter()
         report = ScanReport(scan.index)
         odom = self._odometry_of(scan)
-        if not self._started:
+        first_scan = not self._started
+        if first_scan:
             self.initialize(odom if self._initial_pose is None else self._initial_pose)
+            delta = np.zeros(3)
+            self._update_odom = odom
         else:
-            assert self._prev_odom is not None
-            self.predict(pose_between(self._prev_odom, odom))
-        self._prev_odom = odom
+            assert self._update_odom is not None
+            delta = pose_between(self._update_odom, odom)
+        # the graph's keyframe rule on the odometry since the last update
+        due = first_scan or (
+            math.hypot(delta[0], delta[1]) >= self.config.update_min_distance_m
+            or abs(delta[2]) >= self.config.update_min_angle_rad
+        )
+        self.stats["scans"] += 1
+        self.stats["points"] += int(np.count_nonzero(scan.valid_mask()))
+        if not due:
+            if lines is not None:
+                self.stats["lines_fit"] += len(lines)
+            report.runtime_s = time.perf_counter() - t0
+            self._record(scan.timestamp, report, delta)
+            return report
+        if not first_scan:
+            self.predict(delta)
+            self._update_odom = odom
         short_before = self.stats["lines_too_short"]
         ls = self._as_lineset(scan, lines)
         report.n_lines = len(ls)
-        self.stats["scans"] += 1
-        self.stats["points"] += int(np.count_nonzero(scan.valid_mask()))
         self.stats["lines_fit"] += len(ls) + self.stats["lines_too_short"] - short_before
         valid = _valid_lines(ls) if len(ls) else np.zeros(0, dtype=bool)
         report.n_invalid = int(np.count_nonzero(~valid))
@@ -593,20 +624,10 @@ class EkfSlam:
         ls = ls.subset(valid)
         extra_r, extra_a = self.config.line_sigma_extra
         if len(ls) and (extra_r > 0.0 or extra_a > 0.0):
-            cov = ls.cov.copy()
-            cov[:, 0, 0] += extra_r**2
-            cov[:, 1, 1] += extra_a**2
+            cov = ls.cov + model_error_covariance(ls.r_alpha, ls.endpoints, extra_r, extra_a)
             ls = LineSet(ls.r_alpha, cov, ls.endpoints, ls.ids)
-        first_scan = self.stats["scans"] == 1
-        due = (
-            first_scan
-            or self._since_update_m >= self.config.update_min_distance_m
-            or self._since_update_rad >= self.config.update_min_angle_rad
-        )
-        if due and len(ls) > 0:
+        if len(ls) > 0:
             self._process_lines(ls, report)
-            self._since_update_m = 0.0
-            self._since_update_rad = 0.0
         report.runtime_s = time.perf_counter() - t0
         self._record(scan.timestamp, report)
         return report
@@ -653,10 +674,24 @@ class EkfSlam:
             self.stats["stopped_at_scan"] = self.stats["scans"] - 1
             self.stats["stop_reason"] = reason
 
-    def _record(self, timestamp: float, report: ScanReport) -> None:
+    def _record(
+        self, timestamp: float, report: ScanReport, offset: FloatArray | None = None
+    ) -> None:
+        """Store the scan's pose and covariance.
+
+        After an update the state's; between updates (``offset``: the odometry since the last
+        one) the state's composed with the offset, its covariance compounded with the motion
+        noise.
+        """
         self._t.append(float(timestamp))
-        self._poses.append(self.x[:3].copy())
-        self._covs.append(self.pose_covariance)
+        if offset is None:
+            self._poses.append(self.x[:3].copy())
+            self._covs.append(self.pose_covariance)
+        else:
+            Q_u = odometry_covariance(offset, self.config.odometry)
+            pose, F, Q = predict_pose(self.x[:3], offset, Q_u)
+            self._poses.append(pose)
+            self._covs.append(cov_state_to_tangent(F @ self.P[:3, :3] @ F.T + Q, pose[2]))
         self._runtime.append(report.runtime_s)
         self._n_lm_hist.append(self.n_landmarks)
         self._elapsed_s += report.runtime_s

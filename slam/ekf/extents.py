@@ -97,7 +97,11 @@ class LandmarkExtents:
 
 
 def overlap_mask(
-    ends_world: FloatArray, alpha: FloatArray, lo: FloatArray, hi: FloatArray, margin_m: float
+    ends_world: FloatArray,
+    alpha: FloatArray,
+    lo: FloatArray,
+    hi: FloatArray,
+    margin_m: float | FloatArray,
 ) -> NDArray[np.bool_]:
     """``(K, M)``: measured segment ``k`` overlaps landmark ``m``'s extent within ``margin_m``.
 
@@ -109,9 +113,10 @@ def overlap_mask(
         Landmark normal angles.
     lo, hi : ndarray, shape (M,)
         Landmark extents along their tangents (:meth:`LandmarkExtents.intervals`).
-    margin_m : float
-        Largest accepted gap (m).
+    margin_m : float or ndarray, shape (K,)
+        Largest accepted gap (m), one for all or one per measured segment.
     """
     s = tangent_coordinates(ends_world[:, None, :, :], np.asarray(alpha)[None, :, None])  # (K,M,2)
     gap = np.maximum(s.min(-1), lo[None, :]) - np.minimum(s.max(-1), hi[None, :])
-    return gap <= margin_m
+    margin = np.asarray(margin_m, dtype=float)
+    return np.asarray(gap <= (margin[:, None] if margin.ndim == 1 else margin))

@@ -5,8 +5,10 @@ front-end choices that matter for the paper's claims (weighted or unweighted lin
 association is part of the estimator name, e.g. ``ekf-nn`` / ``ekf-jcbb``).  A data source gives
 the scans, their lines and what to evaluate against:
 
-* ``sim:WORLD[:LOOPS[:SEED]]`` — the line-level simulator (:mod:`slam.experiments.linesim`),
-  with ground truth: ATE, position error over time and pose NEES over time;
+* ``sim:WORLD[:LOOPS[:SEED]]`` — the line-level simulator (:mod:`slam.experiments.linesim`;
+  the estimators are told its true noise models,
+  :func:`~slam.experiments.linesim.matched_run_config`), with ground truth: ATE, position
+  error over time and pose NEES over time;
 * a CARMEN log (path or registered name) — scans read with :mod:`slam.io`, lines extracted with
   :mod:`linefit` (weighted and unweighted), evaluated with the relations metric.
 
@@ -33,7 +35,12 @@ from slam.config import RunConfig
 from slam.errors import ConfigError, LineslamError
 from slam.evaluation import align_se2
 from slam.experiments.estimators import ESTIMATORS, EstimateOutput, run_estimator
-from slam.experiments.linesim import LineSimConfig, simulate_line_run, world_and_trajectory
+from slam.experiments.linesim import (
+    LineSimConfig,
+    matched_run_config,
+    simulate_line_run,
+    world_and_trajectory,
+)
 from slam.experiments.nees import pose_nees
 from slam.experiments.parallel import map_tasks
 from slam.geometry import pose_between, pose_compose
@@ -195,7 +202,7 @@ def run_variant(task: CompareTask) -> VariantOutcome:
         return _run_on_log(task)
     world, truth = world_and_trajectory(data.name, data.loops)
     run = simulate_line_run(world, truth, task.sim, seed=data.seed)
-    rc = replace(task.run_config, ekf=replace(task.run_config.ekf, odometry=task.sim.odometry))
+    rc = matched_run_config(task.run_config, task.sim)
     t0 = time.perf_counter()
     est = run_estimator(variant.estimator, run.scans, run.lines, rc, truth[0])
     wall = time.perf_counter() - t0

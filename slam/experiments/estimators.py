@@ -6,13 +6,17 @@ covariances (right-perturbation tangent space) and run times.  Names:
 
 * ``"ekf"`` — :class:`slam.ekf.EkfSlam` with ``RunConfig.ekf`` (association as configured);
 * ``"ekf-nn"``, ``"ekf-jcbb"`` — the same with the association forced;
-Lines per scan are a :class:`~slam.frontend.lineset.LineSet` (line-level simulator) or a list
-of :class:`linefit.Line` (a log's fits; estimators apply their own length/support filters).
-
+* ``"graph-isam2"``, ``"graph-batch"`` — :class:`slam.graph.LineSlam` with ``RunConfig.slam``
+  and that back-end (association as configured), then :meth:`~slam.graph.LineSlam.optimize`;
+  ``"graph-isam2-nn"``, ``"graph-isam2-jcbb"``, ``"graph-batch-nn"``, ``"graph-batch-jcbb"``
+  force the association;
 * ``"odometry"`` — dead reckoning with the same motion model, covariance propagated (the EKF
   fed no lines), the reference every SLAM estimator must beat.
 
-The graph back-end registers ``"graph-batch"`` and ``"graph-isam2"`` here once it is on main.
+Lines per scan are a :class:`~slam.frontend.lineset.LineSet` (line-level simulator; converted
+to :class:`linefit.Line` objects for the graph, :func:`slam.experiments.linesim.lineset_to_lines`)
+or a list of :class:`linefit.Line` (a log's fits); estimators apply their own length/support
+filters.  ``None`` lets each estimator extract the lines itself.
 """
 
 from __future__ import annotations
@@ -54,7 +58,8 @@ class EstimateOutput:
     scan_runtime_s : ndarray, shape (N,)
     landmarks_r_alpha : ndarray, shape (M, 2)
     stats : dict
-        Estimator counters; ``stopped_at_scan`` / ``stop_reason`` when it stopped early.
+        Estimator counters; ``stopped_at_scan`` / ``stop_reason`` when it stopped early;
+        ``frame`` (``"laser"`` or ``"base"``) of the poses.
     result : object
         The estimator's own result object (e.g. :class:`slam.ekf.EkfResult`), for writing files.
     """
@@ -89,6 +94,7 @@ def _ekf(
             else:
                 ekf.add_scan(scan, LineSet.empty())
     res = ekf.result()
+    res.stats.setdefault("frame", "laser")
     return EstimateOutput(
         name=name,
         timestamps=res.timestamps,
@@ -97,6 +103,54 @@ def _ekf(
         scan_runtime_s=res.scan_runtime_s,
         landmarks_r_alpha=res.landmarks_r_alpha,
         stats=res.stats,
+        result=res,
+    )
+
+
+def _graph(
+    name: str,
+    scans: Sequence[Scan],
+    lines: ScanLines,
+    config: RunConfig,
+    initial_pose: FloatArray | None,
+    backend: Literal["batch", "isam2"],
+    association: Literal["nn", "jcbb"] | None = None,
+) -> EstimateOutput:
+    import warnings
+
+    from slam.experiments.linesim import lineset_to_lines
+    from slam.graph import LineSlam
+
+    cfg = replace(config.slam, backend=backend)
+    if association is not None:
+        cfg = replace(cfg, association=replace(cfg.association, method=association))
+    if initial_pose is not None and scans:
+        odom0 = scans[0].pose_odom_laser
+        if odom0 is None or not np.allclose(odom0, initial_pose, atol=1e-9):
+            raise ConfigError(
+                f"{name}: the graph's world frame is the first scan's odometry pose; "
+                "an initial pose different from it is not supported"
+            )
+    slam = LineSlam(cfg, config.linefit)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # SlamWarnings are counted in the result's stats
+        for k, scan in enumerate(scans):
+            scan_lines: Any = None if lines is None else lines[k]
+            if isinstance(scan_lines, LineSet):
+                scan_lines = lineset_to_lines(scan_lines)
+            slam.add_scan(scan, scan_lines)
+        slam.optimize()
+    res = slam.result()
+    stats = dict(res.stats)
+    stats["frame"] = getattr(res, "frame", "laser")
+    return EstimateOutput(
+        name=name,
+        timestamps=res.timestamps,
+        poses_world_laser=res.poses_world_laser,
+        pose_covariances=res.pose_covariances,
+        scan_runtime_s=res.scan_runtime_s,
+        landmarks_r_alpha=res.landmarks_r_alpha,
+        stats=stats,
         result=res,
     )
 
@@ -116,6 +170,16 @@ ESTIMATORS: dict[str, EstimatorFn] = {
     "ekf-nn": lambda s, ln, c, p: _ekf("ekf-nn", s, ln, c, p, association="nn"),
     "ekf-jcbb": lambda s, ln, c, p: _ekf("ekf-jcbb", s, ln, c, p, association="jcbb"),
     "odometry": lambda s, ln, c, p: _ekf("odometry", s, ln, c, p, use_lines=False),
+    "graph-isam2": lambda s, ln, c, p: _graph("graph-isam2", s, ln, c, p, "isam2"),
+    "graph-batch": lambda s, ln, c, p: _graph("graph-batch", s, ln, c, p, "batch"),
+    "graph-isam2-nn": lambda s, ln, c, p: _graph("graph-isam2-nn", s, ln, c, p, "isam2", "nn"),
+    "graph-isam2-jcbb": lambda s, ln, c, p: _graph(
+        "graph-isam2-jcbb", s, ln, c, p, "isam2", "jcbb"
+    ),
+    "graph-batch-nn": lambda s, ln, c, p: _graph("graph-batch-nn", s, ln, c, p, "batch", "nn"),
+    "graph-batch-jcbb": lambda s, ln, c, p: _graph(
+        "graph-batch-jcbb", s, ln, c, p, "batch", "jcbb"
+    ),
 }
 
 
