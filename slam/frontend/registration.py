@@ -32,7 +32,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from slam.errors import ConfigError, InputError
 from slam.frontend.lineset import LineSet
@@ -120,6 +119,9 @@ class RegistrationResult:
         Gauss-Newton iterations used in total.
     cost : float
         Final value of the (robust) line cost, without the prior.
+    n_compatible : ndarray of int, shape (K,)
+        Map lines inside each scan line's gate (and overlapping) in the last association round;
+        more than one means the choice was ambiguous.
     """
 
     pose_world_laser: FloatArray
@@ -130,6 +132,7 @@ class RegistrationResult:
     matched: bool
     iterations: int
     cost: float
+    n_compatible: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     stats: dict[str, float] = field(default_factory=dict)
 
 
@@ -179,12 +182,14 @@ def _associate(
     pose_cov: FloatArray,
     gate: float,
     margin: float,
-) -> NDArray[np.int64]:
-    """Nearest compatible map line for each scan line at ``pose`` (−1: none)."""
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Nearest compatible map line for each scan line at ``pose`` (−1: none), and how many
+    map lines each scan line is compatible with.
+    """
     K, M = len(scan), len(map_lines)
     matches = np.full(K, -1, dtype=np.int64)
     if K == 0 or M == 0:
-        return matches
+        return matches, np.zeros(K, dtype=np.int64)
     z_pred, H_x, H_l = predict_line_measurement(map_lines.r_alpha, pose)  # (M,2), (M,2,3), (M,2,2)
     res, sign = line_residual(z_pred[None, :, :], scan.r_alpha[:, None, :])  # (K,M,2), (K,M)
     C_map = H_x @ pose_cov @ H_x.swapaxes(-1, -2) + H_l @ map_lines.cov @ H_l.swapaxes(-1, -2)
@@ -201,7 +206,7 @@ def _associate(
     best = np.argmin(d2, axis=1)
     has = np.isfinite(d2[np.arange(K), best])
     matches[has] = best[has]
-    return matches
+    return matches, np.count_nonzero(ok, axis=1).astype(np.int64)
 
 
 def register_lines(
@@ -244,16 +249,19 @@ def register_lines(
     except np.linalg.LinAlgError as exc:
         raise InputError("register_lines: pose_prior_cov is not positive definite") from exc
     info_prior = np.linalg.inv(L_prior @ L_prior.T)
-    gate = float(chi2.ppf(cfg.gate_probability, 2))
+    gate = float(-2.0 * np.log1p(-cfg.gate_probability))  # χ²₂ quantile, closed form
 
     pose = pose_prior.copy()
     cov_assoc = P_prior
     matches = np.full(len(scan), -1, dtype=np.int64)
+    n_compat = np.zeros(len(scan), dtype=np.int64)
     info_lines = np.zeros((3, 3))
     iterations = 0
     cost = 0.0
     for _round in range(cfg.association_rounds):
-        matches = _associate(scan, map_lines, pose, cov_assoc, gate, cfg.overlap_margin_m)
+        matches, n_compat = _associate(
+            scan, map_lines, pose, cov_assoc, gate, cfg.overlap_margin_m
+        )
         k_idx = np.flatnonzero(matches >= 0)
         if len(k_idx) < cfg.min_matches:
             break
@@ -305,4 +313,5 @@ def register_lines(
         matched=matched,
         iterations=iterations,
         cost=cost,
+        n_compatible=n_compat,
     )

@@ -50,6 +50,9 @@ class Backend(Protocol):
     def update(self, graph: LineGraph) -> None:
         """Take in what was added to ``graph`` since the last call; refresh its estimate."""
 
+    def reset(self, graph: LineGraph) -> None:
+        """Take in a graph whose estimate was changed from outside."""
+
     def optimize(self, graph: LineGraph) -> dict[str, Any]:
         """Converge the whole problem; return statistics."""
 
@@ -78,6 +81,17 @@ class Isam2Backend:
         self.estimate_moved = False
         self._last_full = 0
         self.optimize_updates = 0
+        self.resets = 0
+
+    def reset(self, graph: LineGraph) -> None:
+        """Start iSAM2 afresh from the graph's current estimate (after a large correction of
+        it, e.g. a loop closure spread over the trajectory)."""
+        stats = self.solver.stats
+        self.solver = Isam2Solver(self.solver.config, self.solver.solver)
+        self.solver.stats = stats
+        self.resets += 1
+        self.update(graph)
+        self.estimate_moved = True
 
     def update(self, graph: LineGraph) -> None:
         """One ``ISAM2.update``."""
@@ -122,6 +136,7 @@ class Isam2Backend:
             "blocks_merged": s.blocks_merged,
             "variables_relinearized": s.variables_relinearized,
             "full_refreshes": s.full_refreshes,
+            "resets": self.resets,
             "time_s": dict(s.time_s),
         }
 
@@ -142,6 +157,11 @@ class BatchBackend:
         self.solves = 0
         self.iterations = 0
         self.time_s = {"solve": 0.0, "marginals": 0.0}
+
+    def reset(self, graph: LineGraph) -> None:
+        """The estimate was changed from outside: the marginals are stale."""
+        self._marginals = None
+        self.estimate_moved = True
 
     def update(self, graph: LineGraph) -> None:
         """Solve every ``batch_interval`` keyframes."""

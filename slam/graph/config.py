@@ -16,14 +16,19 @@ from numpy.typing import NDArray
 
 from slam.association import AssociationConfig
 from slam.errors import ConfigError
+from slam.frontend.registration import RegistrationConfig
 
 __all__ = [
+    "FrontendConfig",
     "FusionConfig",
     "Isam2Config",
     "KeyframeConfig",
+    "LoopClosureConfig",
     "MotionNoiseConfig",
+    "RelocalisationConfig",
     "SlamConfig",
     "SolverConfig",
+    "TentativeConfig",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -138,6 +143,9 @@ class FusionConfig:
     retest_growth : float
         A pair that failed the test is tested again once its landmarks have this many times the
         measurements (together) they had then.
+    audit_max_median_chi2 : float
+        A merge (fusion or loop closure) is undone when, some keyframes later, the median
+        whitened squared residual of either side's line factors exceeds this (χ²₂ 99 %: 9.21).
     """
 
     enabled: bool = True
@@ -147,6 +155,7 @@ class FusionConfig:
     max_angle_rad: float = 0.2
     max_distance_m: float = 0.5
     retest_growth: float = 2.0
+    audit_max_median_chi2: float = 9.21
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
@@ -155,6 +164,7 @@ class FusionConfig:
         _nonneg("max_gap_m", self.max_gap_m)
         _pos("max_angle_rad", self.max_angle_rad)
         _pos("max_distance_m", self.max_distance_m)
+        _pos("audit_max_median_chi2", self.audit_max_median_chi2)
 
 
 @dataclass(frozen=True)
@@ -194,7 +204,7 @@ class SolverConfig:
     lambda_initial: float = 1e-3
     lambda_min: float = 1e-7
     lambda_max: float = 1e10
-    robust_kernel: Literal["none", "huber", "cauchy"] = "none"
+    robust_kernel: Literal["none", "huber", "cauchy"] = "cauchy"
     robust_k: float = 3.0
     ordering: Literal["colamd", "metis"] = "colamd"
 
@@ -268,6 +278,227 @@ class Isam2Config:
 
 
 @dataclass(frozen=True)
+class RelocalisationConfig:
+    """Fallback of the front end when the registration pairs too few lines (wheel slip, a
+    fast turn: the odometry prediction is too far off for the χ² gates): the scan's lines are
+    searched for in the local map over a window with :func:`slam.frontend.loop_closure.
+    search_loop_closure` (same meaning of the fields as in :class:`LoopClosureConfig`), and the
+    registration is run again from the correction found.
+
+    Attributes
+    ----------
+    enabled : bool
+    min_matched_fraction : float
+        Relocalise when the registration paired fewer than this fraction of the lines (and
+        fewer than all of them).
+    window_xy_m, window_theta_rad : float
+        Search window around the odometry prediction.
+    """
+
+    enabled: bool = True
+    min_matched_fraction: float = 0.5
+    window_xy_m: float = 0.5
+    window_theta_rad: float = 0.4
+    cell_m: float = 0.05
+    angle_tolerance_rad: float = 0.04
+    offset_tolerance_m: float = 0.1
+    overlap_margin_m: float = 0.3
+    min_matched_length_m: float = 1.0
+    min_matches: int = 2
+    min_direction_angle_rad: float = 0.5
+    max_ambiguity: float = 0.8
+    corridor_closures: bool = True
+
+    def __post_init__(self) -> None:
+        _require(0.0 <= self.min_matched_fraction <= 1.0, "min_matched_fraction in [0, 1]")
+        for name in (
+            "window_xy_m",
+            "window_theta_rad",
+            "cell_m",
+            "angle_tolerance_rad",
+            "offset_tolerance_m",
+            "min_direction_angle_rad",
+        ):
+            _pos(name, getattr(self, name))
+        _nonneg("overlap_margin_m", self.overlap_margin_m)
+        _nonneg("min_matched_length_m", self.min_matched_length_m)
+        _require(self.min_matches >= 2, "min_matches must be >= 2")
+        _require(0.0 < self.max_ambiguity <= 1.0, "max_ambiguity must be in (0, 1]")
+
+
+@dataclass(frozen=True)
+class FrontendConfig:
+    """Registration of each keyframe's lines against the local map (initial guess, association).
+
+    The local map is every landmark (graph or tentative) whose extent is within
+    ``association.max_range_m`` of the predicted pose and whose drift relative to the robot is
+    small: a landmark last seen ``d`` metres of path ago has drifted by about
+    ``σ_xy = drift_xy_per_m·d`` and ``σ_θ = drift_theta_per_m·d``
+    (:func:`slam.frontend.anchored.drift_covariance` adds this to its covariance); beyond
+    ``max_drift_xy_m`` it is left to loop closing.
+
+    Attributes
+    ----------
+    registration : RegistrationConfig
+        Gates, iterations, kernel of :func:`slam.frontend.register_lines`.
+    relocalisation : RelocalisationConfig
+        Fallback search when the registration pairs too few lines.
+    prior_sigma_xy_m, prior_sigma_theta_rad : float
+        Added (in quadrature) to the odometry covariance of the prediction used as the
+        registration's prior, so that a bad odometry step (wheel slip) can be corrected.
+    drift_xy_per_m, drift_theta_per_m : float
+        Drift model of the front end (m per m of path, rad per m of path).
+    max_drift_xy_m : float
+        Landmarks whose drift ``σ_xy`` exceeds this are not offered to the registration.
+    landmark_sigma_r_m, landmark_sigma_alpha_rad : float
+        Floor on a landmark's covariance relative to the poses that saw it (its observations'
+        information, summed, never makes it better than this: their errors are not independent).
+    pose_factor : {"none", "inflated"}
+        ``"none"``: the registration is the initial guess and the association, and the scan's
+        lines enter as line factors only (no double counting).  ``"inflated"``: also a
+        relative-pose factor from the previous keyframe with the registration's covariance
+        multiplied by ``pose_factor_inflation`` (see ``docs/real-logs.md``).
+    pose_factor_inflation : float
+    """
+
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+    relocalisation: RelocalisationConfig = field(default_factory=RelocalisationConfig)
+    prior_sigma_xy_m: float = 0.02
+    prior_sigma_theta_rad: float = 0.01
+    drift_xy_per_m: float = 0.01
+    drift_theta_per_m: float = 0.002
+    max_drift_xy_m: float = 0.2
+    landmark_sigma_r_m: float = 0.005
+    landmark_sigma_alpha_rad: float = 0.002
+    pose_factor: Literal["none", "inflated"] = "none"
+    pose_factor_inflation: float = 4.0
+
+    def __post_init__(self) -> None:
+        for name in (
+            "prior_sigma_xy_m",
+            "prior_sigma_theta_rad",
+            "drift_xy_per_m",
+            "drift_theta_per_m",
+            "landmark_sigma_r_m",
+            "landmark_sigma_alpha_rad",
+        ):
+            _nonneg(name, getattr(self, name))
+        _pos("max_drift_xy_m", self.max_drift_xy_m)
+        _require(self.pose_factor in ("none", "inflated"), "pose_factor must be none or inflated")
+        _require(self.pose_factor_inflation >= 1.0, "pose_factor_inflation must be >= 1")
+
+
+@dataclass(frozen=True)
+class TentativeConfig:
+    """When a new line becomes a graph landmark (:mod:`slam.frontend.tentative`).
+
+    Attributes
+    ----------
+    min_observations : int
+        Keyframes that must observe a line before it gets a graph variable (1: at once).
+    max_age_keyframes : int
+        A tentative line not observed for this many keyframes is dropped with its observations.
+    """
+
+    min_observations: int = 3
+    max_age_keyframes: int = 10
+
+    def __post_init__(self) -> None:
+        _require(self.min_observations >= 1, "min_observations must be >= 1")
+        _require(self.max_age_keyframes >= 1, "max_age_keyframes must be >= 1")
+
+
+@dataclass(frozen=True)
+class LoopClosureConfig:
+    """Loop closing: re-associating revisited walls after drift (:mod:`slam.frontend.loop_closure`).
+
+    Every ``interval_keyframes`` keyframes the local submap (landmarks seen during the last
+    ``local_keyframes`` keyframes) is searched for in the old map (landmarks beyond the front
+    end's drift limit, within reach) over a window that grows with the path since they were
+    seen: rotation candidates from the histogram of line angle differences, translation by a
+    vote of line-pair constraints on a grid, then verification (segment overlap, matched length,
+    two directions, a clear winner) and a refinement.  Verified pairs of landmarks are merged;
+    the closure is kept only if the graph explains it afterwards (the line factors on the merged
+    landmarks have a normalised cost below ``max_chi2_per_factor`` on average), else undone.
+
+    Attributes
+    ----------
+    enabled : bool
+    interval_keyframes : int
+    local_keyframes : int
+    window_xy_per_m, window_theta_per_m : float
+        Search half-widths per metre of path since the old landmarks were seen.
+    min_window_xy_m, min_window_theta_rad, max_window_xy_m, max_window_theta_rad : float
+    cell_m : float
+        Translation grid of the vote.
+    angle_tolerance_rad, offset_tolerance_m : float
+        A transformed local line matches an old line within these.
+    overlap_margin_m : float
+        Largest gap along the line between matched segments.
+    min_matched_length_m : float
+        Matched local lines must add up to this length.
+    min_matches : int
+    min_direction_angle_rad : float
+        Matched lines must include two directions at least this far apart.
+    max_ambiguity : float
+        A distinct runner-up hypothesis with more than this fraction of the winner's score
+        makes the closure ambiguous (rejected).
+    corridor_closures : bool
+        Accept closures whose paired lines are all parallel (a corridor: they fix the
+        rotation and the offset across it, not the position along it) if their matched length
+        is 1.5 × ``min_matched_length_m``; ambiguity is then judged across the corridor only.
+    max_chi2_per_factor : float
+        Acceptance after merging and optimising: mean whitened squared residual of the line
+        factors on the merged landmarks (2 dof each).
+    """
+
+    enabled: bool = True
+    interval_keyframes: int = 5
+    local_keyframes: int = 20
+    window_xy_per_m: float = 0.05
+    window_theta_per_m: float = 0.005
+    min_window_xy_m: float = 0.5
+    min_window_theta_rad: float = 0.05
+    max_window_xy_m: float = 5.0
+    max_window_theta_rad: float = 0.5
+    cell_m: float = 0.1
+    angle_tolerance_rad: float = 0.04
+    offset_tolerance_m: float = 0.15
+    overlap_margin_m: float = 0.3
+    min_matched_length_m: float = 4.0
+    min_matches: int = 4
+    min_direction_angle_rad: float = 0.5
+    max_ambiguity: float = 0.7
+    corridor_closures: bool = True
+    max_chi2_per_factor: float = 6.0
+
+    def __post_init__(self) -> None:
+        _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
+        _require(self.local_keyframes >= 1, "local_keyframes must be >= 1")
+        _require(self.min_matches >= 2, "min_matches must be >= 2")
+        for name in (
+            "window_xy_per_m",
+            "window_theta_per_m",
+            "min_window_xy_m",
+            "min_window_theta_rad",
+            "overlap_margin_m",
+            "min_matched_length_m",
+        ):
+            _nonneg(name, getattr(self, name))
+        for name in (
+            "max_window_xy_m",
+            "max_window_theta_rad",
+            "cell_m",
+            "angle_tolerance_rad",
+            "offset_tolerance_m",
+            "min_direction_angle_rad",
+            "max_chi2_per_factor",
+        ):
+            _pos(name, getattr(self, name))
+        _require(0.0 < self.max_ambiguity <= 1.0, "max_ambiguity must be in (0, 1]")
+
+
+@dataclass(frozen=True)
 class SlamConfig:
     """Everything :class:`slam.graph.LineSlam` needs.
 
@@ -279,8 +510,27 @@ class SlamConfig:
         Sub-configurations.
     prior_sigma_xy_m, prior_sigma_theta_rad : float
         Prior on the first pose (defines the world frame: the first laser pose).
+    frontend, tentative, loop_closure
+        Registration front end, tentative landmarks, loop closing.
     pose_base_laser : tuple of 3 floats
-        Laser pose on the robot base, used when a scan has only the base odometry.
+        Laser pose on the robot base (the mounting): used with the base odometry
+        (``laser_odometry = "base"``, or when a scan has no logged laser pose) and to report
+        base poses (``output_frame = "base"``).
+    mount_source : {"catalog", "config"}
+        ``"catalog"``: for a catalogued log whose laser poses lack the recorded mounting, the
+        runner (:func:`slam.runner.slam_config_for_log`) sets ``pose_base_laser`` from the
+        catalogue, ``laser_odometry = "base"`` and ``output_frame = "base"``; ``"config"``:
+        these three are taken as configured.
+    laser_odometry : {"logged", "base"}
+        ``"logged"``: the laser's odometry is ``Scan.pose_odom_laser`` as logged (else the base
+        odometry composed with the mounting); ``"base"``: always
+        ``Scan.pose_odom_base ∘ pose_base_laser`` (logs whose laser pose lacks the mounting).
+    output_frame : {"laser", "base"}
+        Frame of the trajectory in the result (``summary.json`` says which).
+    line_model_sigma_r_m, line_model_sigma_alpha_rad : float
+        Model error added to every measured line's covariance, at the segment's mid-point
+        (:func:`slam.frontend.anchored.model_error_covariance`); 0 for simulated data whose
+        fit covariances are exact.
     min_line_points : int
         Lines with fewer supporting points are ignored (neither matched nor new landmarks).
     min_line_length_m : float
@@ -303,9 +553,17 @@ class SlamConfig:
     fusion: FusionConfig = field(default_factory=FusionConfig)
     solver: SolverConfig = field(default_factory=SolverConfig)
     isam2: Isam2Config = field(default_factory=Isam2Config)
+    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    tentative: TentativeConfig = field(default_factory=TentativeConfig)
+    loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     prior_sigma_xy_m: float = 1e-4
     prior_sigma_theta_rad: float = 1e-5
     pose_base_laser: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mount_source: Literal["catalog", "config"] = "catalog"
+    laser_odometry: Literal["logged", "base"] = "logged"
+    output_frame: Literal["laser", "base"] = "laser"
+    line_model_sigma_r_m: float = 0.02
+    line_model_sigma_alpha_rad: float = 0.01
     min_line_points: int = 5
     min_line_length_m: float = 0.3
     pose_covariances: Literal["keyframes", "none"] = "keyframes"
@@ -322,6 +580,15 @@ class SlamConfig:
             len(self.pose_base_laser) == 3 and all(math.isfinite(v) for v in self.pose_base_laser),
             "pose_base_laser must be three finite numbers (x, y, theta)",
         )
+        _require(
+            self.laser_odometry in ("logged", "base"), "laser_odometry must be logged or base"
+        )
+        _require(
+            self.mount_source in ("catalog", "config"), "mount_source must be catalog or config"
+        )
+        _require(self.output_frame in ("laser", "base"), "output_frame must be laser or base")
+        _nonneg("line_model_sigma_r_m", self.line_model_sigma_r_m)
+        _nonneg("line_model_sigma_alpha_rad", self.line_model_sigma_alpha_rad)
         _require(self.min_line_points >= 2, "min_line_points must be >= 2")
         _nonneg("min_line_length_m", self.min_line_length_m)
         _require(

@@ -39,14 +39,21 @@ IntArray = NDArray[np.intp]
 
 
 def fusion_candidates(
-    graph: LineGraph, extents: FloatArray, subset: IntArray, config: FusionConfig
+    graph: LineGraph,
+    extents: FloatArray,
+    subset: IntArray,
+    config: FusionConfig,
+    others: IntArray | None = None,
 ) -> list[tuple[int, int]]:
     """Pairs of landmarks that pass the geometric pre-filter of the module docstring.
 
     One landmark of each pair is in ``subset`` (e.g. the recently observed ones), the other is
-    any alive landmark; pairs are returned as sorted ``(a, b)`` with ``a < b``.
+    any alive landmark (or any in ``others``, e.g. those near the robot); pairs are returned as
+    sorted ``(a, b)`` with ``a < b``.
     """
     alive = np.flatnonzero(graph.landmark_alive & np.isfinite(extents).all(axis=1))
+    if others is not None:
+        alive = np.intersect1d(alive, np.union1d(np.asarray(others, dtype=np.intp), subset))
     sub = np.intersect1d(np.asarray(subset, dtype=np.intp), alive)
     if sub.size == 0 or alive.size < 2:
         return []

@@ -113,6 +113,7 @@ class Isam2Solver:
         self._factors_of_pose: dict[int, list[int]] = {}
         self._slot_of_pose: dict[int, int] = {}
         self._pending: set[int] = set()
+        self._weak_prior: set[int] = set()
         self._lin_pose = GrowableArray((3,))
         self._lin_lm = GrowableArray((2,))
         self._theta_poses = GrowableArray((3,))
@@ -243,6 +244,9 @@ class Isam2Solver:
             groups = {int(p) for p in np.unique(graph.factor_pose[rec.factors])}
             self.stats.blocks_merged += len(groups)
             self._pending.update(groups)
+            if rec.undo or rec.drop in self._weak_prior:
+                continue  # a revived landmark keeps its weak prior; only its blocks change
+            self._weak_prior.add(rec.drop)
             t = self._theta_lms.data[rec.drop]
             nfg.add(
                 gtsam.PriorFactorPoint2(

@@ -83,11 +83,15 @@ class GrowableArray:
 
 @dataclass(frozen=True)
 class MergeRecord:
-    """Landmark ``drop`` was fused into ``keep``; ``factors`` are the rewired line factors."""
+    """Landmark ``drop`` was fused into ``keep``; ``factors`` are the rewired line factors.
+
+    ``undo``: the record of an undone merge (the factors went back to ``drop``).
+    """
 
     keep: int
     drop: int
     factors: IntArray
+    undo: bool = False
 
 
 class LineGraph:
@@ -401,6 +405,19 @@ class LineGraph:
             )
         self.merge_log.append(MergeRecord(keep, drop, rewired))
         return rewired
+
+    def unmerge(self, record: MergeRecord) -> None:
+        """Undo a merge (a rejected loop closure): ``record.factors`` go back to
+        ``record.drop``, which is alive again.  Logged in :attr:`merge_log` as a record with
+        ``undo=True`` so that incremental solvers rebuild the affected factors.
+        """
+        keep, drop = record.keep, record.drop
+        if self.landmark_alive[drop] or not self.landmark_alive[keep]:
+            raise EstimationError(f"cannot undo the merge of {drop} into {keep}")
+        self.factor_landmark[record.factors] = drop
+        self.landmark_alive[drop] = True
+        self.landmark_merged_into[drop] = -1
+        self.merge_log.append(MergeRecord(keep, drop, record.factors, undo=True))
 
     # -- derived quantities --------------------------------------------------------------------
     def factors_of_landmarks(self, landmarks: IntArray) -> IntArray:

@@ -1,0 +1,405 @@
+"""Loop-closure search: find the local submap's lines in the old map (numpy only).
+
+After a long loop the drift between the robot and the walls it mapped long ago can be metres and
+tens of degrees, far beyond what χ² gates on the current estimate can bridge safely.  This
+module searches for the rigid correction ``T`` (rotation ``dθ`` about the robot's position
+``c``, then translation ``t``) that lays the recent lines (*local*) onto the old ones, inside a
+window ``|t| ≤ W``, ``|dθ| ≤ Θ``:
+
+1. **Oriented lines.**  Each line carries the normal that points from where it was seen towards
+   the wall (:class:`LoopLines`), so a wall and the other face of a thin wall are never
+   confused and a pair of lines fixes the rotation without the ``π`` ambiguity.
+2. **Rotation candidates**: a histogram of the angle differences ``α_old − α_local`` of all
+   pairs within the window, weighted by the shorter line's length, smoothed over the angle
+   tolerance; its highest peaks.
+3. **Translation vote** per rotation: a pair ``(i, j)`` whose angles agree after the rotation
+   constrains ``t`` to a line, ``n_j·t = r_j − r_i'`` (``r_i'`` the rotated local line's
+   offset).  Each constraint votes, with the local line's length, into the cells of a grid over
+   the window that it crosses (a local line votes at most once per cell); peaks are where
+   constraints from different directions cross (a 2-D Hough transform of the line pairs).
+4. **Verification** of each peak: transform the local lines, pair each with the nearest old line
+   within the angle and offset tolerances whose segment overlaps it, refine ``T`` by weighted
+   least squares on the pairs (re-pairing in between), score = the overlapping length.  A
+   hypothesis counts if it pairs at least ``min_matches`` lines of ``min_matched_length_m``
+   total in two directions at least ``min_direction_angle_rad`` apart (otherwise a corridor
+   slides along itself); the winner must beat every distinct runner-up by the factor
+   ``1 / max_ambiguity`` (repeated structure: rows of identical doors or offices).
+
+The caller (:class:`slam.graph.LineSlam`) merges the paired landmarks and keeps the closure only
+if the optimised graph explains it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from linefit.line import wrap_angle
+
+__all__ = ["LoopClosure", "LoopLines", "search_loop_closure"]
+
+LAST_REASON = ""
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+class LoopConfig(Protocol):
+    """The settings used here (:class:`slam.graph.config.LoopClosureConfig`)."""
+
+    cell_m: float
+    angle_tolerance_rad: float
+    offset_tolerance_m: float
+    overlap_margin_m: float
+    min_matched_length_m: float
+    min_matches: int
+    min_direction_angle_rad: float
+    max_ambiguity: float
+    corridor_closures: bool
+
+
+@dataclass(frozen=True, eq=False)
+class LoopLines:
+    """Oriented world lines ``{p : p·n(α) = r}`` with their seen extents.
+
+    Attributes
+    ----------
+    alpha : ndarray, shape (K,)
+        Normal angle; the normal points from the side the line was seen from towards it.
+    r : ndarray, shape (K,)
+        Offset along that normal (any sign).
+    ends : ndarray, shape (K, 2, 2)
+        World end points of the seen extent.
+    """
+
+    alpha: FloatArray
+    r: FloatArray
+    ends: FloatArray
+
+    def __len__(self) -> int:
+        return int(self.alpha.shape[0])
+
+    @property
+    def length(self) -> FloatArray:
+        """Length of each extent (m)."""
+        return np.asarray(np.linalg.norm(self.ends[:, 1] - self.ends[:, 0], axis=1))
+
+    @classmethod
+    def from_anchored(
+        cls, rho_phi: FloatArray, anchors: FloatArray, extents: FloatArray, side: FloatArray
+    ) -> LoopLines:
+        """From anchored landmarks ``(ρ, φ)`` at ``anchors`` with extents ``(s_lo, s_hi)`` along
+        ``t(φ)`` from the anchor, and ``side`` = +1 where ``n(φ)`` points away from the
+        observer (−1: the other way).
+        """
+        v = np.asarray(rho_phi, dtype=float).reshape(-1, 2)
+        c = np.asarray(anchors, dtype=float).reshape(-1, 2)
+        phi = v[:, 1]
+        n = np.stack([np.cos(phi), np.sin(phi)], -1)
+        t = np.stack([-n[:, 1], n[:, 0]], -1)
+        foot = c + v[:, 0:1] * n
+        ext = np.asarray(extents, dtype=float).reshape(-1, 2)
+        ends = foot[:, None, :] + ext[:, :, None] * t[:, None, :]
+        sgn = np.asarray(side, dtype=float).reshape(-1)
+        r = sgn * (np.sum(c * n, axis=1) + v[:, 0])
+        alpha = np.asarray(wrap_angle(phi + np.where(sgn < 0, np.pi, 0.0)))
+        return cls(alpha, r, ends)
+
+    def transformed(self, correction: FloatArray, center: FloatArray) -> LoopLines:
+        """The lines moved by ``p → R(dθ)(p − c) + c + t``, ``correction = (t_x, t_y, dθ)``."""
+        tx, ty, dth = (float(v) for v in correction)
+        c = np.asarray(center, dtype=float)
+        cs, sn = np.cos(dth), np.sin(dth)
+        Rm = np.array([[cs, -sn], [sn, cs]])
+        ends = (self.ends - c) @ Rm.T + c + np.array([tx, ty])
+        a = np.asarray(wrap_angle(self.alpha + dth))
+        n_old = np.stack([np.cos(self.alpha), np.sin(self.alpha)], -1)
+        n_new = np.stack([np.cos(a), np.sin(a)], -1)
+        r = self.r - n_old @ c + n_new @ c + n_new @ np.array([tx, ty])
+        return LoopLines(a, r, ends)
+
+
+@dataclass(frozen=True, eq=False)
+class LoopClosure:
+    """A verified correction.
+
+    Attributes
+    ----------
+    correction : ndarray, shape (3,)
+        ``(t_x, t_y, dθ)``: ``p → R(dθ)(p − c) + c + t`` lays the local lines onto the old ones.
+    pairs : list of (int, int)
+        ``(local row, old row)`` of the paired lines.
+    score : float
+        Overlapping length of the pairs (m).
+    runner_up : float
+        Score of the best distinct other hypothesis.
+    single_direction : bool
+        All paired lines are (nearly) parallel: a corridor, where the position along it is not
+        constrained (the correction's component along it is arbitrary).
+    """
+
+    correction: FloatArray
+    pairs: list[tuple[int, int]]
+    score: float
+    runner_up: float
+    single_direction: bool = False
+
+
+def _pairs_at(
+    local: LoopLines, old: LoopLines, config: LoopConfig
+) -> tuple[IntArray, IntArray, FloatArray]:
+    """Best old line for each local line (already transformed): rows and overlap lengths."""
+    da = np.abs(np.asarray(wrap_angle(local.alpha[:, None] - old.alpha[None, :])))
+    dr = np.abs(local.r[:, None] - old.r[None, :])
+    ok = (da < config.angle_tolerance_rad) & (dr < config.offset_tolerance_m)
+    if not np.any(ok):
+        return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0)
+    t = np.stack([-np.sin(old.alpha), np.cos(old.alpha)], -1)  # (M, 2)
+    s_loc = np.einsum("kpd,md->kmp", local.ends, t)
+    s_old = np.einsum("mpd,md->mp", old.ends, t)
+    lo = np.maximum(s_loc.min(-1), s_old.min(-1)[None, :])
+    hi = np.minimum(s_loc.max(-1), s_old.max(-1)[None, :])
+    overlap = hi - lo
+    ok &= overlap > -config.overlap_margin_m
+    cost = np.where(ok, dr / config.offset_tolerance_m + da / config.angle_tolerance_rad, np.inf)
+    j = np.argmin(cost, axis=1)
+    i = np.flatnonzero(np.isfinite(cost[np.arange(cost.shape[0]), j]))
+    j = j[i]
+    return i, j, np.maximum(overlap[i, j], 0.0)
+
+
+def _refine(
+    local: LoopLines, old: LoopLines, center: FloatArray, correction: FloatArray, config: LoopConfig
+) -> tuple[FloatArray, IntArray, IntArray, FloatArray]:
+    """Alternate pairing and weighted least squares on ``(t_x, t_y, dθ)``."""
+    corr = np.asarray(correction, dtype=float).copy()
+    i = j = np.zeros(0, np.intp)
+    w = np.zeros(0)
+    for _ in range(3):
+        moved = local.transformed(corr, center)
+        i, j, w = _pairs_at(moved, old, config)
+        if i.size < 2:
+            break
+        # residuals of the moved lines against their old partners; Jacobians w.r.t. a small
+        # extra correction (δt, δθ) applied after the current one
+        n = np.stack([np.cos(moved.alpha[i]), np.sin(moved.alpha[i])], -1)
+        tdir = np.stack([-n[:, 1], n[:, 0]], -1)
+        c_t = np.asarray(center) + corr[:2]  # rotation centre after the current translation
+        e_r = moved.r[i] - old.r[j]
+        e_a = np.asarray(wrap_angle(moved.alpha[i] - old.alpha[j]))
+        # r' = r + n·δt + δθ·t·c_t ; α' = α + δθ
+        A = np.zeros((2 * i.size, 3))
+        A[0::2, :2] = n
+        A[0::2, 2] = tdir @ c_t
+        A[1::2, 2] = 1.0
+        b = np.empty(2 * i.size)
+        b[0::2] = -e_r
+        b[1::2] = -e_a
+        sig_r, sig_a = config.offset_tolerance_m / 3.0, config.angle_tolerance_rad / 3.0
+        W = np.empty(2 * i.size)
+        wl = np.maximum(w, 0.1)
+        W[0::2] = wl / sig_r**2
+        W[1::2] = wl / sig_a**2
+        H = A.T @ (A * W[:, None]) + 1e-9 * np.eye(3)
+        step = np.linalg.solve(H, A.T @ (W * b))
+        corr[:2] += step[:2]
+        corr[2] += step[2]
+    return corr, i, j, w
+
+
+class _Hypothesis:
+    """A refined correction with its pairs, score and constrained directions."""
+
+    def __init__(
+        self,
+        corr: FloatArray,
+        i: IntArray,
+        j: IntArray,
+        score: float,
+        alpha: FloatArray,
+        w: FloatArray,
+        config: LoopConfig,
+    ) -> None:
+        self.corr, self.i, self.j, self.score = corr, i, j, score
+        # translation information of the pairs: Σ w n nᵀ; one direction when the lines' normals
+        # all lie within min_direction_angle of each other
+        if alpha.size:
+            d = np.abs(np.sin(alpha[:, None] - alpha[None, :]))
+            self.single = bool(d.max() < np.sin(config.min_direction_angle_rad))
+            k = int(np.argmax(w))
+            self.normal = np.array([np.cos(alpha[k]), np.sin(alpha[k])])
+        else:
+            self.single = True
+            self.normal = np.array([1.0, 0.0])
+        need = config.min_matched_length_m * (1.0 if not self.single else 1.5)
+        self.valid = (
+            i.size >= config.min_matches
+            and score >= need
+            and (config.corridor_closures or not self.single)
+        )
+
+    def distinct(self, other: _Hypothesis, config: LoopConfig) -> bool:
+        """Whether ``other`` is a different solution (not this one moved along a corridor)."""
+        if abs(float(wrap_angle(other.corr[2] - self.corr[2]))) > 2.0 * config.angle_tolerance_rad:
+            return True
+        dt = other.corr[:2] - self.corr[:2]
+        if self.single:
+            return bool(abs(dt @ self.normal) > 2.0 * config.offset_tolerance_m)
+        return bool(np.hypot(dt[0], dt[1]) > 2.0 * config.offset_tolerance_m)
+
+
+def _rotation_candidates(
+    local: LoopLines, old: LoopLines, window_theta: float, tol: float, n_max: int
+) -> list[float]:
+    d = np.asarray(wrap_angle(old.alpha[None, :] - local.alpha[:, None])).ravel()
+    w = np.minimum(local.length[:, None], old.length[None, :]).ravel()
+    inside = np.abs(d) <= window_theta + tol
+    d, w = d[inside], w[inside]
+    if d.size == 0:
+        return []
+    bin_w = tol / 2.0
+    nb = int(np.ceil((2 * (window_theta + tol)) / bin_w)) + 1
+    edges0 = -(window_theta + tol)
+    b = np.clip(((d - edges0) / bin_w).astype(int), 0, nb - 1)
+    hist = np.bincount(b, weights=w, minlength=nb)
+    k = 2  # smooth over ±tol
+    kernel = np.ones(2 * k + 1)
+    sm = np.convolve(hist, kernel, mode="same")
+    out: list[float] = []
+    order = np.argsort(sm)[::-1]
+    for idx in order:
+        if len(out) >= n_max or sm[idx] <= 0:
+            break
+        centre = edges0 + (idx + 0.5) * bin_w
+        if abs(centre) > window_theta:
+            continue
+        if all(abs(centre - c) > 2 * tol for c in out):
+            sel = np.abs(d - centre) <= tol
+            out.append(float(np.average(d[sel], weights=w[sel])) if np.any(sel) else centre)
+    return out
+
+
+def _translation_peaks(
+    local: LoopLines,
+    old: LoopLines,
+    center: FloatArray,
+    dth: float,
+    window_xy: float,
+    config: LoopConfig,
+    n_peaks: int,
+) -> list[FloatArray]:
+    rot = local.transformed(np.array([0.0, 0.0, dth]), center)
+    da = np.abs(np.asarray(wrap_angle(old.alpha[None, :] - rot.alpha[:, None])))
+    ii, jj = np.nonzero(da < config.angle_tolerance_rad)
+    if ii.size == 0:
+        return []
+    n = np.stack([np.cos(old.alpha[jj]), np.sin(old.alpha[jj])], -1)
+    tdir = np.stack([-n[:, 1], n[:, 0]], -1)
+    b = old.r[jj] - rot.r[ii]
+    keep = np.abs(b) <= window_xy * np.sqrt(2.0)
+    ii, jj, n, tdir, b = ii[keep], jj[keep], n[keep], tdir[keep], b[keep]
+    if ii.size == 0:
+        return []
+    cell = config.cell_m
+    nc = int(np.ceil(2 * window_xy / cell))
+    s = np.arange(-window_xy * np.sqrt(2.0), window_xy * np.sqrt(2.0) + cell, cell / 2.0)
+    pts = b[:, None, None] * n[:, None, :] + s[None, :, None] * tdir[:, None, :]  # (P, S, 2)
+    cx = np.floor((pts[..., 0] + window_xy) / cell).astype(np.int64)
+    cy = np.floor((pts[..., 1] + window_xy) / cell).astype(np.int64)
+    inside = (cx >= 0) & (cx < nc) & (cy >= 0) & (cy < nc)
+    pair_of = np.broadcast_to(np.arange(ii.size)[:, None], cx.shape)[inside]
+    if pair_of.size == 0:
+        return []
+    cells = (cx * nc + cy)[inside]
+    # one vote per (local line, cell): the largest weight among its constraints there
+    weight = np.minimum(rot.length[ii], old.length[jj])[pair_of]
+    key = ii[pair_of].astype(np.int64) * (nc * nc) + cells
+    order = np.lexsort((-weight, key))
+    key_s = key[order]
+    first = np.r_[True, key_s[1:] != key_s[:-1]]
+    votes = np.bincount(
+        (key_s[first] % (nc * nc)), weights=weight[order][first], minlength=nc * nc
+    ).reshape(nc, nc)
+    # smooth 3×3 (a crossing may straddle cells)
+    pad = np.pad(votes, 1)
+    sm = sum(pad[dx : dx + nc, dy : dy + nc] for dx in range(3) for dy in range(3))
+    peaks: list[FloatArray] = []
+    flat = np.argsort(sm.ravel())[::-1]
+    min_sep = max(3, int(round(0.5 / cell)))
+    taken: list[tuple[int, int]] = []
+    for f in flat[: 50 * n_peaks]:
+        x, y = divmod(int(f), nc)
+        if sm[x, y] <= 0:
+            break
+        if any(abs(x - a) < min_sep and abs(y - c) < min_sep for a, c in taken):
+            continue
+        taken.append((x, y))
+        peaks.append(np.array([(x + 0.5) * cell - window_xy, (y + 0.5) * cell - window_xy, dth]))
+        if len(peaks) >= n_peaks:
+            break
+    return peaks
+
+
+def search_loop_closure(
+    local: LoopLines,
+    old: LoopLines,
+    center: FloatArray,
+    window_xy: float,
+    window_theta: float,
+    config: LoopConfig,
+    n_rotations: int = 3,
+    n_peaks: int = 4,
+) -> LoopClosure | None:
+    """Search, verify and refine a correction of ``local`` onto ``old`` (module docstring).
+
+    Parameters
+    ----------
+    local, old : LoopLines
+    center : ndarray, shape (2,)
+        Rotation centre (the robot's position).
+    window_xy, window_theta : float
+        Half-widths of the search window (m, rad).
+    config : LoopClosureConfig
+    n_rotations, n_peaks : int
+        Rotation candidates, and translation peaks per rotation, that are verified.
+
+    Returns
+    -------
+    LoopClosure or None
+        None when no hypothesis passes the verification or the best is ambiguous.
+    """
+    global LAST_REASON
+    LAST_REASON = "too few lines"
+    if len(local) < 2 or len(old) < 2:
+        return None
+    c = np.asarray(center, dtype=float).reshape(2)
+    hyps: list[_Hypothesis] = []
+    for dth in _rotation_candidates(
+        local, old, window_theta, config.angle_tolerance_rad, n_rotations
+    ):
+        for peak in _translation_peaks(local, old, c, dth, window_xy, config, n_peaks):
+            corr, i, j, w = _refine(local, old, c, peak, config)
+            if np.hypot(corr[0], corr[1]) > window_xy * 1.5 or abs(corr[2]) > window_theta * 1.5:
+                continue
+            hyps.append(_Hypothesis(corr, i, j, float(w.sum()), old.alpha[j], w, config))
+    LAST_REASON = "no hypothesis"
+    if not hyps:
+        return None
+    valid = [h for h in hyps if h.valid]
+    top = max(hyps, key=lambda h: h.score)
+    LAST_REASON = (
+        f"none verified (best {top.score:.1f} m, {top.i.size} pairs, "
+        f"{'one direction' if top.single else 'two directions'})"
+    )
+    if not valid:
+        return None
+    best = max(valid, key=lambda h: h.score)
+    runner = max((h.score for h in hyps if best.distinct(h, config)), default=0.0)
+    LAST_REASON = f"ambiguous ({best.score:.1f} vs {runner:.1f})"
+    if runner > config.max_ambiguity * best.score:
+        return None
+    pairs = [(int(a), int(b)) for a, b in zip(best.i, best.j, strict=True)]
+    return LoopClosure(best.corr, pairs, best.score, runner, best.single)
