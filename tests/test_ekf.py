@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from linefit.errors import ConfigError
+from slam.association import AssociationConfig
 from slam.config import RunConfig
 from slam.ekf import EkfConfig, EkfSlam, MotionNoiseConfig
 from slam.ekf.augment import augment_state, landmark_from_measurement
@@ -29,6 +31,9 @@ from slam.geometry import (
     wrap_angle,
 )
 from slam.types import Scan
+
+# the overlap test off (landmarks set without seen extents)
+NO_OVERLAP_TEST = AssociationConfig(overlap_margin_m=1e9)
 
 
 def numdiff(f, x, eps=1e-6):
@@ -223,7 +228,7 @@ def test_linear_gaussian_case_nees_matches_state_dimension():
     P0_r = 0.25
     Q_u = np.diag([1e-3, 1e-3, 4e-4])  # isotropic in x, y
     R = np.array([[1e-3, 2e-4], [2e-4, 5e-4]])
-    cfg = EkfConfig(overlap_margin_m=math.inf)
+    cfg = EkfConfig(association=NO_OVERLAP_TEST)
     dim = 3 + M
     nees_pose = np.zeros((n_runs, n_steps))
     nees_full = np.zeros((n_runs, n_steps))
@@ -291,7 +296,7 @@ def test_jcbb_resolves_what_nearest_neighbour_gets_wrong():
     lines = _lines_from_truth(x_true, [0, 1, 2], R)
     results = {}
     for method in ("nn", "jcbb"):
-        ekf = EkfSlam(EkfConfig(association=method, overlap_margin_m=math.inf))
+        ekf = EkfSlam(EkfConfig(association=replace(NO_OVERLAP_TEST, method=method)))
         ekf.set_state(x_pred, P)
         matches, _ = ekf.associate(lines)
         results[method] = matches.tolist()
@@ -301,7 +306,7 @@ def test_jcbb_resolves_what_nearest_neighbour_gets_wrong():
 
 def test_overlap_gating_keeps_collinear_walls_apart():
     # one landmark y=1 seen between x in [0, 2]; a measurement of the same line at x in [6, 8]
-    ekf = EkfSlam(EkfConfig(overlap_margin_m=0.5))
+    ekf = EkfSlam(EkfConfig(association=AssociationConfig(overlap_margin_m=0.5)))
     x = np.array([5.0, 0.0, 0.0, 1.0, np.pi / 2])
     P = np.diag([1e-4, 1e-4, 1e-6, 1e-4, 1e-6])
     ekf.set_state(x, P, ends_world=np.array([[[0.0, 1.0], [2.0, 1.0]]]))
@@ -320,7 +325,7 @@ def test_overlap_gating_keeps_collinear_walls_apart():
 
 # -------------------------------------------------------------------------------- merging
 def test_merging_two_independent_landmarks_gives_the_information_fusion():
-    ekf = EkfSlam(EkfConfig(overlap_margin_m=math.inf))
+    ekf = EkfSlam(EkfConfig(association=NO_OVERLAP_TEST))
     l1, l2 = np.array([2.00, 0.50]), np.array([2.03, 0.49])
     P1 = np.array([[4e-4, 1e-5], [1e-5, 1e-4]])
     P2 = np.array([[2e-4, -2e-5], [-2e-5, 3e-4]])
@@ -342,7 +347,7 @@ def test_merging_two_independent_landmarks_gives_the_information_fusion():
 
 
 def test_distinct_landmarks_are_not_merged():
-    ekf = EkfSlam(EkfConfig(overlap_margin_m=math.inf))
+    ekf = EkfSlam(EkfConfig(association=NO_OVERLAP_TEST))
     x = np.array([0.0, 0.0, 0.0, 2.0, 0.5, 2.5, 0.5])
     P = np.diag([1e-6] * 3 + [1e-4, 1e-5, 1e-4, 1e-5])
     ekf.set_state(x, P)
@@ -371,7 +376,7 @@ def test_bad_input_gives_clear_errors():
     with pytest.raises(InputError, match="non-finite"):
         ekf.add_scan(_scan(0, [0.0, np.nan, 0.0]), LineSet.empty())
     # a line with a singular or NaN covariance is skipped and counted, not used
-    ekf = EkfSlam(EkfConfig(overlap_margin_m=math.inf))
+    ekf = EkfSlam(EkfConfig(association=NO_OVERLAP_TEST))
     bad = LineSet(
         np.array([[1.0, 0.0], [2.0, 1.0]]),
         np.array([np.zeros((2, 2)), np.full((2, 2), np.nan)]),
@@ -381,7 +386,7 @@ def test_bad_input_gives_clear_errors():
     rep = ekf.add_scan(_scan(0, [0, 0, 0]), bad)
     assert rep.n_invalid == 2 and ekf.n_landmarks == 0
     for kwargs in (
-        {"gate_probability": 1.5},
+        {"new_landmark_probability": 1.5},
         {"association": "gnn"},
         {"max_landmarks": 0},
         {"initial_pose_sigma": (0.1, -1.0, 0.0)},
@@ -459,7 +464,7 @@ def test_results_files_follow_the_interfaces(tmp_path):
 def test_run_config_round_trip_with_ekf_table(tmp_path):
     cfg = RunConfig(
         ekf=EkfConfig(
-            association="jcbb",
+            association=AssociationConfig(method="nn", gate_probability=0.99),
             max_landmarks=300,
             max_runtime_s=60.0,
             odometry=MotionNoiseConfig(sigma_xy_per_m=0.1),

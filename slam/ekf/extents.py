@@ -1,5 +1,7 @@
 """Visible extents of line landmarks in the world frame (for overlap gating and ``map.json``).
 
+The overlap test itself is the graph's (:func:`slam.association.overlap_mask`).
+
 A landmark is an infinite line; what the robot saw of it are pieces along it.  Each piece is
 stored as its two world end points; to use them with the current estimate ``(r, α)`` of the
 line they are projected on its tangent ``t(α) = (−sin α, cos α)``.  Pieces closer than
@@ -11,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["LandmarkExtents", "overlap_mask", "tangent_coordinates"]
+__all__ = ["LandmarkExtents", "tangent_coordinates"]
 
 FloatArray = NDArray[np.float64]
 
@@ -94,29 +96,3 @@ class LandmarkExtents:
         s = tangent_coordinates(self._pieces[j], alpha)
         s = np.sort(s, axis=1)
         return _points_on_line(s, r, alpha)
-
-
-def overlap_mask(
-    ends_world: FloatArray,
-    alpha: FloatArray,
-    lo: FloatArray,
-    hi: FloatArray,
-    margin_m: float | FloatArray,
-) -> NDArray[np.bool_]:
-    """``(K, M)``: measured segment ``k`` overlaps landmark ``m``'s extent within ``margin_m``.
-
-    Parameters
-    ----------
-    ends_world : ndarray, shape (K, 2, 2)
-        End points of the measured segments in the world frame.
-    alpha : ndarray, shape (M,)
-        Landmark normal angles.
-    lo, hi : ndarray, shape (M,)
-        Landmark extents along their tangents (:meth:`LandmarkExtents.intervals`).
-    margin_m : float or ndarray, shape (K,)
-        Largest accepted gap (m), one for all or one per measured segment.
-    """
-    s = tangent_coordinates(ends_world[:, None, :, :], np.asarray(alpha)[None, :, None])  # (K,M,2)
-    gap = np.maximum(s.min(-1), lo[None, :]) - np.minimum(s.max(-1), hi[None, :])
-    margin = np.asarray(margin_m, dtype=float)
-    return np.asarray(gap <= (margin[:, None] if margin.ndim == 1 else margin))

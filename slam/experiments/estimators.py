@@ -83,7 +83,9 @@ def _ekf(
     association: Literal["nn", "jcbb"] | None = None,
     use_lines: bool = True,
 ) -> EstimateOutput:
-    ekf_cfg = config.ekf if association is None else replace(config.ekf, association=association)
+    ekf_cfg = config.ekf
+    if association is not None:
+        ekf_cfg = replace(ekf_cfg, association=replace(ekf_cfg.association, method=association))
     ekf = EkfSlam(ekf_cfg, linefit_config=config.linefit, initial_pose_world_laser=initial_pose)
     with blas_threads(ekf_cfg.blas_threads):
         for k, scan in enumerate(scans):
