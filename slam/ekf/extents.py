@@ -5,13 +5,15 @@ The overlap test itself is the graph's (:func:`slam.association.overlap_mask`).
 A landmark is an infinite line; what the robot saw of it are pieces along it.  Each piece is
 stored as its two world end points; to use them with the current estimate ``(r, α)`` of the
 line they are projected on its tangent ``t(α) = (−sin α, cos α)``.  Pieces closer than
-``gap_m`` along the line are merged.
+``gap_m`` along the line are merged (:func:`slam.lines.unite_segments`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+
+from slam.lines import unite_segments
 
 __all__ = ["LandmarkExtents", "tangent_coordinates"]
 
@@ -72,15 +74,7 @@ class LandmarkExtents:
         r, alpha = float(r_alpha[0]), float(r_alpha[1])
         allp = np.concatenate([self._pieces[j], pieces_world], axis=0)
         s = tangent_coordinates(allp, alpha)  # (k, 2)
-        lo, hi = s.min(axis=1), s.max(axis=1)
-        order = np.argsort(lo)
-        merged: list[list[float]] = []
-        for a, b in zip(lo[order], hi[order], strict=True):
-            if merged and a <= merged[-1][1] + self.gap_m:
-                merged[-1][1] = max(merged[-1][1], b)
-            else:
-                merged.append([a, b])
-        s_m = np.asarray(merged)
+        s_m, _ = unite_segments(s, np.zeros_like(s), self.gap_m)
         pieces = _points_on_line(s_m, r, alpha)  # (k, 2, 2)
         self._pieces[j] = pieces
         self._extreme[j] = _points_on_line(np.array([s_m[0, 0], s_m[-1, 1]]), r, alpha)

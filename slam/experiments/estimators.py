@@ -96,7 +96,11 @@ def _ekf(
             else:
                 ekf.add_scan(scan, LineSet.empty())
     res = ekf.result()
-    res.stats.setdefault("frame", "laser")
+    return _output(name, res, {**res.stats, "frame": res.stats.get("frame", "laser")})
+
+
+def _output(name: str, res: Any, stats: dict[str, Any]) -> EstimateOutput:
+    """An estimator's result object (EKF or graph) as an :class:`EstimateOutput`."""
     return EstimateOutput(
         name=name,
         timestamps=res.timestamps,
@@ -104,7 +108,7 @@ def _ekf(
         pose_covariances=res.pose_covariances,
         scan_runtime_s=res.scan_runtime_s,
         landmarks_r_alpha=res.landmarks_r_alpha,
-        stats=res.stats,
+        stats=stats,
         result=res,
     )
 
@@ -143,18 +147,7 @@ def _graph(
             slam.add_scan(scan, scan_lines)
         slam.optimize()
     res = slam.result()
-    stats = dict(res.stats)
-    stats["frame"] = getattr(res, "frame", "laser")
-    return EstimateOutput(
-        name=name,
-        timestamps=res.timestamps,
-        poses_world_laser=res.poses_world_laser,
-        pose_covariances=res.pose_covariances,
-        scan_runtime_s=res.scan_runtime_s,
-        landmarks_r_alpha=res.landmarks_r_alpha,
-        stats=stats,
-        result=res,
-    )
+    return _output(name, res, {**res.stats, "frame": getattr(res, "frame", "laser")})
 
 
 EstimatorFn = Callable[
