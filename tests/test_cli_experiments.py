@@ -133,5 +133,32 @@ def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_p
         assert 0.5 < rows[name]["nees_mean"] < 10.0
     md = (out / "report.md").read_text()
     assert "relations trans. (m)" in md and "ATE RMSE (m)" in md
+    assert "* ekf: ran to the end (200 scans)" in md and "stopped at" not in md
     assert list((out / ".cache").glob("lines-*.pkl"))  # weighted and unweighted fits cached
     assert len(list((out / ".cache").glob("lines-*.pkl"))) == 2
+
+
+def test_compare_report_says_where_the_ekf_stopped(tmp_path):
+    out = tmp_path / "cmp"
+    (tmp_path / "small.toml").write_text("[ekf]\nmax_landmarks = 5\n")
+    main(
+        [
+            "compare",
+            str(DEMO / "log.clf"),
+            "--out",
+            str(out),
+            "--quiet",
+            "--no-figures",
+            "--config",
+            str(tmp_path / "small.toml"),
+            "--max-scans",
+            "60",
+            "--variants",
+            "ekf=ekf-nn",
+        ]
+    )
+    row = json.loads((out / "report.json").read_text())["variants"][0]
+    assert row["stopped_at_scan"] is not None and row["scans_processed"] < 60
+    md = (out / "report.md").read_text()
+    assert f"* ekf: **stopped at scan {row['stopped_at_scan']} of 60**" in md
+    assert "max_landmarks=5" in md

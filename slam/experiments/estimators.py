@@ -35,6 +35,8 @@ from slam.ekf import EkfSlam
 from slam.ekf.threads import blas_threads
 from slam.errors import ConfigError, EstimationError
 from slam.frontend.lineset import LineSet
+from slam.geometry import pose_compose, pose_inverse
+from slam.graph.odometry import adjoint_pose2
 from slam.types import Scan
 
 __all__ = ["ESTIMATORS", "EstimateOutput", "run_estimator"]
@@ -87,8 +89,9 @@ def _ekf(
     if association is not None:
         ekf_cfg = replace(ekf_cfg, association=replace(ekf_cfg.association, method=association))
     ekf = EkfSlam(ekf_cfg, linefit_config=config.linefit, initial_pose_world_laser=initial_pose)
+    mount = np.asarray(config.slam.pose_base_laser, dtype=float)
     with blas_threads(ekf_cfg.blas_threads):
-        for k, scan in enumerate(scans):
+        for k, scan in enumerate(_laser_odometry(scans, config)):
             if ekf.stopped:
                 break
             if use_lines:
@@ -96,7 +99,36 @@ def _ekf(
             else:
                 ekf.add_scan(scan, LineSet.empty())
     res = ekf.result()
+    if config.slam.output_frame == "base" and res.poses_world_laser.shape[0]:
+        # pose_world_base = pose_world_laser ∘ pose_base_laser⁻¹, covariance by Ad(mount),
+        # as the graph reports base poses (slam.graph.LineSlam.result)
+        poses = pose_compose(res.poses_world_laser, np.broadcast_to(pose_inverse(mount), (1, 3)))
+        Ad = adjoint_pose2(mount)
+        res = replace(
+            res, poses_world_laser=poses, pose_covariances=Ad @ res.pose_covariances @ Ad.T
+        )
+        res.stats["frame"] = "base"
     return _output(name, res, {**res.stats, "frame": res.stats.get("frame", "laser")})
+
+
+def _laser_odometry(scans: Sequence[Scan], config: RunConfig) -> Sequence[Scan]:
+    """Scans whose laser odometry follows the graph's setting (``slam.laser_odometry``).
+
+    With ``"base"`` (a log whose logged laser poses lack the mounting,
+    :func:`slam.runner.slam_config_for_log`) the laser odometry is
+    ``pose_odom_base ∘ pose_base_laser``, as :class:`slam.graph.LineSlam` computes it, so that
+    the EKF and odometry-only runs see the same motion as the graph.
+    """
+    cfg = config.slam
+    if cfg.laser_odometry != "base":
+        return scans
+    mount = np.asarray(cfg.pose_base_laser, dtype=float)
+    return [
+        s
+        if s.pose_odom_base is None
+        else replace(s, pose_odom_laser=pose_compose(np.asarray(s.pose_odom_base), mount))
+        for s in scans
+    ]
 
 
 def _output(name: str, res: Any, stats: dict[str, Any]) -> EstimateOutput:
