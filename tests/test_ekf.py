@@ -346,6 +346,27 @@ def test_merging_two_independent_landmarks_gives_the_information_fusion():
     np.testing.assert_allclose(ekf.P[3:5, 3:5], np.linalg.inv(info), atol=1e-12)
 
 
+def test_constraint_and_removal_equal_the_joseph_update_then_deletion():
+    from slam.ekf.update import MeasurementStack, constrain_and_remove
+
+    rng = np.random.default_rng(12)
+    n = 3 + 2 * 6
+    A = rng.standard_normal((n, n))
+    P = A @ A.T / n + 0.01 * np.eye(n)
+    x = rng.standard_normal(n)
+    H_sub = np.hstack([np.diag([-1.0, 1.0]), -np.eye(2)])
+    cols = np.array([5, 6, 11, 12])
+    meas = MeasurementStack(rng.standard_normal(2), H_sub, cols, np.zeros((2, 2)))
+    x_j, P_j, _, _ = joseph_update(x, P, meas)
+    keep = np.setdiff1d(np.arange(n), cols[2:])
+    x_c, P_c = constrain_and_remove(x, P, meas, cols[2:])
+    np.testing.assert_allclose(x_c, x_j[keep], atol=1e-10)
+    np.testing.assert_allclose(P_c, P_j[np.ix_(keep, keep)], atol=1e-10)
+    assert np.array_equal(P_c, P_c.T)
+    # the constraint holds exactly after conditioning (before removal, in the Joseph result)
+    np.testing.assert_allclose(H_sub @ x_j[cols], H_sub @ x[cols] + meas.y, atol=1e-10)
+
+
 def test_distinct_landmarks_are_not_merged():
     ekf = EkfSlam(EkfConfig(association=NO_OVERLAP_TEST))
     x = np.array([0.0, 0.0, 0.0, 2.0, 0.5, 2.5, 0.5])

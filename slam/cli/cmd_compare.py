@@ -43,7 +43,10 @@ def compare(
             "default: every available variant.",
         ),
     ] = None,
-    workers: Annotated[int, typer.Option("--workers", help="Local worker processes.")] = 1,
+    workers: Annotated[
+        int,
+        typer.Option("--workers", help="Local worker processes (0: one per CPU core; 1: serial)."),
+    ] = 0,
     dask: Annotated[
         str | None, typer.Option("--dask", help="Dask scheduler address (tcp://host:port).")
     ] = None,
@@ -68,6 +71,10 @@ def compare(
 
     run_config = build_config(config, sigma_d, sigma_phi, seed)
     data = parse_source(log, seed=run_config.seed)
+    if workers <= 0:
+        import os
+
+        workers = os.cpu_count() or 1
     if variants:
         chosen = []
         for item in (v.strip() for v in variants.split(",") if v.strip()):

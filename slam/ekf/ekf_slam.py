@@ -55,7 +55,13 @@ from slam.ekf.conventions import cov_state_to_tangent, tangent_to_state_jacobian
 from slam.ekf.extents import LandmarkExtents
 from slam.ekf.motion import odometry_covariance, predict_pose
 from slam.ekf.result import EkfResult
-from slam.ekf.update import MeasurementStack, filterpy_update, joseph_update, line_measurements
+from slam.ekf.update import (
+    MeasurementStack,
+    constrain_and_remove,
+    filterpy_update,
+    joseph_update,
+    line_measurements,
+)
 from slam.errors import EstimationError, InputError
 from slam.frontend.anchored import model_error_covariance
 from slam.frontend.lineset import LineSet
@@ -412,7 +418,8 @@ class EkfSlam:
 
         The fusion is the EKF update with the exact constraint ``l_i − l_j = 0`` (same
         representative, ``R = 0``), after which ``l_j`` equals ``l_i`` and is deleted
-        (marginalised).  Pairs are fused greedily by increasing ``D²``, one at a time.
+        (marginalised); both in one pass (:func:`slam.ekf.update.constrain_and_remove`).
+        Pairs are fused greedily by increasing ``D²``, one at a time.
 
         Parameters
         ----------
@@ -478,19 +485,16 @@ class EkfSlam:
             cols = np.array([3 + 2 * a, 4 + 2 * a, 3 + 2 * b, 4 + 2 * b], dtype=np.intp)
             meas = MeasurementStack(-res[best], H_sub, cols, np.zeros((2, 2)))
             try:
-                self.x, self.P, _, _ = joseph_update(self.x, self.P, meas)
+                self.x, self.P = constrain_and_remove(self.x, self.P, meas, cols[2:])
             except EstimationError:
                 break
             self._wrap_angles()
-            keep = np.ones(self.x.shape[0], dtype=bool)
-            keep[[3 + 2 * b, 4 + 2 * b]] = False
+            a_kept = a - 1 if a > b else a  # index of l_a once l_b is gone
             pieces = self._extents.pieces(b)
-            self._extents.absorb(a, self.x[3 + 2 * a : 5 + 2 * a], pieces)
+            self._extents.absorb(a, self.x[3 + 2 * a_kept : 5 + 2 * a_kept], pieces)
             self._extents.delete(b)
             self._n_obs[a] += self._n_obs[b]
             del self._n_obs[b]
-            self.x = self.x[keep]
-            self.P = self.P[np.ix_(keep, keep)]
             removed += 1
             if touched is not None:
                 if b in touched:

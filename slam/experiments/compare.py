@@ -96,18 +96,18 @@ def default_variants(simulated: bool) -> tuple[Variant, ...]:
     registration, :mod:`slam.frontend.registration`), which has no JCBB option, so the NN vs
     JCBB comparison is made on the EKF.
     """
+    # longest first: tasks start in this order, so a pool of workers finishes sooner
     names = [
         ("graph-batch", "graph-batch", True),
         ("graph-isam2", "graph-isam2", True),
+        ("graph-isam2-unweighted", "graph-isam2", False),
         ("ekf", "ekf-jcbb", True),
         ("ekf-nn", "ekf-nn", True),
+        ("ekf-unweighted", "ekf-jcbb", False),
         ("odometry", "odometry", True),
     ]
-    if not simulated:
-        names += [
-            ("graph-isam2-unweighted", "graph-isam2", False),
-            ("ekf-unweighted", "ekf-jcbb", False),
-        ]
+    if simulated:  # the simulator's lines are not fitted: no weighted / unweighted choice
+        names = [n for n in names if n[2]]
     return tuple(Variant(n, e, w) for n, e, w in names if e in ESTIMATORS)
 
 
