@@ -152,13 +152,20 @@ def test_compare_report_says_where_the_ekf_stopped(tmp_path):
             "--config",
             str(tmp_path / "small.toml"),
             "--max-scans",
-            "60",
+            "150",
+            "--time-budget",
+            "0.5",
             "--variants",
-            "ekf=ekf-nn",
+            "ekf=ekf-nn,graph=graph-isam2",
         ]
     )
-    row = json.loads((out / "report.json").read_text())["variants"][0]
-    assert row["stopped_at_scan"] is not None and row["scans_processed"] < 60
+    rows = {r["variant"]: r for r in json.loads((out / "report.json").read_text())["variants"]}
     md = (out / "report.md").read_text()
-    assert f"* ekf: **stopped at scan {row['stopped_at_scan']} of 60**" in md
+    ekf = rows["ekf"]
+    assert ekf["stopped_at_scan"] is not None and ekf["scans_processed"] < 150
+    assert f"* ekf: **stopped at scan {ekf['stopped_at_scan']} of 150**" in md
     assert "max_landmarks=5" in md
+    graph = rows["graph"]
+    assert graph["stopped_at_scan"] is not None and 0 < graph["scans_processed"] < 150
+    assert f"* graph: **stopped at scan {graph['stopped_at_scan']} of 150**" in md
+    assert "time budget of 0.5 s" in md

@@ -7,9 +7,8 @@ covariances (right-perturbation tangent space) and run times.  Names:
 * ``"ekf"`` — :class:`slam.ekf.EkfSlam` with ``RunConfig.ekf`` (association as configured);
 * ``"ekf-nn"``, ``"ekf-jcbb"`` — the same with the association forced;
 * ``"graph-isam2"``, ``"graph-batch"`` — :class:`slam.graph.LineSlam` with ``RunConfig.slam``
-  and that back-end (association as configured), then :meth:`~slam.graph.LineSlam.optimize`;
-  ``"graph-isam2-nn"``, ``"graph-isam2-jcbb"``, ``"graph-batch-nn"``, ``"graph-batch-jcbb"``
-  force the association;
+  and that back-end, then :meth:`~slam.graph.LineSlam.optimize` (the graph's association is its
+  registration front end's nearest neighbour, with no JCBB option);
 * ``"odometry"`` — dead reckoning with the same motion model, covariance propagated (the EKF
   fed no lines), the reference every SLAM estimator must beat.
 
@@ -21,9 +20,11 @@ filters.  ``None`` lets each estimator extract the lines itself.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any, Literal
 
 import numpy as np
@@ -84,10 +85,14 @@ def _ekf(
     initial_pose: FloatArray | None,
     association: Literal["nn", "jcbb"] | None = None,
     use_lines: bool = True,
+    time_budget_s: float | None = None,
 ) -> EstimateOutput:
     ekf_cfg = config.ekf
     if association is not None:
         ekf_cfg = replace(ekf_cfg, association=replace(ekf_cfg.association, method=association))
+    if time_budget_s is not None:
+        limit = min(time_budget_s, ekf_cfg.max_runtime_s or math.inf)
+        ekf_cfg = replace(ekf_cfg, max_runtime_s=limit)
     ekf = EkfSlam(ekf_cfg, linefit_config=config.linefit, initial_pose_world_laser=initial_pose)
     mount = np.asarray(config.slam.pose_base_laser, dtype=float)
     with blas_threads(ekf_cfg.blas_threads):
@@ -152,7 +157,7 @@ def _graph(
     config: RunConfig,
     initial_pose: FloatArray | None,
     backend: Literal["batch", "isam2"],
-    association: Literal["nn", "jcbb"] | None = None,
+    time_budget_s: float | None = None,
 ) -> EstimateOutput:
     import warnings
 
@@ -160,8 +165,6 @@ def _graph(
     from slam.graph import LineSlam
 
     cfg = replace(config.slam, backend=backend)
-    if association is not None:
-        cfg = replace(cfg, association=replace(cfg.association, method=association))
     if initial_pose is not None and scans:
         odom0 = scans[0].pose_odom_laser
         if odom0 is None or not np.allclose(odom0, initial_pose, atol=1e-9):
@@ -170,43 +173,40 @@ def _graph(
                 "an initial pose different from it is not supported"
             )
     slam = LineSlam(cfg, config.linefit)
+    stop: dict[str, Any] = {}
+    t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # SlamWarnings are counted in the result's stats
         for k, scan in enumerate(scans):
+            if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
+                stop = {
+                    "stopped_at_scan": k,
+                    "stop_reason": (
+                        f"the comparison's time budget of {time_budget_s:g} s per variant was "
+                        f"spent at scan {k} ({cfg.backend} back-end); the graph so far was "
+                        "optimised and evaluated"
+                    ),
+                }
+                break
             scan_lines: Any = None if lines is None else lines[k]
             if isinstance(scan_lines, LineSet):
                 scan_lines = lineset_to_lines(scan_lines)
             slam.add_scan(scan, scan_lines)
         slam.optimize()
     res = slam.result()
-    return _output(name, res, {**res.stats, "frame": getattr(res, "frame", "laser")})
+    return _output(name, res, {**res.stats, "frame": getattr(res, "frame", "laser"), **stop})
 
 
-EstimatorFn = Callable[
-    [
-        Sequence[Scan],
-        Sequence[LineSet] | Sequence[Sequence[Line]] | None,
-        RunConfig,
-        FloatArray | None,
-    ],
-    EstimateOutput,
-]
+EstimatorFn = Callable[..., EstimateOutput]
+"""``fn(scans, lines, config, initial_pose, time_budget_s=None) -> EstimateOutput``."""
 
 ESTIMATORS: dict[str, EstimatorFn] = {
-    "ekf": lambda s, ln, c, p: _ekf("ekf", s, ln, c, p),
-    "ekf-nn": lambda s, ln, c, p: _ekf("ekf-nn", s, ln, c, p, association="nn"),
-    "ekf-jcbb": lambda s, ln, c, p: _ekf("ekf-jcbb", s, ln, c, p, association="jcbb"),
-    "odometry": lambda s, ln, c, p: _ekf("odometry", s, ln, c, p, use_lines=False),
-    "graph-isam2": lambda s, ln, c, p: _graph("graph-isam2", s, ln, c, p, "isam2"),
-    "graph-batch": lambda s, ln, c, p: _graph("graph-batch", s, ln, c, p, "batch"),
-    "graph-isam2-nn": lambda s, ln, c, p: _graph("graph-isam2-nn", s, ln, c, p, "isam2", "nn"),
-    "graph-isam2-jcbb": lambda s, ln, c, p: _graph(
-        "graph-isam2-jcbb", s, ln, c, p, "isam2", "jcbb"
-    ),
-    "graph-batch-nn": lambda s, ln, c, p: _graph("graph-batch-nn", s, ln, c, p, "batch", "nn"),
-    "graph-batch-jcbb": lambda s, ln, c, p: _graph(
-        "graph-batch-jcbb", s, ln, c, p, "batch", "jcbb"
-    ),
+    "ekf": partial(_ekf, "ekf"),
+    "ekf-nn": partial(_ekf, "ekf-nn", association="nn"),
+    "ekf-jcbb": partial(_ekf, "ekf-jcbb", association="jcbb"),
+    "odometry": partial(_ekf, "odometry", use_lines=False),
+    "graph-isam2": partial(_graph, "graph-isam2", backend="isam2"),
+    "graph-batch": partial(_graph, "graph-batch", backend="batch"),
 }
 
 
@@ -216,8 +216,13 @@ def run_estimator(
     lines: ScanLines,
     config: RunConfig,
     initial_pose_world_laser: FloatArray | None = None,
+    time_budget_s: float | None = None,
 ) -> EstimateOutput:
     """Run the estimator ``name`` on scans (with their lines, or None to extract them).
+
+    With ``time_budget_s`` the estimator stops taking scans once that much time is spent
+    (the EKF through ``ekf.max_runtime_s``; the graph optimises what it has); its statistics
+    then say at which scan and why (``stopped_at_scan``, ``stop_reason``).
 
     Raises
     ------
@@ -231,7 +236,7 @@ def run_estimator(
             f"unknown estimator {name!r}; known: {', '.join(sorted(ESTIMATORS))}"
         ) from exc
     t0 = time.perf_counter()
-    out = fn(scans, lines, config, initial_pose_world_laser)
+    out = fn(scans, lines, config, initial_pose_world_laser, time_budget_s=time_budget_s)
     if out.poses_world_laser.shape[0] == 0:
         raise EstimationError(f"estimator {name} produced no poses")
     out.stats.setdefault("wall_time_s", time.perf_counter() - t0)
