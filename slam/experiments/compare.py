@@ -154,7 +154,10 @@ class DataSpec:
         """Short name for reports."""
         if self.kind == "sim":
             return f"sim:{self.name}:{self.loops:g}:{self.seed}"
-        return Path(self.name).stem if "/" in self.name else self.name
+        if "/" not in self.name:
+            return self.name
+        path = Path(self.name)  # a file named like its folder's log, e.g. sim/demo/log.clf
+        return path.parent.name if path.stem == "log" else path.stem
 
 
 def parse_source(source: str, seed: int = 0) -> DataSpec:
