@@ -509,3 +509,13 @@ def test_filterpy_and_sparse_runs_agree_on_a_simulated_stretch():
         out.append((ekf.x.copy(), ekf.P.copy()))
     np.testing.assert_allclose(out[0][0], out[1][0], atol=1e-9)
     np.testing.assert_allclose(out[0][1], out[1][1], atol=1e-11)
+
+
+def test_the_per_log_configs_load():
+    from pathlib import Path
+
+    files = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.toml"))
+    assert files
+    for path in files:
+        cfg = RunConfig.from_toml(path)
+        assert cfg.ekf.odometry.sigma_xy_per_m > 0.0, path  # the calibrated table was read
