@@ -233,6 +233,8 @@ class LineSlam:
         self._kf_since_closure = 0
         self._closure_log: list[dict[str, Any]] = []
         self._to_audit: list[Any] = []
+        # pairs of landmarks whose merge an audit undid: never merged again by fusion
+        self._vetoed: set[tuple[int, int]] = set()
         self._base_laser = np.asarray(self.config.pose_base_laser, dtype=float)
         self.counters: dict[str, int] = {
             "points": 0,
@@ -867,6 +869,7 @@ class LineSlam:
             if self._merge_consistent(rec) is False:
                 g.unmerge(rec)
                 undone.append(rec)
+                self._vetoed.add((min(rec.keep, rec.drop), max(rec.keep, rec.drop)))
         if undone:
             self._recompute_info(np.array(sorted({r.keep for r in undone} | {r.drop for r in undone})))
             self._extents = g.landmark_extents()
@@ -919,9 +922,14 @@ class LineSlam:
             last = self._lm_last_kf.data
             gap = np.abs(self._kf_path.data[last[a]] - self._kf_path.data[last[b]])
             fc = cfg.frontend
-            mid = g.anchors[a]
+            # the drift rotates b about the robot where it last saw b
+            seen_from = g.poses[last[b], :2]
             Pb = Pb + drift_covariance(
-                g.landmarks[b], g.anchors[b], mid, fc.drift_xy_per_m * gap, fc.drift_theta_per_m * gap
+                g.landmarks[b],
+                g.anchors[b],
+                seen_from,
+                fc.drift_xy_per_m * gap,
+                fc.drift_theta_per_m * gap,
             )
             Ja = anchored_jacobian(g.landmarks[a], g.anchors[a])
             Jb = anchored_jacobian(g.landmarks[b], g.anchors[b])
@@ -929,6 +937,8 @@ class LineSlam:
             Pb = Jb @ Pb @ np.swapaxes(Jb, -1, -2)
             tested = []
             for k in range(a.size):
+                if (int(a[k]), int(b[k])) in self._vetoed:
+                    continue
                 P = np.zeros((4, 4))
                 P[:2, :2] = Pa[k]
                 P[2:, 2:] = Pb[k]
@@ -1161,6 +1171,14 @@ class LineSlam:
             if self._fusion_round(self.graph.poses[-1], everywhere=True) == 0:
                 break
             self.backend.update(self.graph)
+        if self._to_audit:
+            # the last round's merges, checked at the converged estimate
+            stats = self.backend.optimize(self.graph)
+            if self._audit(self._to_audit):
+                self.backend.update(self.graph)
+                stats = self.backend.optimize(self.graph)
+            self._to_audit = []
+            self._extents = self.graph.landmark_extents()
         self.time_s["optimize"] += time.perf_counter() - t0
         return stats
 
