@@ -48,17 +48,34 @@ IntArray = NDArray[np.intp]
 
 
 class LoopConfig(Protocol):
-    """The settings used here (:class:`slam.graph.config.LoopClosureConfig`)."""
+    """The settings used here (:class:`slam.graph.config.LoopClosureConfig`, read only)."""
 
-    cell_m: float
-    angle_tolerance_rad: float
-    offset_tolerance_m: float
-    overlap_margin_m: float
-    min_matched_length_m: float
-    min_matches: int
-    min_direction_angle_rad: float
-    max_ambiguity: float
-    corridor_closures: bool
+    @property
+    def cell_m(self) -> float: ...
+
+    @property
+    def angle_tolerance_rad(self) -> float: ...
+
+    @property
+    def offset_tolerance_m(self) -> float: ...
+
+    @property
+    def overlap_margin_m(self) -> float: ...
+
+    @property
+    def min_matched_length_m(self) -> float: ...
+
+    @property
+    def min_matches(self) -> int: ...
+
+    @property
+    def min_direction_angle_rad(self) -> float: ...
+
+    @property
+    def max_ambiguity(self) -> float: ...
+
+    @property
+    def corridor_closures(self) -> bool: ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,7 +108,9 @@ class LoopLines:
     def from_anchored(
         cls, rho_phi: FloatArray, anchors: FloatArray, extents: FloatArray, side: FloatArray
     ) -> LoopLines:
-        """From anchored landmarks ``(ρ, φ)`` at ``anchors`` with extents ``(s_lo, s_hi)`` along
+        """Oriented lines from anchored landmarks.
+
+        Landmarks ``(ρ, φ)`` at ``anchors`` with extents ``(s_lo, s_hi)`` along
         ``t(φ)`` from the anchor, and ``side`` = +1 where ``n(φ)`` points away from the
         observer (−1: the other way).
         """
@@ -325,10 +344,10 @@ def _translation_peaks(
     ).reshape(nc, nc)
     # smooth 3×3 (a crossing may straddle cells)
     pad = np.pad(votes, 1)
-    sm = sum(pad[dx : dx + nc, dy : dy + nc] for dx in range(3) for dy in range(3))
+    sm = np.sum([pad[dx : dx + nc, dy : dy + nc] for dx in range(3) for dy in range(3)], axis=0)
     peaks: list[FloatArray] = []
     flat = np.argsort(sm.ravel())[::-1]
-    min_sep = max(3, int(round(0.5 / cell)))
+    min_sep = max(3, round(0.5 / cell))
     taken: list[tuple[int, int]] = []
     for f in flat[: 50 * n_peaks]:
         x, y = divmod(int(f), nc)

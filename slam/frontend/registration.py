@@ -183,8 +183,9 @@ def _associate(
     gate: float,
     margin: float,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Nearest compatible map line for each scan line at ``pose`` (−1: none), and how many
-    map lines each scan line is compatible with.
+    """Nearest compatible map line for each scan line at ``pose`` (−1: none).
+
+    Also returns how many map lines each scan line is compatible with.
     """
     K, M = len(scan), len(map_lines)
     matches = np.full(K, -1, dtype=np.int64)
@@ -259,9 +260,7 @@ def register_lines(
     iterations = 0
     cost = 0.0
     for _round in range(cfg.association_rounds):
-        matches, n_compat = _associate(
-            scan, map_lines, pose, cov_assoc, gate, cfg.overlap_margin_m
-        )
+        matches, n_compat = _associate(scan, map_lines, pose, cov_assoc, gate, cfg.overlap_margin_m)
         k_idx = np.flatnonzero(matches >= 0)
         if len(k_idx) < cfg.min_matches:
             break

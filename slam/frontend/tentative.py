@@ -135,8 +135,9 @@ class TentativePool:
         ep = np.array([o.endpoints for o in observations])
         anchors = self.anchors[rows]
         v_obs, P_obs = observe_anchored(z, R, pose_world_laser, anchors)
-        v_obs, P_obs = align_representative(self.rho_phi[rows], v_obs, P_obs)
-        assert P_obs is not None
+        v_obs, P_aligned = align_representative(self.rho_phi[rows], v_obs, P_obs)
+        assert P_aligned is not None
+        P_obs = P_aligned
         I_old = np.linalg.inv(self.cov[rows])
         I_obs = np.linalg.inv(P_obs)
         P_new = np.linalg.inv(I_old + I_obs)

@@ -53,7 +53,7 @@ class Backend(Protocol):
     def reset(self, graph: LineGraph) -> None:
         """Take in a graph whose estimate was changed from outside."""
 
-    def optimize(self, graph: LineGraph) -> dict[str, Any]:
+    def optimize(self, graph: LineGraph, max_updates: int | None = None) -> dict[str, Any]:
         """Converge the whole problem; return statistics."""
 
     def joint_covariance(
@@ -84,8 +84,10 @@ class Isam2Backend:
         self.resets = 0
 
     def reset(self, graph: LineGraph) -> None:
-        """Start iSAM2 afresh from the graph's current estimate (after a large correction of
-        it, e.g. a loop closure spread over the trajectory)."""
+        """Start iSAM2 afresh from the graph's current estimate.
+
+        Used after a large correction of it, e.g. a loop closure spread over the trajectory.
+        """
         stats = self.solver.stats
         self.solver = Isam2Solver(self.solver.config, self.solver.solver)
         self.solver.stats = stats
@@ -100,10 +102,10 @@ class Isam2Backend:
         self.estimate_moved = full != self._last_full
         self._last_full = full
 
-    def optimize(self, graph: LineGraph) -> dict[str, Any]:
-        """Extra updates until iSAM2 settles."""
+    def optimize(self, graph: LineGraph, max_updates: int | None = None) -> dict[str, Any]:
+        """Extra updates until iSAM2 settles (at most ``max_updates``, default the config's)."""
         t0 = time.perf_counter()
-        runs = self.solver.optimize(graph)
+        runs = self.solver.optimize(graph, max_updates)
         self.optimize_updates += runs
         self.estimate_moved = True
         return {"updates": runs, "time_s": time.perf_counter() - t0}
@@ -180,8 +182,8 @@ class BatchBackend:
         self._marginals = None
         self.estimate_moved = True
 
-    def optimize(self, graph: LineGraph) -> dict[str, Any]:
-        """A full solve to convergence."""
+    def optimize(self, graph: LineGraph, max_updates: int | None = None) -> dict[str, Any]:
+        """A full solve to convergence (``max_updates`` is for iSAM2 and ignored here)."""
         t0 = time.perf_counter()
         st = self.solver.solve(graph)
         self.solves += 1

@@ -145,7 +145,8 @@ class FusionConfig:
         measurements (together) they had then.
     audit_max_median_chi2 : float
         A merge (fusion or loop closure) is undone when, some keyframes later, the median
-        whitened squared residual of either side's line factors exceeds this (χ²₂ 99 %: 9.21).
+        whitened squared residual of either side's line factors exceeds this (χ²₂ 99 %: 9.21);
+        fusion never merges an undone pair again.
     """
 
     enabled: bool = True
@@ -279,11 +280,12 @@ class Isam2Config:
 
 @dataclass(frozen=True)
 class RelocalisationConfig:
-    """Fallback of the front end when the registration pairs too few lines (wheel slip, a
-    fast turn: the odometry prediction is too far off for the χ² gates): the scan's lines are
-    searched for in the local map over a window with :func:`slam.frontend.loop_closure.
-    search_loop_closure` (same meaning of the fields as in :class:`LoopClosureConfig`), and the
-    registration is run again from the correction found.
+    """Relocalisation: the front end's fallback when the registration pairs too few lines.
+
+    After wheel slip or a fast turn the odometry prediction is too far off for the χ² gates:
+    the scan's lines are then searched for in the local map over a window with
+    :func:`slam.frontend.loop_closure.search_loop_closure` (same meaning of the fields as in
+    :class:`LoopClosureConfig`), and the registration is run again from the correction found.
 
     Attributes
     ----------
@@ -450,6 +452,9 @@ class LoopClosureConfig:
     max_chi2_per_factor : float
         Acceptance after merging and optimising: mean whitened squared residual of the line
         factors on the merged landmarks (2 dof each).
+    max_updates : int
+        Most iSAM2 updates (``Isam2Solver.optimize``) run to converge a candidate closure and
+        to return from a rejected one (the batch back-end always solves to convergence).
     """
 
     enabled: bool = True
@@ -459,7 +464,7 @@ class LoopClosureConfig:
     window_theta_per_m: float = 0.005
     min_window_xy_m: float = 0.5
     min_window_theta_rad: float = 0.05
-    max_window_xy_m: float = 5.0
+    max_window_xy_m: float = 10.0
     max_window_theta_rad: float = 0.5
     cell_m: float = 0.1
     angle_tolerance_rad: float = 0.04
@@ -471,10 +476,12 @@ class LoopClosureConfig:
     max_ambiguity: float = 0.7
     corridor_closures: bool = True
     max_chi2_per_factor: float = 6.0
+    max_updates: int = 20
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
         _require(self.local_keyframes >= 1, "local_keyframes must be >= 1")
+        _require(self.max_updates >= 1, "max_updates must be >= 1")
         _require(self.min_matches >= 2, "min_matches must be >= 2")
         for name in (
             "window_xy_per_m",
@@ -580,9 +587,7 @@ class SlamConfig:
             len(self.pose_base_laser) == 3 and all(math.isfinite(v) for v in self.pose_base_laser),
             "pose_base_laser must be three finite numbers (x, y, theta)",
         )
-        _require(
-            self.laser_odometry in ("logged", "base"), "laser_odometry must be logged or base"
-        )
+        _require(self.laser_odometry in ("logged", "base"), "laser_odometry must be logged or base")
         _require(
             self.mount_source in ("catalog", "config"), "mount_source must be catalog or config"
         )

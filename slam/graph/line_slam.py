@@ -180,7 +180,9 @@ class _LocalMap:
     @classmethod
     def empty(cls) -> _LocalMap:
         z2 = np.zeros((0, 2))
-        return cls(np.zeros(0, np.intp), np.zeros(0, np.intp), LineSet.empty(), z2, z2, z2, np.zeros(0))
+        return cls(
+            np.zeros(0, np.intp), np.zeros(0, np.intp), LineSet.empty(), z2, z2, z2, np.zeros(0)
+        )
 
 
 class LineSlam:
@@ -289,7 +291,9 @@ class LineSlam:
 
     def _is_keyframe(self, delta: FloatArray) -> bool:
         k = self.config.keyframes
-        return bool(np.hypot(delta[0], delta[1]) >= k.min_distance_m or abs(delta[2]) >= k.min_angle_rad)
+        return bool(
+            np.hypot(delta[0], delta[1]) >= k.min_distance_m or abs(delta[2]) >= k.min_angle_rad
+        )
 
     def _extract(self, scan: Scan) -> list[Line]:
         from linefit import extract_lines
@@ -338,8 +342,10 @@ class LineSlam:
 
     # -- the main step -----------------------------------------------------------------------
     def add_scans(self, scans: Sequence[Scan]) -> list[ScanReport]:
-        """Process several scans; the lines of those that become keyframes are extracted in one
-        vectorised call (:func:`linefit.extract_lines_batch`, the fast path).
+        """Process several scans.
+
+        The lines of those that become keyframes are extracted in one vectorised call
+        (:func:`linefit.extract_lines_batch`, the fast path).
         """
         from linefit import extract_lines_batch
 
@@ -460,7 +466,9 @@ class LineSlam:
         P[:, 1, 1] += fc.landmark_sigma_alpha_rad**2
         return P
 
-    def _endpoints(self, rho_phi: FloatArray, anchors: FloatArray, extents: FloatArray) -> FloatArray:
+    def _endpoints(
+        self, rho_phi: FloatArray, anchors: FloatArray, extents: FloatArray
+    ) -> FloatArray:
         """World end points ``(k, 2, 2)`` of anchored lines' extents."""
         phi = rho_phi[:, 1]
         n = np.stack([np.cos(phi), np.sin(phi)], -1)
@@ -685,8 +693,11 @@ class LineSlam:
         P0: FloatArray,
         reg: Any,
     ) -> Any:
-        """Search the scan's lines in the local map around ``x_pred`` and register again from
-        the correction found; the better of the two registrations (more pairs) is returned."""
+        """Search the scan's lines in the local map around ``x_pred``; register again.
+
+        The registration restarts from the correction found; the better of the two
+        registrations (more pairs) is returned.
+        """
         from slam.frontend.loop_closure import LoopLines, search_loop_closure
 
         rc = self.config.frontend.relocalisation
@@ -756,7 +767,12 @@ class LineSlam:
         self._lm_last_kf.data[lms] = np.maximum(self._lm_last_kf.data[lms], kf)
 
     def _new_graph_landmarks(
-        self, rho_phi: FloatArray, anchors: FloatArray, info: FloatArray, last_kf: IntArray, side: FloatArray
+        self,
+        rho_phi: FloatArray,
+        anchors: FloatArray,
+        info: FloatArray,
+        last_kf: IntArray,
+        side: FloatArray,
     ) -> IntArray:
         g = self.graph
         ids = g.add_landmarks(r_alpha_from_anchored(rho_phi, anchors), anchors)
@@ -776,7 +792,7 @@ class LineSlam:
         ids = self._new_graph_landmarks(
             tp.rho_phi[rows],
             tp.anchors[rows],
-            np.linalg.inv(tp.cov[rows]),
+            np.asarray(np.linalg.inv(tp.cov[rows]), dtype=float),
             tp.last_kf[rows],
             tp.side[rows],
         )
@@ -861,8 +877,10 @@ class LineSlam:
         return bool(np.median(c2[side]) <= limit and np.median(c2[~side]) <= limit)
 
     def _audit(self, records: list[Any]) -> int:
-        """Undo the merges among ``records`` that the estimate does not explain; return how
-        many were undone."""
+        """Undo the merges among ``records`` that the estimate does not explain.
+
+        Returns how many were undone; an undone pair is never merged again by fusion.
+        """
         g = self.graph
         undone = []
         for rec in records:
@@ -871,7 +889,9 @@ class LineSlam:
                 undone.append(rec)
                 self._vetoed.add((min(rec.keep, rec.drop), max(rec.keep, rec.drop)))
         if undone:
-            self._recompute_info(np.array(sorted({r.keep for r in undone} | {r.drop for r in undone})))
+            self._recompute_info(
+                np.array(sorted({r.keep for r in undone} | {r.drop for r in undone}))
+            )
             self._extents = g.landmark_extents()
             self.counters["merges_undone"] += len(undone)
         return len(undone)
@@ -984,12 +1004,19 @@ class LineSlam:
                 return 0
             x = g.poses[pose]
             sxy, _ = self._drift_sigmas(last)
-            old_mask = alive & (sxy > cfg.frontend.max_drift_xy_m) & (last <= pose - lcc.local_keyframes)
+            old_mask = (
+                alive & (sxy > cfg.frontend.max_drift_xy_m) & (last <= pose - lcc.local_keyframes)
+            )
             d_old = self._path - self._kf_path.data[last]
             win_xy = np.clip(lcc.window_xy_per_m * d_old, lcc.min_window_xy_m, lcc.max_window_xy_m)
             reach = cfg.association.max_range_m + win_xy
             near = candidate_landmarks(
-                x, g.landmarks_r_alpha, self._extents, float(reach.max(initial=0.0)), alive=old_mask, anchors=g.anchors
+                x,
+                g.landmarks_r_alpha,
+                self._extents,
+                float(reach.max(initial=0.0)),
+                alive=old_mask,
+                anchors=g.anchors,
             )
             if near.size < lcc.min_matches:
                 return 0
@@ -997,7 +1024,9 @@ class LineSlam:
             d = float(np.max(d_old[near]))
             wxy = float(np.clip(lcc.window_xy_per_m * d, lcc.min_window_xy_m, lcc.max_window_xy_m))
             wth = float(
-                np.clip(lcc.window_theta_per_m * d, lcc.min_window_theta_rad, lcc.max_window_theta_rad)
+                np.clip(
+                    lcc.window_theta_per_m * d, lcc.min_window_theta_rad, lcc.max_window_theta_rad
+                )
             )
             self.counters["loop_closure_attempts"] += 1
             found = search_loop_closure(
@@ -1012,8 +1041,14 @@ class LineSlam:
                 import slam.frontend.loop_closure as _lc
 
                 self._closure_log.append(
-                    {"keyframe": int(pose), "local": int(local.size), "old": int(near.size),
-                     "window": [wxy, wth], "accepted": False, "reason": _lc.LAST_REASON}
+                    {
+                        "keyframe": int(pose),
+                        "local": int(local.size),
+                        "old": int(near.size),
+                        "window": [wxy, wth],
+                        "accepted": False,
+                        "reason": _lc.LAST_REASON,
+                    }
                 )
                 return 0
             self.counters["loop_closure_candidates"] += 1
@@ -1030,8 +1065,10 @@ class LineSlam:
         return LoopLines.from_anchored(v, c, self._extents[lms], self._lm_side.data[lms])
 
     def _apply_closure(self, local: IntArray, old: IntArray, found: Any, pose: int) -> int:
-        """Spread the correction, merge the verified pairs, optimise, and keep the closure only
-        if the graph explains it (else undo everything)."""
+        """Spread the correction, merge the verified pairs, optimise; keep only if explained.
+
+        A closure the optimised graph does not explain is undone completely.
+        """
         g = self.graph
         lcc = self.config.loop_closure
         saved = (g.poses.copy(), g.landmarks.copy())
@@ -1091,15 +1128,17 @@ class LineSlam:
         return 0
 
     def _converge(self, reset: bool) -> None:
-        """Bring the back-end to the graph (rebuilding iSAM2 from the graph's estimate after a
-        large change of it), converge, and refresh the extents."""
+        """Bring the back-end to the graph, converge, and refresh the extents.
+
+        With ``reset`` iSAM2 is rebuilt from the graph's estimate (after a large change of it).
+        """
         g = self.graph
         t0 = time.perf_counter()
         if reset:
             self.backend.reset(g)
         else:
             self.backend.update(g)
-        self.backend.optimize(g)
+        self.backend.optimize(g, self.config.loop_closure.max_updates)
         self._extents = g.landmark_extents()
         self.time_s["backend"] += time.perf_counter() - t0
 
@@ -1205,7 +1244,9 @@ class LineSlam:
             d_next = self._kf_delta.data[k + 1]
             est = pose_between(g.poses[k], g.poses[k + 1])
             corr = pose_log(pose_between(d_next, est))
-            total = np.hypot(d_next[:, 0], d_next[:, 1]) + ANGLE_WEIGHT_M_PER_RAD * np.abs(d_next[:, 2])
+            total = np.hypot(d_next[:, 0], d_next[:, 1]) + ANGLE_WEIGHT_M_PER_RAD * np.abs(
+                d_next[:, 2]
+            )
             prog = np.asarray(self._scan_progress, dtype=float)[has_next]
             f = np.clip(prog / np.maximum(total, 1e-9), 0.0, 1.0)
             poses[has_next] = pose_compose(poses[has_next], pose_exp(f[:, None] * corr))

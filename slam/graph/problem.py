@@ -407,9 +407,11 @@ class LineGraph:
         return rewired
 
     def unmerge(self, record: MergeRecord) -> None:
-        """Undo a merge (a rejected loop closure): ``record.factors`` go back to
-        ``record.drop``, which is alive again.  Logged in :attr:`merge_log` as a record with
-        ``undo=True`` so that incremental solvers rebuild the affected factors.
+        """Undo a merge (e.g. of a rejected loop closure).
+
+        ``record.factors`` go back to ``record.drop``, which is alive again.  Logged in
+        :attr:`merge_log` as a record with ``undo=True`` so that incremental solvers rebuild
+        the affected factors.
         """
         keep, drop = record.keep, record.drop
         if self.landmark_alive[drop] or not self.landmark_alive[keep]:
