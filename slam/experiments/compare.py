@@ -526,6 +526,8 @@ def _figures(report: CompareReport, out: Path) -> list[str]:
     trajs = {o.variant.name: o.estimate.poses_world_laser for o in report.outcomes}
     segments: list[FloatArray] = []
     mapped = [o for o in report.outcomes if o.estimate.landmarks_r_alpha.shape[0] > 0]
+    # the map of a variant that ran to the end (a time-budgeted one covers part of the log)
+    mapped.sort(key=lambda o: o.estimate.stats.get("stopped_at_scan") is not None)
     if mapped and hasattr(mapped[0].estimate.result, "landmark_segments"):
         segments = list(mapped[0].estimate.result.landmark_segments)
     truth = None
