@@ -4,12 +4,15 @@ For every relation ``(t1, t2)`` short enough to reflect the local noise (path le
 ``--max-distance`` and turning below ``--max-turn`` by the odometry), the odometry's relative
 pose is compared with the relation: ``ξ = Log(relation⁻¹ · odometry⁻¹(t1) · odometry(t2))``.
 Least squares on the squared errors then fits the model the estimators use
-(``slam.ekf.motion`` / ``slam.sim.odometry``):
+(``slam.graph.config.MotionNoiseConfig``, used by the graph and the EKF; the
+``sigma_xy_per_rad`` term is not fitted and printed as 0):
 
     E[ξ_x² + ξ_y²] / 2 = σ_t² · Δs,        E[ξ_θ²] = σ_rr² · |Δθ| + σ_rm² · Δs
 
 with ``Δs`` the odometry path length and ``|Δθ|`` the summed absolute turning between the two
-scans.  Prints the values as an ``[ekf.odometry]`` TOML table.
+scans.  Prints the values as ``[slam.motion]`` and ``[ekf.odometry]`` TOML tables (the same
+model); the configuration lineslam uses by default is one for all logs, so these are for
+experiments only (``configs/``).
 
 Usage: python scripts/calibrate_odometry.py LOG [--max-distance 2.0] [--max-turn 1.5]
 """
@@ -67,10 +70,12 @@ def main() -> None:
         f"# {log.name}: {short.shape[0]} of {r.shape[0]} relations used "
         f"(median path {np.median(ds):.2f} m, median turning {np.median(dr):.2f} rad)"
     )
-    print("[ekf.odometry]")
-    print(f"sigma_trans_per_m = {np.sqrt(max(a, 0.0)):.4f}")
-    print(f"sigma_rot_per_rad = {np.sqrt(max(b[0], 0.0)):.4f}")
-    print(f"sigma_rot_per_m = {np.sqrt(max(b[1], 0.0)):.4f}")
+    for table in ("slam.motion", "ekf.odometry"):
+        print(f"\n[{table}]")
+        print(f"sigma_xy_per_m = {np.sqrt(max(a, 0.0)):.4f}")
+        print("sigma_xy_per_rad = 0.0")
+        print(f"sigma_theta_per_m = {np.sqrt(max(b[1], 0.0)):.4f}")
+        print(f"sigma_theta_per_rad = {np.sqrt(max(b[0], 0.0)):.4f}")
 
 
 if __name__ == "__main__":

@@ -108,6 +108,8 @@ def test_ekf_command_on_the_demo_log_beats_odometry(tmp_path):
 
 def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_path):
     out = tmp_path / "cmp"
+    # the simulated fits' covariances are exact: no model-error floor, so NEES means something
+    (tmp_path / "exact.toml").write_text("[ekf]\nline_sigma_extra = [0.0, 0.0]\n")
     main(
         [
             "compare",
@@ -115,6 +117,8 @@ def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_p
             "--out",
             str(out),
             "--quiet",
+            "--config",
+            str(tmp_path / "exact.toml"),
             "--max-scans",
             "200",
             "--variants",
@@ -129,5 +133,39 @@ def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_p
         assert 0.5 < rows[name]["nees_mean"] < 10.0
     md = (out / "report.md").read_text()
     assert "relations trans. (m)" in md and "ATE RMSE (m)" in md
+    assert "* ekf: ran to the end (200 scans)" in md and "stopped at" not in md
     assert list((out / ".cache").glob("lines-*.pkl"))  # weighted and unweighted fits cached
     assert len(list((out / ".cache").glob("lines-*.pkl"))) == 2
+
+
+def test_compare_report_says_where_the_ekf_stopped(tmp_path):
+    out = tmp_path / "cmp"
+    (tmp_path / "small.toml").write_text("[ekf]\nmax_landmarks = 5\n")
+    main(
+        [
+            "compare",
+            str(DEMO / "log.clf"),
+            "--out",
+            str(out),
+            "--quiet",
+            "--no-figures",
+            "--config",
+            str(tmp_path / "small.toml"),
+            "--max-scans",
+            "150",
+            "--time-budget",
+            "0.5",
+            "--variants",
+            "ekf=ekf-nn,graph=graph-isam2",
+        ]
+    )
+    rows = {r["variant"]: r for r in json.loads((out / "report.json").read_text())["variants"]}
+    md = (out / "report.md").read_text()
+    ekf = rows["ekf"]
+    assert ekf["stopped_at_scan"] is not None and ekf["scans_processed"] < 150
+    assert f"* ekf: **stopped at scan {ekf['stopped_at_scan']} of 150**" in md
+    assert "max_landmarks=5" in md
+    graph = rows["graph"]
+    assert graph["stopped_at_scan"] is not None and 0 < graph["scans_processed"] < 150
+    assert f"* graph: **stopped at scan {graph['stopped_at_scan']} of 150**" in md
+    assert "time budget of 0.5 s" in md

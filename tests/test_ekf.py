@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from linefit.errors import ConfigError
+from slam.association import AssociationConfig
 from slam.config import RunConfig
-from slam.ekf import EkfConfig, EkfSlam, OdometryNoiseConfig
+from slam.ekf import EkfConfig, EkfSlam, MotionNoiseConfig
 from slam.ekf.augment import augment_state, landmark_from_measurement
 from slam.ekf.conventions import (
     cov_state_to_tangent,
@@ -29,6 +31,9 @@ from slam.geometry import (
     wrap_angle,
 )
 from slam.types import Scan
+
+# the overlap test off (landmarks set without seen extents)
+NO_OVERLAP_TEST = AssociationConfig(overlap_margin_m=1e9)
 
 
 def numdiff(f, x, eps=1e-6):
@@ -104,7 +109,7 @@ def test_covariance_conversion_round_trip_and_first_order_equivalence(rng):
 def test_motion_jacobian_and_process_noise(rng):
     pose = np.array([0.5, 1.0, 2.8])
     u = np.array([0.3, -0.05, 0.2])
-    Q_u = odometry_covariance(u, OdometryNoiseConfig())
+    Q_u = odometry_covariance(u, MotionNoiseConfig())
     new, F, Q = predict_pose(pose, u, Q_u)
 
     def f(p):
@@ -121,8 +126,13 @@ def test_motion_jacobian_and_process_noise(rng):
     assert np.max(np.abs(np.cov(d.T) - Q) / scale) < 0.03
     # noise per metre / per radian as documented
     d = math.hypot(0.3, 0.05)
-    assert Q_u[0, 0] == pytest.approx(0.02**2 * d + 1e-4**2)
-    assert Q_u[2, 2] == pytest.approx(0.02**2 * 0.2 + 0.005**2 * d + 1e-4**2)
+    m = MotionNoiseConfig()
+    assert Q_u[0, 0] == pytest.approx(
+        m.sigma_xy_per_m**2 * d + m.sigma_xy_per_rad**2 * 0.2 + m.sigma_xy_min_m**2
+    )
+    assert Q_u[2, 2] == pytest.approx(
+        m.sigma_theta_per_rad**2 * 0.2 + m.sigma_theta_per_m**2 * d + m.sigma_theta_min_rad**2
+    )
 
 
 # -------------------------------------------------------------------------------- augmentation
@@ -218,7 +228,7 @@ def test_linear_gaussian_case_nees_matches_state_dimension():
     P0_r = 0.25
     Q_u = np.diag([1e-3, 1e-3, 4e-4])  # isotropic in x, y
     R = np.array([[1e-3, 2e-4], [2e-4, 5e-4]])
-    cfg = EkfConfig(overlap_margin_m=math.inf)
+    cfg = EkfConfig(association=NO_OVERLAP_TEST)
     dim = 3 + M
     nees_pose = np.zeros((n_runs, n_steps))
     nees_full = np.zeros((n_runs, n_steps))
@@ -286,7 +296,7 @@ def test_jcbb_resolves_what_nearest_neighbour_gets_wrong():
     lines = _lines_from_truth(x_true, [0, 1, 2], R)
     results = {}
     for method in ("nn", "jcbb"):
-        ekf = EkfSlam(EkfConfig(association=method, overlap_margin_m=math.inf))
+        ekf = EkfSlam(EkfConfig(association=replace(NO_OVERLAP_TEST, method=method)))
         ekf.set_state(x_pred, P)
         matches, _ = ekf.associate(lines)
         results[method] = matches.tolist()
@@ -296,7 +306,7 @@ def test_jcbb_resolves_what_nearest_neighbour_gets_wrong():
 
 def test_overlap_gating_keeps_collinear_walls_apart():
     # one landmark y=1 seen between x in [0, 2]; a measurement of the same line at x in [6, 8]
-    ekf = EkfSlam(EkfConfig(overlap_margin_m=0.5))
+    ekf = EkfSlam(EkfConfig(association=AssociationConfig(overlap_margin_m=0.5)))
     x = np.array([5.0, 0.0, 0.0, 1.0, np.pi / 2])
     P = np.diag([1e-4, 1e-4, 1e-6, 1e-4, 1e-6])
     ekf.set_state(x, P, ends_world=np.array([[[0.0, 1.0], [2.0, 1.0]]]))
@@ -315,7 +325,7 @@ def test_overlap_gating_keeps_collinear_walls_apart():
 
 # -------------------------------------------------------------------------------- merging
 def test_merging_two_independent_landmarks_gives_the_information_fusion():
-    ekf = EkfSlam(EkfConfig(overlap_margin_m=math.inf))
+    ekf = EkfSlam(EkfConfig(association=NO_OVERLAP_TEST))
     l1, l2 = np.array([2.00, 0.50]), np.array([2.03, 0.49])
     P1 = np.array([[4e-4, 1e-5], [1e-5, 1e-4]])
     P2 = np.array([[2e-4, -2e-5], [-2e-5, 3e-4]])
@@ -336,8 +346,29 @@ def test_merging_two_independent_landmarks_gives_the_information_fusion():
     np.testing.assert_allclose(ekf.P[3:5, 3:5], np.linalg.inv(info), atol=1e-12)
 
 
+def test_constraint_and_removal_equal_the_joseph_update_then_deletion():
+    from slam.ekf.update import MeasurementStack, constrain_and_remove
+
+    rng = np.random.default_rng(12)
+    n = 3 + 2 * 6
+    A = rng.standard_normal((n, n))
+    P = A @ A.T / n + 0.01 * np.eye(n)
+    x = rng.standard_normal(n)
+    H_sub = np.hstack([np.diag([-1.0, 1.0]), -np.eye(2)])
+    cols = np.array([5, 6, 11, 12])
+    meas = MeasurementStack(rng.standard_normal(2), H_sub, cols, np.zeros((2, 2)))
+    x_j, P_j, _, _ = joseph_update(x, P, meas)
+    keep = np.setdiff1d(np.arange(n), cols[2:])
+    x_c, P_c = constrain_and_remove(x, P, meas, cols[2:])
+    np.testing.assert_allclose(x_c, x_j[keep], atol=1e-10)
+    np.testing.assert_allclose(P_c, P_j[np.ix_(keep, keep)], atol=1e-10)
+    assert np.array_equal(P_c, P_c.T)
+    # the constraint holds exactly after conditioning (before removal, in the Joseph result)
+    np.testing.assert_allclose(H_sub @ x_j[cols], H_sub @ x[cols] + meas.y, atol=1e-10)
+
+
 def test_distinct_landmarks_are_not_merged():
-    ekf = EkfSlam(EkfConfig(overlap_margin_m=math.inf))
+    ekf = EkfSlam(EkfConfig(association=NO_OVERLAP_TEST))
     x = np.array([0.0, 0.0, 0.0, 2.0, 0.5, 2.5, 0.5])
     P = np.diag([1e-6] * 3 + [1e-4, 1e-5, 1e-4, 1e-5])
     ekf.set_state(x, P)
@@ -366,7 +397,7 @@ def test_bad_input_gives_clear_errors():
     with pytest.raises(InputError, match="non-finite"):
         ekf.add_scan(_scan(0, [0.0, np.nan, 0.0]), LineSet.empty())
     # a line with a singular or NaN covariance is skipped and counted, not used
-    ekf = EkfSlam(EkfConfig(overlap_margin_m=math.inf))
+    ekf = EkfSlam(EkfConfig(association=NO_OVERLAP_TEST))
     bad = LineSet(
         np.array([[1.0, 0.0], [2.0, 1.0]]),
         np.array([np.zeros((2, 2)), np.full((2, 2), np.nan)]),
@@ -376,7 +407,7 @@ def test_bad_input_gives_clear_errors():
     rep = ekf.add_scan(_scan(0, [0, 0, 0]), bad)
     assert rep.n_invalid == 2 and ekf.n_landmarks == 0
     for kwargs in (
-        {"gate_probability": 1.5},
+        {"new_landmark_probability": 1.5},
         {"association": "gnn"},
         {"max_landmarks": 0},
         {"initial_pose_sigma": (0.1, -1.0, 0.0)},
@@ -385,7 +416,7 @@ def test_bad_input_gives_clear_errors():
         with pytest.raises(ConfigError):
             EkfConfig(**kwargs)
     with pytest.raises(ConfigError):
-        OdometryNoiseConfig(sigma_xy_min_m=0.0)
+        MotionNoiseConfig(sigma_xy_min_m=0.0)
 
 
 def _line_run(seed=3, loops=1.0):
@@ -454,10 +485,10 @@ def test_results_files_follow_the_interfaces(tmp_path):
 def test_run_config_round_trip_with_ekf_table(tmp_path):
     cfg = RunConfig(
         ekf=EkfConfig(
-            association="jcbb",
+            association=AssociationConfig(method="nn", gate_probability=0.99),
             max_landmarks=300,
             max_runtime_s=60.0,
-            odometry=OdometryNoiseConfig(sigma_trans_per_m=0.1),
+            odometry=MotionNoiseConfig(sigma_xy_per_m=0.1),
             initial_pose_sigma=(0.1, 0.1, 0.01),
         )
     )
@@ -478,3 +509,13 @@ def test_filterpy_and_sparse_runs_agree_on_a_simulated_stretch():
         out.append((ekf.x.copy(), ekf.P.copy()))
     np.testing.assert_allclose(out[0][0], out[1][0], atol=1e-9)
     np.testing.assert_allclose(out[0][1], out[1][1], atol=1e-11)
+
+
+def test_the_per_log_configs_load():
+    from pathlib import Path
+
+    files = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.toml"))
+    assert files
+    for path in files:
+        cfg = RunConfig.from_toml(path)
+        assert cfg.ekf.odometry.sigma_xy_per_m > 0.0, path  # the calibrated table was read

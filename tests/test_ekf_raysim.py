@@ -8,10 +8,9 @@ from scipy.stats import chi2
 
 from linefit import extract_lines
 from slam.config import RunConfig
-from slam.ekf import EkfConfig, EkfSlam, OdometryNoiseConfig
+from slam.ekf import EkfConfig, EkfSlam, MotionNoiseConfig
 from slam.experiments.linesim import LineWorld
 from slam.experiments.nees import pose_nees
-from slam.frontend.lineset import LineSet
 from slam.geometry import line_residual
 from slam.sim import SimConfig, get_world
 from slam.sim.simulate import simulate
@@ -22,12 +21,16 @@ def loop_run():
     sim = SimConfig()
     log = simulate(get_world("loop"), None, sim, seed=11)
     scans = list(log.scans())
-    lines = [
-        LineSet.from_lines(extract_lines(s.ranges, s.bearings, RunConfig().linefit)) for s in scans
-    ]
+    lines = [list(extract_lines(s.ranges, s.bearings, RunConfig().linefit)) for s in scans]
     o = sim.odometry
     cfg = EkfConfig(
-        odometry=OdometryNoiseConfig(o.sigma_trans_per_m, o.sigma_rot_per_rad, o.sigma_rot_per_m)
+        odometry=MotionNoiseConfig(
+            sigma_xy_per_m=o.sigma_trans_per_m,
+            sigma_xy_per_rad=0.0,
+            sigma_theta_per_m=o.sigma_rot_per_m,
+            sigma_theta_per_rad=o.sigma_rot_per_rad,
+        ),
+        line_sigma_extra=(0.0, 0.0),
     )
     return log, scans, lines, cfg
 

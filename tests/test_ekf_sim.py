@@ -8,7 +8,12 @@ from scipy.stats import chi2
 
 from slam.ekf import EkfConfig, EkfSlam
 from slam.ekf.conventions import cov_tangent_to_state
-from slam.experiments.linesim import corridor_loop_world, loop_trajectory, simulate_line_run
+from slam.experiments.linesim import (
+    SIM_ODOMETRY,
+    corridor_loop_world,
+    loop_trajectory,
+    simulate_line_run,
+)
 from slam.experiments.nees import anees_bounds, pose_nees
 from slam.geometry import wrap_angle
 
@@ -17,7 +22,8 @@ def run_ekf(seed, config=None):
     world = corridor_loop_world()
     truth = loop_trajectory(loops=1.0)
     run = simulate_line_run(world, truth, seed=seed)
-    ekf = EkfSlam(config or EkfConfig())
+    # the simulator's odometry model, and its fit covariances are exact: no model-error floor
+    ekf = EkfSlam(config or EkfConfig(odometry=SIM_ODOMETRY, line_sigma_extra=(0.0, 0.0)))
     for scan, lines in zip(run.scans, run.lines, strict=True):
         ekf.add_scan(scan, lines)
     odom = np.array([s.pose_odom_laser for s in run.scans])

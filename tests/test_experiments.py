@@ -66,3 +66,45 @@ def test_bad_experiment_configuration_is_rejected():
         ConsistencyConfig(n_runs=0)
     with pytest.raises(ConfigError, match="Dask scheduler"):
         map_tasks(_square, [1], dask_address="tcp://127.0.0.1:9", connect_timeout_s=1.0)
+
+
+def test_ekf_and_odometry_follow_the_graphs_laser_mounting_and_output_frame():
+    """With ``slam.laser_odometry = "base"`` the EKF sees ``base odometry ∘ mounting`` and with
+    ``output_frame = "base"`` reports base poses: dead reckoning then returns the base odometry
+    itself, whatever the (wrong) logged laser poses say."""
+    from dataclasses import replace
+
+    from slam.config import RunConfig
+    from slam.experiments.estimators import run_estimator
+    from slam.geometry import pose_compose
+    from slam.types import Scan
+
+    rng = np.random.default_rng(4)
+    base = np.cumsum(rng.normal([0.3, 0.0, 0.05], [0.05, 0.02, 0.1], (30, 3)), axis=0)
+    scans = [
+        Scan(
+            index=k,
+            timestamp=float(k),
+            ranges=np.zeros(0),
+            bearings=np.zeros(0),
+            pose_odom_base=base[k],
+            pose_odom_laser=base[k],  # the mounting is missing from the logged laser pose
+        )
+        for k in range(30)
+    ]
+    rc = RunConfig()
+    mounted = replace(
+        rc,
+        slam=replace(
+            rc.slam, pose_base_laser=(0.2, 0.05, 0.1), laser_odometry="base", output_frame="base"
+        ),
+    )
+    out = run_estimator("odometry", scans, None, mounted, None)
+    np.testing.assert_allclose(out.poses_world_laser, base, atol=1e-12)
+    assert out.stats["frame"] == "base"
+    laser_cfg = replace(mounted, slam=replace(mounted.slam, output_frame="laser"))
+    laser = run_estimator("odometry", scans, None, laser_cfg, None).poses_world_laser
+    # the laser poses are the base poses composed with the mounting (not the logged ones)
+    expected = pose_compose(base, np.broadcast_to([0.2, 0.05, 0.1], base.shape))
+    np.testing.assert_allclose(laser[:, :2], expected[:, :2], atol=1e-12)
+    assert np.max(np.abs(laser[:, :2] - base[:, :2])) > 0.1

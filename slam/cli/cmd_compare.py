@@ -43,9 +43,20 @@ def compare(
             "default: every available variant.",
         ),
     ] = None,
-    workers: Annotated[int, typer.Option("--workers", help="Local worker processes.")] = 1,
+    workers: Annotated[
+        int,
+        typer.Option("--workers", help="Local worker processes (0: one per CPU core; 1: serial)."),
+    ] = 0,
     dask: Annotated[
         str | None, typer.Option("--dask", help="Dask scheduler address (tcp://host:port).")
+    ] = None,
+    time_budget: Annotated[
+        float | None,
+        typer.Option(
+            "--time-budget",
+            help="Seconds each variant may run before it stops taking scans (default: only "
+            "graph-batch on logs, 150 s).",
+        ),
     ] = None,
     figures: Annotated[bool, typer.Option("--figures/--no-figures", help="Draw figures.")] = True,
     max_scans: Annotated[
@@ -58,6 +69,9 @@ def compare(
     quiet: QuietOpt = False,
 ) -> None:
     """Compare graph SLAM, EKF-SLAM, odometry and front-end variants on one log."""
+    from dataclasses import replace
+
+    from slam.errors import ConfigError
     from slam.experiments.compare import (
         Variant,
         default_variants,
@@ -68,6 +82,10 @@ def compare(
 
     run_config = build_config(config, sigma_d, sigma_phi, seed)
     data = parse_source(log, seed=run_config.seed)
+    if workers <= 0:
+        import os
+
+        workers = os.cpu_count() or 1
     if variants:
         chosen = []
         for item in (v.strip() for v in variants.split(",") if v.strip()):
@@ -78,6 +96,10 @@ def compare(
         selected = tuple(chosen)
     else:
         selected = default_variants(simulated=data.kind == "sim")
+    if time_budget is not None:
+        if not time_budget > 0.0:
+            raise ConfigError(f"--time-budget must be > 0, got {time_budget}")
+        selected = tuple(replace(v, time_budget_s=time_budget) for v in selected)
     prepare_out_dir(out, run_config)
     bar = None
     if not quiet:

@@ -10,7 +10,7 @@ covers the scans processed and ``summary.json`` says at which scan and why.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import typer
 
@@ -55,12 +55,12 @@ def ekf(
 
     run_config = build_config(config, sigma_d, sigma_phi, seed)
     if association is not None:
-        if association == "nn":
-            run_config = replace(run_config, ekf=replace(run_config.ekf, association="nn"))
-        elif association == "jcbb":
-            run_config = replace(run_config, ekf=replace(run_config.ekf, association="jcbb"))
-        else:
+        if association not in ("nn", "jcbb"):
             raise ConfigError(f"--association must be nn or jcbb, got {association!r}")
+        method: Literal["nn", "jcbb"] = "nn" if association == "nn" else "jcbb"
+        ekf_cfg = run_config.ekf
+        ekf_cfg = replace(ekf_cfg, association=replace(ekf_cfg.association, method=method))
+        run_config = replace(run_config, ekf=ekf_cfg)
     prepare_out_dir(out, run_config)
     bar = None
     if not quiet:

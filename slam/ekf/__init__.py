@@ -4,8 +4,8 @@ Public API: :class:`EkfSlam` (the filter), :class:`EkfConfig` (its settings, TOM
 ``[ekf]``), :class:`EkfResult` (trajectory, map, covariances, statistics, files).
 """
 
-from slam.ekf.config import EkfConfig, OdometryNoiseConfig
+from slam.ekf.config import EkfConfig, MotionNoiseConfig
 from slam.ekf.ekf_slam import EkfSlam, ScanReport
 from slam.ekf.result import EkfResult
 
-__all__ = ["EkfConfig", "EkfResult", "EkfSlam", "OdometryNoiseConfig", "ScanReport"]
+__all__ = ["EkfConfig", "EkfResult", "EkfSlam", "MotionNoiseConfig", "ScanReport"]

@@ -6,10 +6,11 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-from slam.ekf.motion import OdometryNoiseConfig
+from slam.association import AssociationConfig
 from slam.errors import ConfigError
+from slam.graph.config import MotionNoiseConfig
 
-__all__ = ["EkfConfig", "OdometryNoiseConfig"]
+__all__ = ["AssociationConfig", "EkfConfig", "MotionNoiseConfig"]
 
 
 def _probability(name: str, value: float) -> None:
@@ -23,30 +24,26 @@ class EkfConfig:
 
     Attributes
     ----------
-    odometry : OdometryNoiseConfig
-        Motion model (noise per metre and per radian) of the prediction.
-    association : {"nn", "jcbb"}
-        Nearest neighbour with the individual χ² gate, or joint compatibility branch and bound.
-    gate_probability : float
-        Individual χ² gate (2 dof) of a measurement-landmark pair.
-    joint_gate_probability : float
-        JCBB's joint gate (``2h`` dof for ``h`` pairs).
-    jcbb_max_nodes : int
-        Node budget of JCBB per scan; when exhausted the best hypothesis so far is used
-        (counted in the result's ``stats``).
+    odometry : MotionNoiseConfig
+        Motion model of the prediction: the graph back-end's class
+        (:class:`slam.graph.config.MotionNoiseConfig`) with its defaults, so both estimators
+        assume the same odometry noise unless told otherwise.
+    association : AssociationConfig
+        Data association: the graph's class and code (:mod:`slam.association`: χ² gate on the
+        joint covariance of pose and landmark, segment-overlap test with the pose-dependent
+        margin, candidates within ``max_range_m``, nearest neighbour or JCBB) with its
+        defaults, so both estimators gate alike unless told otherwise.
     new_landmark_probability : float
         An unmatched line starts a new landmark only if no overlapping landmark passes the χ²
         gate at this (looser) probability; otherwise it is ambiguous and dropped.
-    overlap_margin_m : float
-        A pair must overlap along the landmark (measured segment vs the landmark's seen extent,
-        at the predicted pose) with a gap below this (m); ``inf`` disables the test.
     segment_gap_m : float
         Seen pieces of a landmark closer than this (m) are merged (``map.json`` segments).
     update_min_distance_m, update_min_angle_rad : float
-        Update policy (the graph's keyframe policy): lines of a scan are used only once the
-        robot moved at least this far (odometry path length) or turned this much since the last
-        update; 0 and 0 use every scan.  Prediction runs on every scan regardless, and every
-        scan gets a pose.
+        Update policy (the graph's keyframe policy): a scan is predicted to and its lines are
+        used only when the odometry since the last update (straight-line distance, heading
+        change) reaches this distance or this angle; 0 and 0 use every scan.  Other scans get
+        the last update's pose composed with their odometry offset and its covariance
+        compounded with the motion noise (as the graph's non-keyframe scans).
     max_landmarks : int
         Guard on the ``O(n²)`` cost per update (``n = 3 + 2·landmarks``).
     on_max_landmarks : {"stop", "freeze"}
@@ -62,8 +59,8 @@ class EkfConfig:
         Fuse two landmarks that pass the χ² test on their joint marginal and overlap (an exact
         EKF constraint update ``l_i − l_j = 0`` followed by deleting ``l_j``).  Tested for the
         landmarks observed or created since the last test against all others.  This is how a
-        wall first seen in two pieces (farther apart than ``overlap_margin_m``) becomes one
-        landmark once the pieces meet.
+        wall first seen in two pieces (farther apart than ``association.overlap_margin_m``)
+        becomes one landmark once the pieces meet.
     merge_probability : float
         χ² probability (2 dof) of the landmark merge test.
     merge_every_n_updates : int
@@ -80,20 +77,19 @@ class EkfConfig:
         BLAS threads the runners allow while filtering (:mod:`slam.ekf.threads`); 0 leaves the
         library default.  One is fastest on small shared machines.
     line_sigma_extra : tuple of float
-        Model error ``(σ_r, σ_α)`` (m, rad) added in quadrature to every line's covariance
-        (``R + diag(σ_r², σ_α²)``): real walls are not ideal lines and real range noise is not
-        the fit's model.  Zero (default) trusts the fit's covariance as it is, which is right
-        for simulated data.
+        Model-error floor ``(σ_offset, σ_angle)`` (m, rad) added to every line's covariance,
+        specified at the segment's mid-point
+        (:func:`slam.frontend.anchored.model_error_covariance`, the graph's function):
+        real walls are not ideal lines and real range noise is not the fit's model.  The
+        default (0.02 m, 0.01 rad) is the graph back-end's ``line_model_sigma_*``; zero trusts
+        the fit's covariance as it is (right for simulated data whose fit covariances are
+        exact, e.g. the consistency study).
     """
 
-    odometry: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)
-    association: Literal["nn", "jcbb"] = "nn"
-    gate_probability: float = 0.999
-    joint_gate_probability: float = 0.999
-    jcbb_max_nodes: int = 2000
+    odometry: MotionNoiseConfig = field(default_factory=MotionNoiseConfig)
+    association: AssociationConfig = field(default_factory=AssociationConfig)
     new_landmark_probability: float = 0.99999
-    overlap_margin_m: float = 0.5
-    segment_gap_m: float = 0.5
+    segment_gap_m: float = 0.3
     update_min_distance_m: float = 0.2
     update_min_angle_rad: float = 0.15
     max_landmarks: int = 2000
@@ -104,28 +100,23 @@ class EkfConfig:
     merge_probability: float = 0.999
     merge_every_n_updates: int = 1
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    min_landmark_observations: int = 1
-    line_sigma_extra: tuple[float, float] = (0.0, 0.0)
+    min_landmark_observations: int = 3
+    line_sigma_extra: tuple[float, float] = (0.02, 0.01)
     blas_threads: int = 1
     min_line_points: int = 5
-    min_line_length_m: float = 0.1
+    min_line_length_m: float = 0.3
 
     def __post_init__(self) -> None:
-        if self.association not in ("nn", "jcbb"):
-            raise ConfigError(f"ekf.association must be 'nn' or 'jcbb', got {self.association!r}")
-        for name in (
-            "gate_probability",
-            "joint_gate_probability",
-            "new_landmark_probability",
-            "merge_probability",
-        ):
+        if not isinstance(self.association, AssociationConfig):
+            raise ConfigError(
+                f"ekf.association must be an AssociationConfig, got {self.association!r}"
+            )
+        for name in ("new_landmark_probability", "merge_probability"):
             _probability(name, getattr(self, name))
-        if self.new_landmark_probability < self.gate_probability:
-            raise ConfigError("ekf.new_landmark_probability must be >= ekf.gate_probability")
-        if self.jcbb_max_nodes < 1:
-            raise ConfigError(f"ekf.jcbb_max_nodes must be >= 1, got {self.jcbb_max_nodes}")
-        if not (self.overlap_margin_m >= 0.0):
-            raise ConfigError(f"ekf.overlap_margin_m must be >= 0, got {self.overlap_margin_m}")
+        if self.new_landmark_probability < self.association.gate_probability:
+            raise ConfigError(
+                "ekf.new_landmark_probability must be >= ekf.association.gate_probability"
+            )
         if not (math.isfinite(self.segment_gap_m) and self.segment_gap_m >= 0.0):
             raise ConfigError(f"ekf.segment_gap_m must be >= 0, got {self.segment_gap_m}")
         for name in ("update_min_distance_m", "update_min_angle_rad"):

@@ -25,9 +25,9 @@ One scan (:meth:`EkfSlam.add_scan`)
    (:mod:`slam.ekf.motion`).
 2. **Lines**: given, or extracted with :func:`linefit.extract_lines`; lines whose covariance is
    not finite and positive definite are skipped (counted).
-3. **Associate** (:mod:`slam.ekf.gating`): individual χ² gate on each (line, landmark) pair with
-   ``S = H P Hᵀ + R`` from the current joint covariance, plus a segment-overlap test along the
-   landmark; then nearest neighbour or JCBB.
+3. **Associate** with the graph's code (:mod:`slam.association`): candidates within range,
+   segment-overlap test along the landmark, individual χ² gate on each (line, landmark) pair
+   with ``S = H P Hᵀ + R`` from the current joint covariance; then nearest neighbour or JCBB.
 4. **Update** all matched lines at once, Joseph form (:mod:`slam.ekf.update`).
 5. **Augment** the state with unmatched lines that no landmark could explain (Eq. 30 with the
    cross-covariances, :mod:`slam.ekf.augment`).
@@ -46,26 +46,26 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from linefit.line import Line, wrap_angle
+from slam.association import associate, build_problem, candidate_landmarks, overlap_mask
 from slam.ekf.augment import augment_state
 from slam.ekf.config import EkfConfig
-from slam.ekf.conventions import cov_state_to_tangent, state_jacobian_from_tangent
-from slam.ekf.extents import LandmarkExtents, overlap_mask
-from slam.ekf.gating import (
-    AssociationProblem,
-    innovation_covariances,
-    jcbb,
-    mahalanobis2_2x2,
-    nearest_neighbour,
-)
+from slam.ekf.conventions import cov_state_to_tangent, tangent_to_state_jacobian
+from slam.ekf.extents import LandmarkExtents
 from slam.ekf.motion import odometry_covariance, predict_pose
 from slam.ekf.result import EkfResult
-from slam.ekf.update import MeasurementStack, filterpy_update, joseph_update, line_measurements
+from slam.ekf.update import (
+    MeasurementStack,
+    constrain_and_remove,
+    filterpy_update,
+    joseph_update,
+    line_measurements,
+)
 from slam.errors import EstimationError, InputError
+from slam.frontend.anchored import model_error_covariance
 from slam.frontend.lineset import LineSet
-from slam.geometry import line_residual, pose_between, predict_line_measurement
+from slam.geometry import line_residual, pose_between
 from slam.types import Scan
 
 if TYPE_CHECKING:
@@ -170,9 +170,7 @@ class EkfSlam:
         self._extents = LandmarkExtents(self.config.segment_gap_m)
         self._n_obs: list[int] = []
         self._touched: set[int] = set()
-        self._prev_odom: FloatArray | None = None
-        self._since_update_m = 0.0
-        self._since_update_rad = 0.0
+        self._update_odom: FloatArray | None = None
         self._n_updates = 0
         self._started = False
         self.stopped = False
@@ -198,9 +196,9 @@ class EkfSlam:
             "jcbb_incomplete": 0,
             "updates": 0,
         }
-        self._gate = float(chi2.ppf(self.config.gate_probability, 2))
-        self._new_gate = float(chi2.ppf(self.config.new_landmark_probability, 2))
-        self._merge_gate = float(chi2.ppf(self.config.merge_probability, 2))
+        # χ²₂ quantiles in closed form: −2 ln(1 − p)
+        self._new_gate = -2.0 * math.log1p(-self.config.new_landmark_probability)
+        self._merge_gate = -2.0 * math.log1p(-self.config.merge_probability)
 
     # ------------------------------------------------------------------ state access
     @property
@@ -254,7 +252,7 @@ class EkfSlam:
         ends_world : ndarray, shape (M, 2, 2), optional
             Seen extent of each landmark; default: a point at the foot of each line's normal
             (overlap gating then accepts only measurements within the margin of it, so set
-            ``overlap_margin_m = inf`` when landmarks have no extent).
+            ``association.overlap_margin_m`` large when landmarks have no extent).
         """
         x = np.asarray(x, dtype=float).reshape(-1)
         n = x.shape[0]
@@ -300,8 +298,6 @@ class EkfSlam:
         if P.shape[0] > 3:
             P[:3, 3:] = F @ P[:3, 3:]
             P[3:, :3] = P[:3, 3:].T
-        self._since_update_m += math.hypot(u[0], u[1])
-        self._since_update_rad += abs(u[2])
 
     def update(self, landmark_idx: IntArray, z_r_alpha: FloatArray, R: FloatArray) -> None:
         """Update with lines ``z`` (laser frame, covariances ``R`` (m, 2, 2)) of known landmarks."""
@@ -344,19 +340,30 @@ class EkfSlam:
             self._n_obs.append(1)
 
     # ------------------------------------------------------------------ association
-    def _pose_cross_blocks(self, cols_lm: IntArray) -> tuple[FloatArray, FloatArray]:
-        """``P_xl (C, 3, 2)`` and ``P_ll (C, 2, 2)`` for the landmarks ``cols_lm``."""
-        base = 3 + 2 * cols_lm
-        P_xl = np.stack([self.P[:3, base], self.P[:3, base + 1]], axis=-1)  # (3, C, 2)
-        P_ll = np.empty((cols_lm.shape[0], 2, 2))
-        P_ll[:, 0, 0] = self.P[base, base]
-        P_ll[:, 0, 1] = self.P[base, base + 1]
-        P_ll[:, 1, 0] = self.P[base + 1, base]
-        P_ll[:, 1, 1] = self.P[base + 1, base + 1]
-        return np.transpose(P_xl, (1, 0, 2)), P_ll
+    def _joint_tangent_covariance(self, landmarks: IntArray) -> FloatArray:
+        """Joint covariance of the pose and ``landmarks`` with the pose in the tangent space.
+
+        The filter's pose error is additive, ``δ = J(θ) ξ``; :mod:`slam.association` (shared
+        with the graph) works with right-perturbation Jacobians, so the pose rows and columns
+        are mapped with ``J(θ)⁻¹``: ``H_ξ P_ξ H_ξᵀ = H_δ P_δ H_δᵀ`` (same ``S``).
+        """
+        cols = np.concatenate(
+            [np.arange(3), np.stack([3 + 2 * landmarks, 4 + 2 * landmarks], -1).ravel()]
+        )
+        P = self.P[np.ix_(cols, cols)]
+        J_inv = tangent_to_state_jacobian(self.x[2]).T
+        P[:3, :] = J_inv @ P[:3, :]
+        P[:, :3] = P[:, :3] @ J_inv.T
+        return P
 
     def associate(self, lines: LineSet) -> tuple[IntArray, NDArray[np.bool_]]:
         """Match scan lines to landmarks at the current (predicted) state.
+
+        The graph's association code (:mod:`slam.association`) with ``config.association``:
+        landmarks whose seen extent comes within ``max_range_m`` of the laser, thinned by the
+        segment-overlap test (pose covariance only) and capped at the ``max_candidates``
+        nearest, then the χ² gate on the joint covariance of the pose and each candidate and
+        nearest neighbour or JCBB.
 
         Returns
         -------
@@ -368,51 +375,41 @@ class EkfSlam:
         """
         K, M = len(lines), self.n_landmarks
         matches = np.full(K, -1, dtype=np.intp)
+        no_match = np.zeros(K, dtype=bool)
         if K == 0 or M == 0:
-            return matches, np.zeros(K, dtype=bool)
+            return matches, no_match
+        acfg = self.config.association
         pose = self.x[:3]
         lm = self.x[3:].reshape(M, 2)
-        z_pred, H_xi, H_l = predict_line_measurement(lm, pose[None, :])  # (M,2),(M,2,3),(M,2,2)
-        res, sign = line_residual(z_pred[None, :, :], lines.r_alpha[:, None, :])  # (K,M,2),(K,M)
-        H_x = np.broadcast_to(state_jacobian_from_tangent(H_xi, pose[2]), (K, M, 2, 3)).copy()
-        H_lk = np.broadcast_to(H_l, (K, M, 2, 2)).copy()
-        H_x[..., 0, :] *= sign[..., None]
-        H_lk[..., 0, :] *= sign[..., None]
-        P_xl, P_ll = self._pose_cross_blocks(np.arange(M))
-        S = innovation_covariances(H_x, H_lk, self.P[:3, :3], P_xl, P_ll, lines.cov)
-        d2, _ = mahalanobis2_2x2(-res, S)
-        if math.isfinite(self.config.overlap_margin_m):
-            lo, hi = self._extents.intervals(lm[:, 1])
-            allowed = overlap_mask(
-                lines.endpoints_in(pose), lm[:, 1], lo, hi, self.config.overlap_margin_m
-            )
-            d2 = np.where(allowed, d2, np.inf)
-        ambiguous = np.any(d2 < self._new_gate, axis=1)
-        cand = np.flatnonzero(np.any(d2 < self._gate, axis=0))
+        extents = np.column_stack(self._extents.intervals(lm[:, 1]))
+        cand = candidate_landmarks(pose, lm, extents, acfg.max_range_m)
+        if cand.size:
+            P_pose = cov_state_to_tangent(self.P[:3, :3], pose[2])
+            near = overlap_mask(lines.endpoints, pose, P_pose, lm[cand], extents[cand], acfg)
+            cand = cand[np.any(near, axis=0)]
+            if cand.size > acfg.max_candidates:  # the nearest to the laser
+                keep = candidate_landmarks(
+                    pose, lm[cand], extents[cand], acfg.max_range_m, None, None, acfg.max_candidates
+                )
+                cand = cand[keep]
         if cand.size == 0:
-            return matches, ambiguous
-        cols = np.concatenate([np.arange(3), np.stack([3 + 2 * cand, 4 + 2 * cand], -1).ravel()])
-        problem = AssociationProblem(
-            nu=-res[:, cand],
-            H_x=H_x[:, cand],
-            H_l=H_lk[:, cand],
-            R=lines.cov,
-            P=self.P[np.ix_(cols, cols)],
-            allowed=np.isfinite(d2[:, cand]),
+            return matches, no_match
+        problem = build_problem(
+            lines.r_alpha,
+            lines.cov,
+            lines.endpoints,
+            pose,
+            self._joint_tangent_covariance(cand),
+            lm[cand],
+            extents[cand],
+            acfg,
         )
-        if self.config.association == "jcbb":
-            assign, complete = jcbb(
-                problem,
-                self.config.gate_probability,
-                self.config.joint_gate_probability,
-                self.config.jcbb_max_nodes,
-            )
-            if not complete:
-                self.stats["jcbb_incomplete"] += 1
-        else:
-            assign = nearest_neighbour(problem, self.config.gate_probability)
-        has = assign >= 0
-        matches[has] = cand[assign[has]]
+        found = associate(problem, acfg)
+        if not found.complete:
+            self.stats["jcbb_incomplete"] += 1
+        has = found.assignment >= 0
+        matches[has] = cand[found.assignment[has]]
+        ambiguous = np.any(found.d2 <= self._new_gate, axis=1)
         return matches, ambiguous & ~has
 
     # ------------------------------------------------------------------ merging
@@ -421,7 +418,8 @@ class EkfSlam:
 
         The fusion is the EKF update with the exact constraint ``l_i − l_j = 0`` (same
         representative, ``R = 0``), after which ``l_j`` equals ``l_i`` and is deleted
-        (marginalised).  Pairs are fused greedily by increasing ``D²``, one at a time.
+        (marginalised); both in one pass (:func:`slam.ekf.update.constrain_and_remove`).
+        Pairs are fused greedily by increasing ``D²``, one at a time.
 
         Parameters
         ----------
@@ -468,11 +466,15 @@ class EkfSlam:
                     P_ij[:, a, b] = self.P[base_i + a, base_j + b]
             JP = Ji @ P_ij
             C = Ji @ P_ii @ Ji.swapaxes(-1, -2) + P_jj - JP - JP.swapaxes(-1, -2)
-            d2, _ = mahalanobis2_2x2(res, C)
-            if math.isfinite(self.config.overlap_margin_m):
-                lo, hi = self._extents.intervals(lm[:, 1])
-                gap = np.maximum(lo[i], lo[j]) - np.minimum(hi[i], hi[j])
-                d2 = np.where(gap <= self.config.overlap_margin_m, d2, np.inf)
+            det = C[:, 0, 0] * C[:, 1, 1] - C[:, 0, 1] * C[:, 1, 0]
+            ok = (det > 0.0) & (C[:, 0, 0] > 0.0)
+            C_adj = np.stack([C[:, 1, 1], -C[:, 0, 1], C[:, 0, 0]], -1)  # adjugate (symmetric)
+            quad = C_adj[:, 0] * res[:, 0] ** 2 + 2 * C_adj[:, 1] * res[:, 0] * res[:, 1]
+            quad += C_adj[:, 2] * res[:, 1] ** 2
+            d2 = np.where(ok, quad / np.where(ok, det, 1.0), np.inf)
+            lo, hi = self._extents.intervals(lm[:, 1])
+            gap = np.maximum(lo[i], lo[j]) - np.minimum(hi[i], hi[j])
+            d2 = np.where(gap <= self.config.association.overlap_margin_m, d2, np.inf)
             best = int(np.argmin(d2))
             if not d2[best] < self._merge_gate:
                 break
@@ -483,19 +485,16 @@ class EkfSlam:
             cols = np.array([3 + 2 * a, 4 + 2 * a, 3 + 2 * b, 4 + 2 * b], dtype=np.intp)
             meas = MeasurementStack(-res[best], H_sub, cols, np.zeros((2, 2)))
             try:
-                self.x, self.P, _, _ = joseph_update(self.x, self.P, meas)
+                self.x, self.P = constrain_and_remove(self.x, self.P, meas, cols[2:])
             except EstimationError:
                 break
             self._wrap_angles()
-            keep = np.ones(self.x.shape[0], dtype=bool)
-            keep[[3 + 2 * b, 4 + 2 * b]] = False
+            a_kept = a - 1 if a > b else a  # index of l_a once l_b is gone
             pieces = self._extents.pieces(b)
-            self._extents.absorb(a, self.x[3 + 2 * a : 5 + 2 * a], pieces)
+            self._extents.absorb(a, self.x[3 + 2 * a_kept : 5 + 2 * a_kept], pieces)
             self._extents.delete(b)
             self._n_obs[a] += self._n_obs[b]
             del self._n_obs[b]
-            self.x = self.x[keep]
-            self.P = self.P[np.ix_(keep, keep)]
             removed += 1
             if touched is not None:
                 if b in touched:
@@ -575,17 +574,33 @@ class EkfSlam:
         t0 = time.perf_counter()
         report = ScanReport(scan.index)
         odom = self._odometry_of(scan)
-        if not self._started:
+        first_scan = not self._started
+        if first_scan:
             self.initialize(odom if self._initial_pose is None else self._initial_pose)
+            delta = np.zeros(3)
+            self._update_odom = odom
         else:
-            assert self._prev_odom is not None
-            self.predict(pose_between(self._prev_odom, odom))
-        self._prev_odom = odom
+            assert self._update_odom is not None
+            delta = pose_between(self._update_odom, odom)
+        # the graph's keyframe rule on the odometry since the last update
+        due = first_scan or (
+            math.hypot(delta[0], delta[1]) >= self.config.update_min_distance_m
+            or abs(delta[2]) >= self.config.update_min_angle_rad
+        )
+        self.stats["scans"] += 1
+        self.stats["points"] += int(np.count_nonzero(scan.valid_mask()))
+        if not due:
+            if lines is not None:
+                self.stats["lines_fit"] += len(lines)
+            report.runtime_s = time.perf_counter() - t0
+            self._record(scan.timestamp, report, delta)
+            return report
+        if not first_scan:
+            self.predict(delta)
+            self._update_odom = odom
         short_before = self.stats["lines_too_short"]
         ls = self._as_lineset(scan, lines)
         report.n_lines = len(ls)
-        self.stats["scans"] += 1
-        self.stats["points"] += int(np.count_nonzero(scan.valid_mask()))
         self.stats["lines_fit"] += len(ls) + self.stats["lines_too_short"] - short_before
         valid = _valid_lines(ls) if len(ls) else np.zeros(0, dtype=bool)
         report.n_invalid = int(np.count_nonzero(~valid))
@@ -593,20 +608,10 @@ class EkfSlam:
         ls = ls.subset(valid)
         extra_r, extra_a = self.config.line_sigma_extra
         if len(ls) and (extra_r > 0.0 or extra_a > 0.0):
-            cov = ls.cov.copy()
-            cov[:, 0, 0] += extra_r**2
-            cov[:, 1, 1] += extra_a**2
+            cov = ls.cov + model_error_covariance(ls.r_alpha, ls.endpoints, extra_r, extra_a)
             ls = LineSet(ls.r_alpha, cov, ls.endpoints, ls.ids)
-        first_scan = self.stats["scans"] == 1
-        due = (
-            first_scan
-            or self._since_update_m >= self.config.update_min_distance_m
-            or self._since_update_rad >= self.config.update_min_angle_rad
-        )
-        if due and len(ls) > 0:
+        if len(ls) > 0:
             self._process_lines(ls, report)
-            self._since_update_m = 0.0
-            self._since_update_rad = 0.0
         report.runtime_s = time.perf_counter() - t0
         self._record(scan.timestamp, report)
         return report
@@ -653,10 +658,24 @@ class EkfSlam:
             self.stats["stopped_at_scan"] = self.stats["scans"] - 1
             self.stats["stop_reason"] = reason
 
-    def _record(self, timestamp: float, report: ScanReport) -> None:
+    def _record(
+        self, timestamp: float, report: ScanReport, offset: FloatArray | None = None
+    ) -> None:
+        """Store the scan's pose and covariance.
+
+        After an update the state's; between updates (``offset``: the odometry since the last
+        one) the state's composed with the offset, its covariance compounded with the motion
+        noise.
+        """
         self._t.append(float(timestamp))
-        self._poses.append(self.x[:3].copy())
-        self._covs.append(self.pose_covariance)
+        if offset is None:
+            self._poses.append(self.x[:3].copy())
+            self._covs.append(self.pose_covariance)
+        else:
+            Q_u = odometry_covariance(offset, self.config.odometry)
+            pose, F, Q = predict_pose(self.x[:3], offset, Q_u)
+            self._poses.append(pose)
+            self._covs.append(cov_state_to_tangent(F @ self.P[:3, :3] @ F.T + Q, pose[2]))
         self._runtime.append(report.runtime_s)
         self._n_lm_hist.append(self.n_landmarks)
         self._elapsed_s += report.runtime_s

@@ -1,9 +1,11 @@
 """Visible extents of line landmarks in the world frame (for overlap gating and ``map.json``).
 
+The overlap test itself is the graph's (:func:`slam.association.overlap_mask`).
+
 A landmark is an infinite line; what the robot saw of it are pieces along it.  Each piece is
 stored as its two world end points; to use them with the current estimate ``(r, α)`` of the
 line they are projected on its tangent ``t(α) = (−sin α, cos α)``.  Pieces closer than
-``gap_m`` along the line are merged.
+``gap_m`` along the line are merged (:func:`slam.lines.unite_segments`).
 """
 
 from __future__ import annotations
@@ -11,7 +13,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["LandmarkExtents", "overlap_mask", "tangent_coordinates"]
+from slam.lines import unite_segments
+
+__all__ = ["LandmarkExtents", "tangent_coordinates"]
 
 FloatArray = NDArray[np.float64]
 
@@ -70,15 +74,7 @@ class LandmarkExtents:
         r, alpha = float(r_alpha[0]), float(r_alpha[1])
         allp = np.concatenate([self._pieces[j], pieces_world], axis=0)
         s = tangent_coordinates(allp, alpha)  # (k, 2)
-        lo, hi = s.min(axis=1), s.max(axis=1)
-        order = np.argsort(lo)
-        merged: list[list[float]] = []
-        for a, b in zip(lo[order], hi[order], strict=True):
-            if merged and a <= merged[-1][1] + self.gap_m:
-                merged[-1][1] = max(merged[-1][1], b)
-            else:
-                merged.append([a, b])
-        s_m = np.asarray(merged)
+        s_m, _ = unite_segments(s, np.zeros_like(s), self.gap_m)
         pieces = _points_on_line(s_m, r, alpha)  # (k, 2, 2)
         self._pieces[j] = pieces
         self._extreme[j] = _points_on_line(np.array([s_m[0, 0], s_m[-1, 1]]), r, alpha)
@@ -94,24 +90,3 @@ class LandmarkExtents:
         s = tangent_coordinates(self._pieces[j], alpha)
         s = np.sort(s, axis=1)
         return _points_on_line(s, r, alpha)
-
-
-def overlap_mask(
-    ends_world: FloatArray, alpha: FloatArray, lo: FloatArray, hi: FloatArray, margin_m: float
-) -> NDArray[np.bool_]:
-    """``(K, M)``: measured segment ``k`` overlaps landmark ``m``'s extent within ``margin_m``.
-
-    Parameters
-    ----------
-    ends_world : ndarray, shape (K, 2, 2)
-        End points of the measured segments in the world frame.
-    alpha : ndarray, shape (M,)
-        Landmark normal angles.
-    lo, hi : ndarray, shape (M,)
-        Landmark extents along their tangents (:meth:`LandmarkExtents.intervals`).
-    margin_m : float
-        Largest accepted gap (m).
-    """
-    s = tangent_coordinates(ends_world[:, None, :, :], np.asarray(alpha)[None, :, None])  # (K,M,2)
-    gap = np.maximum(s.min(-1), lo[None, :]) - np.minimum(s.max(-1), hi[None, :])
-    return gap <= margin_m

@@ -159,6 +159,54 @@ def joseph_update(
     return x_post, P_post, S, K
 
 
+def constrain_and_remove(
+    x: FloatArray, P: FloatArray, meas: MeasurementStack, remove: IntArray
+) -> tuple[FloatArray, FloatArray]:
+    """Condition the state on an exact constraint ``H x = y`` (``R = 0``), then delete entries.
+
+    Used to fuse two landmarks (``l_i − l_j = 0``, then ``l_j`` removed).  With
+    ``U = P Hᵀ``, ``S = H U = L Lᵀ`` and ``G = U L⁻ᵀ`` the conditional covariance is
+    ``P − G Gᵀ`` (exactly symmetric as computed), evaluated only on the entries kept, so the
+    deletion and the update are one pass over ``P`` plus one rank-``2m`` product instead of a
+    Joseph update followed by a copy.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+    P : ndarray, shape (n, n)
+    meas : MeasurementStack
+        The constraint (its ``R`` is ignored: the constraint is exact).
+    remove : ndarray of int
+        State entries deleted after conditioning.
+
+    Returns
+    -------
+    x_post : ndarray, shape (n − len(remove),)
+    P_post : ndarray, shape (n − len(remove), n − len(remove))
+
+    Raises
+    ------
+    EstimationError
+        When ``H P Hᵀ`` is not positive definite.
+    """
+    cols, H_sub = meas.cols, meas.H_sub
+    U = P[:, cols] @ H_sub.T  # (n, 2m)
+    S = H_sub @ U[cols, :]
+    S = 0.5 * (S + S.T)
+    try:
+        L = np.linalg.cholesky(S)
+    except np.linalg.LinAlgError as exc:
+        raise EstimationError("EKF constraint: H P Hᵀ is not positive definite") from exc
+    G = scipy.linalg.solve_triangular(L, U.T, lower=True).T  # U L⁻ᵀ, (n, 2m)
+    x_post = x + G @ scipy.linalg.solve_triangular(L, meas.y, lower=True)
+    keep = np.ones(x.shape[0], dtype=bool)
+    keep[np.asarray(remove, dtype=np.intp)] = False
+    G_k = G[keep]
+    P_post = P[np.ix_(keep, keep)]
+    P_post -= G_k @ G_k.T
+    return x_post[keep], P_post
+
+
 def filterpy_update(
     x: FloatArray,
     P: FloatArray,

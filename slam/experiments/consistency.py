@@ -24,7 +24,12 @@ from numpy.typing import NDArray
 from slam.config import RunConfig
 from slam.errors import ConfigError
 from slam.experiments.estimators import ESTIMATORS, run_estimator
-from slam.experiments.linesim import LineSimConfig, simulate_line_run, world_and_trajectory
+from slam.experiments.linesim import (
+    LineSimConfig,
+    matched_run_config,
+    simulate_line_run,
+    world_and_trajectory,
+)
 from slam.experiments.nees import anees_bounds, pose_nees
 from slam.experiments.parallel import map_tasks, task_seed
 from slam.geometry import pose_between
@@ -60,15 +65,16 @@ class ConsistencyConfig:
     seed : int
         Base seed; run ``i`` uses ``task_seed(seed, i)``.
     linesim : LineSimConfig
-        Line-level simulator noise.  Its odometry noise is what the estimators assume too
-        (``RunConfig.ekf.odometry`` is overridden by it), so the study measures the
-        estimators, not a mismatched motion model.
+        Line-level simulator noise.  The estimators are told its true models
+        (:func:`slam.experiments.linesim.matched_run_config`: its odometry noise, no
+        model-error floor on the exact line covariances), so the study measures the
+        estimators, not a mismatched model.
     """
 
     world: str = "corridor_loop"
     loops: float = 1.0
     n_runs: int = 50
-    estimators: tuple[str, ...] = ("ekf", "odometry")
+    estimators: tuple[str, ...] = ("ekf", "graph-isam2", "odometry")
     probability: float = 0.95
     seed: int = 0
     linesim: LineSimConfig = field(default_factory=LineSimConfig)
@@ -107,14 +113,10 @@ def consistency_task(task: ConsistencyTask) -> dict[str, dict[str, Any]]:
         ``{estimator: {"nees": (N,), "pos_err_m": (N,), "rot_err_rad": (N,),
         "runtime_s": float, "landmarks": int, "stopped_at_scan": int or None}}``.
     """
-    from dataclasses import replace
-
     cfg = task.config
     world, truth = world_and_trajectory(cfg.world, cfg.loops)
     run = simulate_line_run(world, truth, cfg.linesim, seed=task.seed)
-    run_config = replace(
-        task.run_config, ekf=replace(task.run_config.ekf, odometry=cfg.linesim.odometry)
-    )
+    run_config = matched_run_config(task.run_config, cfg.linesim)
     out: dict[str, dict[str, Any]] = {}
     for name in cfg.estimators:
         t0 = time.perf_counter()

@@ -6,20 +6,25 @@ covariances (right-perturbation tangent space) and run times.  Names:
 
 * ``"ekf"`` — :class:`slam.ekf.EkfSlam` with ``RunConfig.ekf`` (association as configured);
 * ``"ekf-nn"``, ``"ekf-jcbb"`` — the same with the association forced;
-Lines per scan are a :class:`~slam.frontend.lineset.LineSet` (line-level simulator) or a list
-of :class:`linefit.Line` (a log's fits; estimators apply their own length/support filters).
-
+* ``"graph-isam2"``, ``"graph-batch"`` — :class:`slam.graph.LineSlam` with ``RunConfig.slam``
+  and that back-end, then :meth:`~slam.graph.LineSlam.optimize` (the graph's association is its
+  registration front end's nearest neighbour, with no JCBB option);
 * ``"odometry"`` — dead reckoning with the same motion model, covariance propagated (the EKF
   fed no lines), the reference every SLAM estimator must beat.
 
-The graph back-end registers ``"graph-batch"`` and ``"graph-isam2"`` here once it is on main.
+Lines per scan are a :class:`~slam.frontend.lineset.LineSet` (line-level simulator; converted
+to :class:`linefit.Line` objects for the graph, :func:`slam.experiments.linesim.lineset_to_lines`)
+or a list of :class:`linefit.Line` (a log's fits); estimators apply their own length/support
+filters.  ``None`` lets each estimator extract the lines itself.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any, Literal
 
 import numpy as np
@@ -31,6 +36,8 @@ from slam.ekf import EkfSlam
 from slam.ekf.threads import blas_threads
 from slam.errors import ConfigError, EstimationError
 from slam.frontend.lineset import LineSet
+from slam.geometry import pose_compose, pose_inverse
+from slam.graph.odometry import adjoint_pose2
 from slam.types import Scan
 
 __all__ = ["ESTIMATORS", "EstimateOutput", "run_estimator"]
@@ -54,7 +61,8 @@ class EstimateOutput:
     scan_runtime_s : ndarray, shape (N,)
     landmarks_r_alpha : ndarray, shape (M, 2)
     stats : dict
-        Estimator counters; ``stopped_at_scan`` / ``stop_reason`` when it stopped early.
+        Estimator counters; ``stopped_at_scan`` / ``stop_reason`` when it stopped early;
+        ``frame`` (``"laser"`` or ``"base"``) of the poses.
     result : object
         The estimator's own result object (e.g. :class:`slam.ekf.EkfResult`), for writing files.
     """
@@ -77,11 +85,18 @@ def _ekf(
     initial_pose: FloatArray | None,
     association: Literal["nn", "jcbb"] | None = None,
     use_lines: bool = True,
+    time_budget_s: float | None = None,
 ) -> EstimateOutput:
-    ekf_cfg = config.ekf if association is None else replace(config.ekf, association=association)
+    ekf_cfg = config.ekf
+    if association is not None:
+        ekf_cfg = replace(ekf_cfg, association=replace(ekf_cfg.association, method=association))
+    if time_budget_s is not None:
+        limit = min(time_budget_s, ekf_cfg.max_runtime_s or math.inf)
+        ekf_cfg = replace(ekf_cfg, max_runtime_s=limit)
     ekf = EkfSlam(ekf_cfg, linefit_config=config.linefit, initial_pose_world_laser=initial_pose)
+    mount = np.asarray(config.slam.pose_base_laser, dtype=float)
     with blas_threads(ekf_cfg.blas_threads):
-        for k, scan in enumerate(scans):
+        for k, scan in enumerate(_laser_odometry(scans, config)):
             if ekf.stopped:
                 break
             if use_lines:
@@ -89,6 +104,40 @@ def _ekf(
             else:
                 ekf.add_scan(scan, LineSet.empty())
     res = ekf.result()
+    if config.slam.output_frame == "base" and res.poses_world_laser.shape[0]:
+        # pose_world_base = pose_world_laser ∘ pose_base_laser⁻¹, covariance by Ad(mount),
+        # as the graph reports base poses (slam.graph.LineSlam.result)
+        poses = pose_compose(res.poses_world_laser, np.broadcast_to(pose_inverse(mount), (1, 3)))
+        Ad = adjoint_pose2(mount)
+        res = replace(
+            res, poses_world_laser=poses, pose_covariances=Ad @ res.pose_covariances @ Ad.T
+        )
+        res.stats["frame"] = "base"
+    return _output(name, res, {**res.stats, "frame": res.stats.get("frame", "laser")})
+
+
+def _laser_odometry(scans: Sequence[Scan], config: RunConfig) -> Sequence[Scan]:
+    """Scans whose laser odometry follows the graph's setting (``slam.laser_odometry``).
+
+    With ``"base"`` (a log whose logged laser poses lack the mounting,
+    :func:`slam.runner.slam_config_for_log`) the laser odometry is
+    ``pose_odom_base ∘ pose_base_laser``, as :class:`slam.graph.LineSlam` computes it, so that
+    the EKF and odometry-only runs see the same motion as the graph.
+    """
+    cfg = config.slam
+    if cfg.laser_odometry != "base":
+        return scans
+    mount = np.asarray(cfg.pose_base_laser, dtype=float)
+    return [
+        s
+        if s.pose_odom_base is None
+        else replace(s, pose_odom_laser=pose_compose(np.asarray(s.pose_odom_base), mount))
+        for s in scans
+    ]
+
+
+def _output(name: str, res: Any, stats: dict[str, Any]) -> EstimateOutput:
+    """An estimator's result object (EKF or graph) as an :class:`EstimateOutput`."""
     return EstimateOutput(
         name=name,
         timestamps=res.timestamps,
@@ -96,26 +145,68 @@ def _ekf(
         pose_covariances=res.pose_covariances,
         scan_runtime_s=res.scan_runtime_s,
         landmarks_r_alpha=res.landmarks_r_alpha,
-        stats=res.stats,
+        stats=stats,
         result=res,
     )
 
 
-EstimatorFn = Callable[
-    [
-        Sequence[Scan],
-        Sequence[LineSet] | Sequence[Sequence[Line]] | None,
-        RunConfig,
-        FloatArray | None,
-    ],
-    EstimateOutput,
-]
+def _graph(
+    name: str,
+    scans: Sequence[Scan],
+    lines: ScanLines,
+    config: RunConfig,
+    initial_pose: FloatArray | None,
+    backend: Literal["batch", "isam2"],
+    time_budget_s: float | None = None,
+) -> EstimateOutput:
+    import warnings
+
+    from slam.experiments.linesim import lineset_to_lines
+    from slam.graph import LineSlam
+
+    cfg = replace(config.slam, backend=backend)
+    if initial_pose is not None and scans:
+        odom0 = scans[0].pose_odom_laser
+        if odom0 is None or not np.allclose(odom0, initial_pose, atol=1e-9):
+            raise ConfigError(
+                f"{name}: the graph's world frame is the first scan's odometry pose; "
+                "an initial pose different from it is not supported"
+            )
+    slam = LineSlam(cfg, config.linefit)
+    stop: dict[str, Any] = {}
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # SlamWarnings are counted in the result's stats
+        for k, scan in enumerate(scans):
+            if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
+                stop = {
+                    "stopped_at_scan": k,
+                    "stop_reason": (
+                        f"the comparison's time budget of {time_budget_s:g} s per variant was "
+                        f"spent at scan {k} ({cfg.backend} back-end); the graph so far was "
+                        "optimised and evaluated"
+                    ),
+                }
+                break
+            scan_lines: Any = None if lines is None else lines[k]
+            if isinstance(scan_lines, LineSet):
+                scan_lines = lineset_to_lines(scan_lines)
+            slam.add_scan(scan, scan_lines)
+        slam.optimize()
+    res = slam.result()
+    return _output(name, res, {**res.stats, "frame": getattr(res, "frame", "laser"), **stop})
+
+
+EstimatorFn = Callable[..., EstimateOutput]
+"""``fn(scans, lines, config, initial_pose, time_budget_s=None) -> EstimateOutput``."""
 
 ESTIMATORS: dict[str, EstimatorFn] = {
-    "ekf": lambda s, ln, c, p: _ekf("ekf", s, ln, c, p),
-    "ekf-nn": lambda s, ln, c, p: _ekf("ekf-nn", s, ln, c, p, association="nn"),
-    "ekf-jcbb": lambda s, ln, c, p: _ekf("ekf-jcbb", s, ln, c, p, association="jcbb"),
-    "odometry": lambda s, ln, c, p: _ekf("odometry", s, ln, c, p, use_lines=False),
+    "ekf": partial(_ekf, "ekf"),
+    "ekf-nn": partial(_ekf, "ekf-nn", association="nn"),
+    "ekf-jcbb": partial(_ekf, "ekf-jcbb", association="jcbb"),
+    "odometry": partial(_ekf, "odometry", use_lines=False),
+    "graph-isam2": partial(_graph, "graph-isam2", backend="isam2"),
+    "graph-batch": partial(_graph, "graph-batch", backend="batch"),
 }
 
 
@@ -125,8 +216,13 @@ def run_estimator(
     lines: ScanLines,
     config: RunConfig,
     initial_pose_world_laser: FloatArray | None = None,
+    time_budget_s: float | None = None,
 ) -> EstimateOutput:
     """Run the estimator ``name`` on scans (with their lines, or None to extract them).
+
+    With ``time_budget_s`` the estimator stops taking scans once that much time is spent
+    (the EKF through ``ekf.max_runtime_s``; the graph optimises what it has); its statistics
+    then say at which scan and why (``stopped_at_scan``, ``stop_reason``).
 
     Raises
     ------
@@ -140,7 +236,7 @@ def run_estimator(
             f"unknown estimator {name!r}; known: {', '.join(sorted(ESTIMATORS))}"
         ) from exc
     t0 = time.perf_counter()
-    out = fn(scans, lines, config, initial_pose_world_laser)
+    out = fn(scans, lines, config, initial_pose_world_laser, time_budget_s=time_budget_s)
     if out.poses_world_laser.shape[0] == 0:
         raise EstimationError(f"estimator {name} produced no poses")
     out.stats.setdefault("wall_time_s", time.perf_counter() - t0)

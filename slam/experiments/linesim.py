@@ -18,17 +18,22 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from linefit.line import normal_form
-from slam.ekf.motion import OdometryNoiseConfig, odometry_covariance
+from linefit.line import Line, normal_form
+from slam.ekf.motion import odometry_covariance
 from slam.errors import ConfigError
 from slam.frontend.lineset import LineSet
 from slam.geometry import pose_between, pose_compose, pose_exp, predict_line_measurement
+from slam.graph.config import MotionNoiseConfig
 from slam.types import Scan
+
+if TYPE_CHECKING:
+    from slam.config import RunConfig
 
 __all__ = [
     "LineRun",
@@ -37,7 +42,9 @@ __all__ = [
     "corridor_loop_world",
     "grid_route",
     "grid_world",
+    "lineset_to_lines",
     "loop_trajectory",
+    "matched_run_config",
     "simulate_line_run",
     "visible_walls",
     "waypoint_trajectory",
@@ -183,6 +190,17 @@ def grid_route(
     return np.asarray(dedup, dtype=float)
 
 
+SIM_ODOMETRY = MotionNoiseConfig(
+    sigma_xy_per_m=0.02,
+    sigma_xy_per_rad=0.0,
+    sigma_theta_per_m=0.005,
+    sigma_theta_per_rad=0.02,
+    sigma_xy_min_m=1e-4,
+    sigma_theta_min_rad=1e-4,
+)
+"""The line simulator's default odometry noise (the EKF's earlier default model)."""
+
+
 @dataclass(frozen=True)
 class LineSimConfig:
     """Noise and visibility of :func:`simulate_line_run`.
@@ -199,8 +217,11 @@ class LineSimConfig:
         Shorter visible pieces give no line.
     samples_per_wall : int
         Samples along each wall for the occlusion test.
-    odometry : OdometryNoiseConfig
-        Noise of the odometry increments (also what the estimators should assume).
+    odometry : MotionNoiseConfig
+        Noise of the odometry increments (also what the estimators are told in the
+        experiments: ``RunConfig.ekf.odometry`` and ``RunConfig.slam.motion``).  Default: 0.02
+        m/√m, 0.02 rad/√rad, 0.005 rad/√m, floors 0.1 mm / 0.1 mrad (no translation error from
+        turning).
     """
 
     sigma_range_m: float = 0.01
@@ -208,7 +229,7 @@ class LineSimConfig:
     max_range_m: float = 8.0
     min_visible_length_m: float = 0.3
     samples_per_wall: int = 40
-    odometry: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)
+    odometry: MotionNoiseConfig = field(default_factory=lambda: SIM_ODOMETRY)
 
     def __post_init__(self) -> None:
         for name in ("sigma_range_m", "point_spacing_m", "max_range_m"):
@@ -400,3 +421,61 @@ def world_and_trajectory(name: str, loops: float = 1.0) -> tuple[LineWorld, Floa
         wp = np.vstack([route] + [route[1:]] * (reps - 1))
         return grid_world(nx, ny), waypoint_trajectory(wp)
     raise ConfigError(f"unknown simulated world {name!r} (corridor_loop, gridNxM)")
+
+
+def lineset_to_lines(lines: LineSet, point_spacing_m: float = 0.05) -> list[Line]:
+    """The simulated lines of one scan as :class:`linefit.Line` objects (for the graph).
+
+    The graph back-end takes the per-scan output of ``linefit`` (segment extents along the
+    line, their variances, the number of supporting points); a simulated line gets its visible
+    part projected on the measured line as its one segment, the notional points behind its fit
+    (``length / point_spacing_m + 1``) as ``n_points``, and its ``(r, α)`` covariance; the
+    ``s`` entries (not used for estimation) get a variance of ``point_spacing_m²``.
+    """
+    out: list[Line] = []
+    for k in range(len(lines)):
+        r, a = (float(v) for v in lines.r_alpha[k])
+        r_n, a_n, flipped = normal_form(np.array([r]), np.array([a]))
+        r, a = float(r_n[0]), float(a_n[0])
+        cov2 = np.array(lines.cov[k], dtype=float)
+        if bool(flipped[0]):
+            cov2[0, 1] *= -1.0
+            cov2[1, 0] *= -1.0
+        ends = lines.endpoints[k]
+        s_ends = np.sort(-ends[:, 0] * math.sin(a) + ends[:, 1] * math.cos(a))
+        cov = np.zeros((3, 3))
+        cov[:2, :2] = cov2
+        cov[2, 2] = point_spacing_m**2
+        n = int(np.floor((s_ends[1] - s_ends[0]) / point_spacing_m)) + 1
+        out.append(
+            Line(
+                r=r,
+                alpha=a,
+                s=float(np.mean(s_ends)),
+                cov=cov,
+                segments_s=s_ends.reshape(1, 2),
+                segments_var=np.full((1, 2), point_spacing_m**2),
+                n_points=max(n, 2),
+            )
+        )
+    return out
+
+
+def matched_run_config(run_config: RunConfig, sim: LineSimConfig) -> RunConfig:
+    """The run configuration with the estimators told the line simulator's true noise models.
+
+    Both estimators get the simulator's odometry noise (``ekf.odometry``, ``slam.motion``) and
+    no model-error floor on the lines (the simulated fits' covariances are exact), so that a
+    consistency study measures the estimators and not a mismatched model.  Everything else
+    (gates, keyframes, association, ...) stays as configured.
+    """
+    ekf = replace(run_config.ekf, odometry=sim.odometry, line_sigma_extra=(0.0, 0.0))
+    slam_cfg = replace(run_config.slam, motion=sim.odometry)
+    floors: dict[str, Any] = {
+        name: 0.0
+        for name in ("line_model_sigma_r_m", "line_model_sigma_alpha_rad")
+        if hasattr(slam_cfg, name)
+    }
+    if floors:
+        slam_cfg = replace(slam_cfg, **floors)
+    return replace(run_config, ekf=ekf, slam=slam_cfg)
