@@ -77,8 +77,8 @@ def hough_accumulator(
     n_rho = 2 * half
     # float32 is ample for bins of centimetres and halves the memory traffic
     # layout (scan, angle, point): the votes of one angle row are adjacent in memory.
-    # |ℛ| ≤ range < (half − 1)·Δℛ, so the shifted bin coordinate is positive and truncation
-    # is floor; float32 is ample for bins of centimetres and halves the memory traffic.
+    # |ℛ| ≤ range < (half − 1)·Δℛ, so bin + half is in [0, n_ℛ); float32 is ample for bins
+    # of centimetres and halves the memory traffic.
     inv = 1.0 / range_step_m
     shifted = (np.cos(betas) * inv).astype(np.float32)[None, :, None] * x.astype(np.float32)[
         :, None, :
@@ -86,10 +86,13 @@ def hough_accumulator(
     shifted += (np.sin(betas) * inv).astype(np.float32)[None, :, None] * y.astype(np.float32)[
         :, None, :
     ]
-    shifted += np.float32(half)
     n_cells = n_beta * n_rho
-    # flat cell index: scan · n_cells + angle bin · n_ℛ + distance bin
+    # flat cell index: scan · n_cells + angle bin · n_ℛ + distance bin.  The bin is floored
+    # before the (batch-dependent) offset ``half`` is added: adding it in float32 first would
+    # round a point near a bin edge differently depending on the other scans of the batch.
+    np.floor(shifted, out=shifted)
     votes = shifted.astype(np.intp)
+    votes += half
     votes += (
         np.arange(n_scans, dtype=np.intp)[:, None, None] * n_cells
         + np.arange(n_beta, dtype=np.intp)[None, :, None] * n_rho
@@ -139,9 +142,10 @@ def hough_groups(
     n_scans, n = x.shape
     if n_scans == 0 or n < 2 or not valid.any():
         return Grouping.empty(), np.zeros(0, dtype=np.intp)
-    acc, cells, betas, r_max = hough_accumulator(x, y, valid, angle_step_rad, range_step_m)
+    acc, cells, betas, _ = hough_accumulator(x, y, valid, angle_step_rad, range_step_m)
     cos_b, sin_b = np.cos(betas), np.sin(betas)
     n_rho = acc.shape[1] // betas.shape[0]
+    half = n_rho // 2  # r_max = half · Δℛ
     alive = valid.copy()
     tol_peak = max(gather_m, range_step_m)
     out_scan: list[IntArray] = []
@@ -164,7 +168,9 @@ def hough_groups(
         if rows.shape[0] == 0:
             break
         j, i = np.divmod(best, n_rho)
-        rho_c = (i + 0.5) * range_step_m - r_max
+        # bin centre from the bin's signed index (not ``… − r_max``, whose rounding would
+        # depend on the batch's ``r_max`` and flip points at ``tol_peak`` between batches)
+        rho_c = (i - half + 0.5) * range_step_m
         # candidate: unassigned points near the cell's line
         rho_j = x[rows] * cos_b[j][:, None] + y[rows] * sin_b[j][:, None]
         cand = alive[rows] & (np.abs(rho_j - rho_c[:, None]) <= tol_peak)
