@@ -20,7 +20,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
 from slam.errors import EvaluationError
 from slam.evaluation.timestamps import associate
@@ -104,6 +103,8 @@ def pose_nees(
     values = nees_values(xi, cov[i_est])
     n, dof = values.size, 3
     alpha = 1.0 - confidence
+    from scipy.stats import chi2  # here: importing scipy.stats costs ~1 s at start-up
+
     lower = float(chi2.ppf(alpha / 2.0, dof * n) / n)
     upper = float(chi2.ppf(1.0 - alpha / 2.0, dof * n) / n)
     single = (values >= chi2.ppf(alpha / 2.0, dof)) & (values <= chi2.ppf(1 - alpha / 2.0, dof))
