@@ -124,9 +124,14 @@ def run_estimator_on_log(
     t0 = time.perf_counter()
     result.write(out)
     if plot:
-        from slam.plotting_slam import plot_slam_result
+        from slam.plotting_slam import plot_slam_result, raw_points_world
 
-        plot_slam_result(result, out / "figures", title=resolved.name)
+        points = None
+        if hasattr(result, "poses_world_laser") and hasattr(result, "is_keyframe"):
+            points = raw_points_world(
+                iter_scans(resolved.log), result.poses_world_laser, result.is_keyframe
+            )
+        plot_slam_result(result, out / "figures", title=resolved.name, points_world=points)
     clock["write"] = time.perf_counter() - t0
     clock["total"] = time.perf_counter() - t_start
     summary: dict[str, Any] = result.summary_dict()

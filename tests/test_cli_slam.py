@@ -97,3 +97,18 @@ def test_slam_plot_and_bad_input(tmp_path, capsys):
         ["slam", str(DEMO / "log.clf"), "--out", str(out), "--backend", "ekf", "--quiet"], capsys
     )
     assert code != 0 and "backend" in err
+
+
+def test_raw_points_are_placed_by_the_estimated_poses():
+    from slam.plotting_slam import raw_points_world
+    from slam.types import Scan
+
+    bearings = np.array([0.0, np.pi / 2, 1.0])
+    scans = [
+        Scan(0, 0.0, np.array([2.0, 1.0, np.inf]), bearings, max_range_m=10.0),
+        Scan(1, 0.1, np.array([3.0, 0.0, 10.0]), bearings, max_range_m=10.0),  # 0, max: skipped
+        Scan(2, 0.2, np.array([5.0, 5.0, 5.0]), bearings, max_range_m=10.0),  # not kept
+    ]
+    poses = np.array([[1.0, 1.0, np.pi / 2], [0.0, 0.0, np.pi], [0.0, 0.0, 0.0]])
+    points = raw_points_world(scans, poses, np.array([True, True, False]))
+    np.testing.assert_allclose(points, [[1.0, 3.0], [0.0, 1.0], [-3.0, 0.0]], atol=1e-12)
