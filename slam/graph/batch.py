@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from slam.errors import EstimationError
 from slam.geometry import pose_retract
 from slam.graph.config import SolverConfig
-from slam.graph.factors import line_factor_costs, linearize_line_factors
+from slam.graph.factors import LineLinearization, line_factor_costs, linearize_line_factors
 from slam.graph.landmark import retract_landmarks
 from slam.graph.linear import (
     UNIT2,
@@ -143,7 +143,17 @@ class BatchSolver:
         """The whole graph linearised at the given estimate (default: the graph's own)."""
         poses = graph.poses if poses is None else poses
         landmarks = graph.landmarks if landmarks is None else landmarks
+        return self._linearize(graph, poses, landmarks)[0]
+
+    def _linearize(
+        self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray
+    ) -> tuple[gtsam.GaussianFactorGraph, LineLinearization | None]:
+        """:meth:`linearize`, also returning the line factors' linearisation.
+
+        :meth:`damping_scale` at the same point reuses it instead of linearising again.
+        """
         gfg = gtsam.GaussianFactorGraph()
+        lin: LineLinearization | None = None
         if graph.prior_pose is not None and graph.prior_sqrt_info is not None:
             A, b, _ = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
             gfg.push_back(gtsam.JacobianFactor(keys_of("x", np.array([0]))[0], A, b, UNIT3))
@@ -171,10 +181,14 @@ class BatchSolver:
             )
             for f in line_jacobian_factors(graph.factor_pose, lm, lin):
                 gfg.push_back(f)
-        return gfg
+        return gfg, lin
 
     def damping_scale(
-        self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray
+        self,
+        graph: LineGraph,
+        poses: FloatArray,
+        landmarks: FloatArray,
+        lin: LineLinearization | None = None,
     ) -> tuple[FloatArray, FloatArray]:
         """Marquardt scaling: ``diag(AᵀA)`` per pose ``(N, 3)`` and landmark ``(M, 2)``.
 
@@ -187,15 +201,16 @@ class BatchSolver:
         dl = np.zeros((M, 2))
         if graph.n_line_factors:
             lm = graph.factor_landmark
-            lin = linearize_line_factors(
-                poses[graph.factor_pose],
-                landmarks[lm],
-                graph.anchors[lm],
-                graph.factor_z,
-                graph.factor_sqrt_info,
-                self.config.robust_kernel,
-                self.config.robust_k,
-            )
+            if lin is None:
+                lin = linearize_line_factors(
+                    poses[graph.factor_pose],
+                    landmarks[lm],
+                    graph.anchors[lm],
+                    graph.factor_z,
+                    graph.factor_sqrt_info,
+                    self.config.robust_kernel,
+                    self.config.robust_k,
+                )
             np.add.at(dp, graph.factor_pose, np.sum(lin.A_pose**2, axis=1))
             np.add.at(dl, lm, np.sum(lin.A_landmark**2, axis=1))
         if graph.n_odometry:
@@ -269,6 +284,7 @@ class BatchSolver:
         stats.initial_cost = cost
         lam, nu = 0.0, 2.0
         scale: tuple[FloatArray, FloatArray] | None = None
+        lin: LineLinearization | None = None
         ordering = None
         gfg = gtsam.GaussianFactorGraph()
         relinearize = True
@@ -278,7 +294,7 @@ class BatchSolver:
                     stats.reason = "iteration limit"
                     break
                 t0 = time.perf_counter()
-                gfg = self.linearize(graph, poses, landmarks)
+                gfg, lin = self._linearize(graph, poses, landmarks)
                 stats.iterations += 1
                 scale = None
                 if ordering is None:
@@ -287,7 +303,7 @@ class BatchSolver:
             t0 = time.perf_counter()
             if lam > 0.0:
                 if scale is None:
-                    scale = self.damping_scale(graph, poses, landmarks)
+                    scale = self.damping_scale(graph, poses, landmarks, lin)
                 system = self._damped(gfg, lms, scale[0], scale[1], lam)
             else:
                 system = gfg
