@@ -132,3 +132,20 @@ def test_gauge_is_required_and_empty_graph_is_fine():
     g.add_pose(np.zeros(3))
     with pytest.raises(EstimationError, match="prior"):
         BatchSolver().solve(g)
+
+
+def test_revert_merges_restores_the_graph_exactly():
+    g = synthetic_problem(20, seed=3).graph
+    before = (g.factor_landmark.copy(), g.landmark_alive.copy(), g.landmark_merged_into.copy())
+    n_log = len(g.merge_log)
+    first = g.merge_landmarks(0, 1)
+    g.merge_landmarks(2, 3)
+    g.unmerge(g.merge_log[n_log])  # an undo record among the reverted ones
+    assert first.size > 0 and g.landmark_alive[1] and not g.landmark_alive[3]
+    g.revert_merges(n_log)
+    assert len(g.merge_log) == n_log
+    np.testing.assert_array_equal(g.factor_landmark, before[0])
+    np.testing.assert_array_equal(g.landmark_alive, before[1])
+    np.testing.assert_array_equal(g.landmark_merged_into, before[2])
+    with pytest.raises(EstimationError, match="merge log"):
+        g.revert_merges(n_log + 1)

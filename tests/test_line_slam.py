@@ -286,3 +286,30 @@ def test_scan_without_odometry_is_an_input_error():
     scan = Scan(index=0, timestamp=0.0, ranges=np.zeros(0), bearings=np.zeros(0), source="x.clf:3")
     with pytest.raises(InputError, match=r"x\.clf:3.*odometry"):
         slam.add_scan(scan, [])
+
+
+def test_rejected_loop_closure_leaves_graph_and_backend_untouched(loop_runs):
+    """A candidate the judge rejects is rolled back before the back-end sees it."""
+    from slam.frontend.loop_closure import LoopClosure
+
+    slam = loop_runs[3]["isam2"][0]
+    g = slam.graph
+    alive = np.flatnonzero(g.landmark_alive)
+    alpha = g.landmarks_r_alpha[alive, 1]
+    # pair walls with walls about 90° away: four "matches" no estimate can explain
+    a = alive[np.abs(np.cos(alpha)) > 0.9][:4]
+    b = alive[np.abs(np.sin(alpha)) > 0.9][:4]
+    assert a.size == b.size == 4
+    pose = g.n_poses - 1
+    found = LoopClosure(np.array([0.3, -0.2, 0.02]), [(k, k) for k in range(4)], 10.0, 1.0)
+    state = (g.poses.copy(), g.landmarks.copy(), g.factor_landmark.copy(), len(g.merge_log))
+    updates = slam.backend.solver.stats.updates
+    undone = slam.counters["loop_closures_undone"]
+    assert slam._apply_closure(a, b, found, pose) == 0
+    assert slam.counters["loop_closures_undone"] == undone + 1
+    assert slam._closure_log[-1]["accepted"] is False
+    np.testing.assert_array_equal(g.poses, state[0])
+    np.testing.assert_array_equal(g.landmarks, state[1])
+    np.testing.assert_array_equal(g.factor_landmark, state[2])
+    assert len(g.merge_log) == state[3]
+    assert slam.backend.solver.stats.updates == updates

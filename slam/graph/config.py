@@ -147,6 +147,13 @@ class FusionConfig:
         A merge (fusion or loop closure) is undone when, some keyframes later, the median
         whitened squared residual of either side's line factors exceeds this (χ²₂ 99 %: 9.21);
         fusion never merges an undone pair again.
+    max_path_gap_m : float
+        During the run, two landmarks last seen more than this much driven path apart are
+        not fused but left to loop closing, which verifies a whole submap and rejects
+        ambiguous matches: after metres of drift a wall can land on its neighbour (rooms along
+        a corridor repeat), and a wrong fusion binds the drifted estimate to the wrong place.
+        Default: the front end's drift limit (``max_drift_xy_m / drift_xy_per_m`` = 20 m).
+        The final round over the whole map (:meth:`LineSlam.optimize`) has no such limit.
     """
 
     enabled: bool = True
@@ -157,6 +164,7 @@ class FusionConfig:
     max_distance_m: float = 0.5
     retest_growth: float = 2.0
     audit_max_median_chi2: float = 9.21
+    max_path_gap_m: float = 20.0
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
@@ -166,6 +174,7 @@ class FusionConfig:
         _pos("max_angle_rad", self.max_angle_rad)
         _pos("max_distance_m", self.max_distance_m)
         _pos("audit_max_median_chi2", self.audit_max_median_chi2)
+        _pos("max_path_gap_m", self.max_path_gap_m)
 
 
 @dataclass(frozen=True)
@@ -453,8 +462,13 @@ class LoopClosureConfig:
         Acceptance after merging and optimising: mean whitened squared residual of the line
         factors on the merged landmarks (2 dof each).
     max_updates : int
-        Most iSAM2 updates (``Isam2Solver.optimize``) run to converge a candidate closure and
-        to return from a rejected one (the batch back-end always solves to convergence).
+        Most iSAM2 updates (``Isam2Solver.optimize``) run to settle the back-end after an
+        accepted closure (it restarts from the judged estimate).
+    judge_iterations : int
+        Most linearisations of the batch solve that judges a candidate closure (outside the
+        back-end; a rejected candidate never reaches it).
+    judge_relative_tolerance : float
+        That solve stops when the cost decreases by less than this fraction.
     """
 
     enabled: bool = True
@@ -477,9 +491,12 @@ class LoopClosureConfig:
     corridor_closures: bool = True
     max_chi2_per_factor: float = 6.0
     max_updates: int = 20
+    judge_iterations: int = 10
+    judge_relative_tolerance: float = 1e-4
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
+        _require(self.judge_iterations >= 1, "judge_iterations must be >= 1")
         _require(self.local_keyframes >= 1, "local_keyframes must be >= 1")
         _require(self.max_updates >= 1, "max_updates must be >= 1")
         _require(self.min_matches >= 2, "min_matches must be >= 2")
@@ -500,6 +517,7 @@ class LoopClosureConfig:
             "offset_tolerance_m",
             "min_direction_angle_rad",
             "max_chi2_per_factor",
+            "judge_relative_tolerance",
         ):
             _pos(name, getattr(self, name))
         _require(0.0 < self.max_ambiguity <= 1.0, "max_ambiguity must be in (0, 1]")

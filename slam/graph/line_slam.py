@@ -42,7 +42,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -62,6 +62,7 @@ from slam.frontend.registration import register_lines
 from slam.frontend.tentative import Observation, TentativePool
 from slam.geometry import pose_between, pose_compose, pose_exp, pose_inverse, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
+from slam.graph.batch import BatchSolver
 from slam.graph.config import SlamConfig
 from slam.graph.factors import line_factor_residuals
 from slam.graph.landmark import anchored_jacobian, landmarks_normal_form, r_alpha_from_anchored
@@ -211,6 +212,13 @@ class LineSlam:
         self.graph = LineGraph()
         self.backend: BatchBackend | Isam2Backend = make_backend(self.config)
         self.tentative = TentativePool()
+        # loop-closure candidates are judged by batch solves outside the back-end
+        self._judge = BatchSolver(
+            replace(
+                self.config.solver,
+                relative_tolerance=self.config.loop_closure.judge_relative_tolerance,
+            )
+        )
         self._extents = np.zeros((0, 2))
         # per graph landmark (front-end bookkeeping)
         self._lm_info = GrowableArray((2, 2))
@@ -269,6 +277,7 @@ class LineSlam:
             "backend": 0.0,
             "fusion": 0.0,
             "loop_closure": 0.0,
+            "judge": 0.0,
             "optimize": 0.0,
             "covariances": 0.0,
         }
@@ -941,6 +950,11 @@ class LineSlam:
             # drift between their last sightings
             last = self._lm_last_kf.data
             gap = np.abs(self._kf_path.data[last[a]] - self._kf_path.data[last[b]])
+            if not everywhere:
+                # far apart in path: loop closing's job (submap verification), not fusion's
+                near = gap <= cfg.fusion.max_path_gap_m
+                a, b, gap = a[near], b[near], gap[near]
+                Pa, Pb = Pa[near], Pb[near]
             fc = cfg.frontend
             # the drift rotates b about the robot where it last saw b
             seen_from = g.poses[last[b], :2]
@@ -1065,9 +1079,12 @@ class LineSlam:
         return LoopLines.from_anchored(v, c, self._extents[lms], self._lm_side.data[lms])
 
     def _apply_closure(self, local: IntArray, old: IntArray, found: Any, pose: int) -> int:
-        """Spread the correction, merge the verified pairs, optimise; keep only if explained.
+        """Spread the correction, merge the verified pairs, judge; keep only if explained.
 
-        A closure the optimised graph does not explain is undone completely.
+        The candidate is judged by a batch solve of the whole graph in our own loop
+        (:class:`slam.graph.batch.BatchSolver`, ``judge_iterations`` at most) without touching
+        the back-end: a rejected closure is rolled back (merges and estimate) and the back-end
+        never sees it; an accepted one restarts the back-end from the judged estimate.
         """
         g = self.graph
         lcc = self.config.loop_closure
@@ -1083,18 +1100,21 @@ class LineSlam:
         if big:
             self._spread_correction(corr, g.poses[pose, :2].copy(), int(np.median(old_last)), pose)
         n_log = len(g.merge_log)
+        info_saved = (self._lm_info.data.copy(), self._lm_last_kf.data.copy())
         done: set[int] = set()
-        merged_into: set[int] = set()
         for i, j in found.pairs:
             keep, drop = int(old[j]), int(local[i])
             if drop in done or not (g.landmark_alive[keep] and g.landmark_alive[drop]):
                 continue
             self._merge(keep, drop)
             done.add(drop)
-            merged_into.add(keep)
         if not done:
+            g.poses[:] = saved[0]
+            g.landmarks[:] = saved[1]
             return 0
-        self._converge(reset=big)
+        t0 = time.perf_counter()
+        judged = self._judge.solve(g, lcc.judge_iterations)
+        self.time_s["judge"] += time.perf_counter() - t0
         records = list(g.merge_log[n_log:])
         verdict = [self._merge_consistent(r) for r in records]
         good = sum(v is True for v in verdict)
@@ -1106,22 +1126,23 @@ class LineSlam:
             "single_direction": bool(found.single_direction),
             "score": float(found.score),
             "runner_up": float(found.runner_up),
+            "judge_iterations": judged.iterations,
         }
         if good >= max(lcc.min_matches - 1, 2) and good >= 0.6 * len(records):
             # explained (up to a few wrong pairs, which are undone)
-            if self._audit(records):
-                self._converge(reset=False)
+            self._audit(records)
+            self._converge(reset=True)
             entry["accepted"] = True
             self._closure_log.append(entry)
             self.counters["loop_closures"] += 1
             return 1
-        # not explained: undo the merges (newest first), restore the estimate, converge again
-        for rec in reversed(records):
-            g.unmerge(rec)
-        self._recompute_info(np.array(sorted(merged_into | done)))
+        # not explained: the back-end never saw it; roll the merges and the estimate back
+        g.revert_merges(n_log)
+        self._lm_info.data[:] = info_saved[0]
+        self._lm_last_kf.data[:] = info_saved[1]
         g.poses[:] = saved[0]
         g.landmarks[:] = saved[1]
-        self._converge(reset=True)
+        self._extents = g.landmark_extents()
         entry["accepted"] = False
         self._closure_log.append(entry)
         self.counters["loop_closures_undone"] += 1

@@ -421,6 +421,25 @@ class LineGraph:
         self.landmark_merged_into[drop] = -1
         self.merge_log.append(MergeRecord(keep, drop, record.factors, undo=True))
 
+    def revert_merges(self, since: int) -> None:
+        """Undo the merges logged from ``merge_log[since]`` on and drop them from the log.
+
+        Unlike :meth:`unmerge` this leaves no trace: only for merges no incremental solver has
+        read yet (e.g. a loop-closure candidate judged and rejected before the back-end saw it).
+        """
+        if not 0 <= since <= len(self.merge_log):
+            raise EstimationError(f"no merge log entry {since} to revert to")
+        for record in reversed(self.merge_log[since:]):
+            if record.undo:
+                self.factor_landmark[record.factors] = record.keep
+                self.landmark_alive[record.drop] = False
+                self.landmark_merged_into[record.drop] = record.keep
+            else:
+                self.factor_landmark[record.factors] = record.drop
+                self.landmark_alive[record.drop] = True
+                self.landmark_merged_into[record.drop] = -1
+        del self.merge_log[since:]
+
     # -- derived quantities --------------------------------------------------------------------
     def factors_of_landmarks(self, landmarks: IntArray) -> IntArray:
         """Line factors on any of ``landmarks``."""
