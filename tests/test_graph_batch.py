@@ -149,3 +149,31 @@ def test_revert_merges_restores_the_graph_exactly():
     np.testing.assert_array_equal(g.landmark_merged_into, before[2])
     with pytest.raises(EstimationError, match="merge log"):
         g.revert_merges(n_log + 1)
+
+
+def test_solve_with_held_poses_returns_to_the_full_optimum():
+    """Poses before ``free_from`` are constants; at the full optimum they are the right ones,
+    so a perturbed rest of the graph must come back to the full optimum exactly."""
+    p = synthetic_problem(40, seed=11)
+    g = p.graph
+    solver = BatchSolver(
+        SolverConfig(robust_kernel="none", relative_tolerance=1e-14, step_tolerance=1e-11)
+    )
+    solver.solve(g)
+    best_poses, best_landmarks = g.poses.copy(), g.landmarks.copy()
+    k = 25
+    rng = np.random.default_rng(0)
+    g.poses[k:] += rng.normal(0.0, [0.05, 0.05, 0.01], size=(g.n_poses - k, 3))
+    seen_late = np.unique(g.factor_landmark[g.factor_pose >= k])
+    g.landmarks[seen_late] += rng.normal(0.0, [0.03, 0.005], size=(seen_late.size, 2))
+    moved = g.landmarks.copy()
+    stats = solver.solve(g, free_from=k)
+    assert stats.converged
+    np.testing.assert_array_equal(g.poses[:k], best_poses[:k])  # held, bit for bit
+    only_early = np.setdiff1d(np.arange(g.n_landmarks), seen_late)
+    np.testing.assert_array_equal(g.landmarks[only_early], moved[only_early])
+    np.testing.assert_allclose(g.poses[k:, :2], best_poses[k:, :2], atol=1e-7)
+    np.testing.assert_allclose(wrap_angle(g.poses[k:, 2] - best_poses[k:, 2]), 0.0, atol=1e-8)
+    np.testing.assert_allclose(g.landmarks[seen_late], best_landmarks[seen_late], atol=1e-7)
+    with pytest.raises(EstimationError, match="free_from"):
+        solver.solve(g, free_from=g.n_poses)

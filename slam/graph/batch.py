@@ -146,42 +146,77 @@ class BatchSolver:
         return self._linearize(graph, poses, landmarks)[0]
 
     def _linearize(
-        self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray
-    ) -> tuple[gtsam.GaussianFactorGraph, LineLinearization | None]:
-        """:meth:`linearize`, also returning the line factors' linearisation.
+        self,
+        graph: LineGraph,
+        poses: FloatArray,
+        landmarks: FloatArray,
+        free_from: int = 0,
+        solved: NDArray[np.bool_] | None = None,
+    ) -> tuple[gtsam.GaussianFactorGraph, LineLinearization | None, IntArray]:
+        """:meth:`linearize`, also returning the line factors' linearisation and their indices.
 
-        :meth:`damping_scale` at the same point reuses it instead of linearising again.
+        :meth:`damping_scale` at the same point reuses it instead of linearising again.  With
+        ``free_from > 0`` poses before it are constants: factors touching only constants are
+        left out, and a factor between a constant and a variable becomes a one-key factor.
+        ``solved`` (per landmark) says which landmarks are variables (default: all).
         """
         gfg = gtsam.GaussianFactorGraph()
         lin: LineLinearization | None = None
-        if graph.prior_pose is not None and graph.prior_sqrt_info is not None:
+        used = np.zeros(0, dtype=np.intp)
+        if free_from == 0 and graph.prior_pose is not None and graph.prior_sqrt_info is not None:
             A, b, _ = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
             gfg.push_back(gtsam.JacobianFactor(keys_of("x", np.array([0]))[0], A, b, UNIT3))
         if graph.n_odometry:
+            e = np.flatnonzero(graph.odometry_second >= free_from)
+            first, second = graph.odometry_first[e], graph.odometry_second[e]
             A1, A2, b = linearize_between(
-                poses[graph.odometry_first],
-                poses[graph.odometry_second],
-                graph.odometry_measured,
-                graph.odometry_sqrt_info,
+                poses[first], poses[second], graph.odometry_measured[e], graph.odometry_sqrt_info[e]
             )
+            both = first >= free_from
             for f in odometry_jacobian_factors(
-                graph.odometry_first, graph.odometry_second, A1, A2, b
+                first[both], second[both], A1[both], A2[both], b[both]
             ):
                 gfg.push_back(f)
+            for key, A, rhs in zip(keys_of("x", second[~both]), A2[~both], b[~both], strict=True):
+                gfg.push_back(gtsam.JacobianFactor(key, A, rhs, UNIT3))
         if graph.n_line_factors:
-            lm = graph.factor_landmark
+            lm_all = graph.factor_landmark
+            used = (
+                np.arange(graph.n_line_factors)
+                if solved is None
+                else np.flatnonzero(solved[lm_all])
+            )
+            lm = lm_all[used]
+            fp = graph.factor_pose[used]
             lin = linearize_line_factors(
-                poses[graph.factor_pose],
+                poses[fp],
                 landmarks[lm],
                 graph.anchors[lm],
-                graph.factor_z,
-                graph.factor_sqrt_info,
+                graph.factor_z[used],
+                graph.factor_sqrt_info[used],
                 self.config.robust_kernel,
                 self.config.robust_k,
             )
-            for f in line_jacobian_factors(graph.factor_pose, lm, lin):
+            free = fp >= free_from
+            if free.all():
+                factors = line_jacobian_factors(fp, lm, lin)
+            else:
+                sub = LineLinearization(
+                    lin.A_pose[free],
+                    lin.A_landmark[free],
+                    lin.b[free],
+                    lin.whitened_residual[free],
+                    lin.weights[free],
+                )
+                factors = line_jacobian_factors(fp[free], lm[free], sub)
+                fixed = ~free
+                for key, A, rhs in zip(
+                    keys_of("l", lm[fixed]), lin.A_landmark[fixed], lin.b[fixed], strict=True
+                ):
+                    factors.append(gtsam.JacobianFactor(key, A, rhs, UNIT2))
+            for f in factors:
                 gfg.push_back(f)
-        return gfg, lin
+        return gfg, lin, used
 
     def damping_scale(
         self,
@@ -189,9 +224,11 @@ class BatchSolver:
         poses: FloatArray,
         landmarks: FloatArray,
         lin: LineLinearization | None = None,
+        factors: IntArray | None = None,
     ) -> tuple[FloatArray, FloatArray]:
         """Marquardt scaling: ``diag(AᵀA)`` per pose ``(N, 3)`` and landmark ``(M, 2)``.
 
+        ``factors``: the line factors ``lin`` linearised (default all).
         Line factors contribute their whitened Jacobian columns' squared norms exactly; odometry
         contributes ``diag(Σ⁻¹)`` to both of its poses (its Jacobians are rotations of the
         identity to first order).  Floored at ``1e-9`` of the largest entry.
@@ -200,18 +237,20 @@ class BatchSolver:
         dp = np.zeros((N, 3))
         dl = np.zeros((M, 2))
         if graph.n_line_factors:
-            lm = graph.factor_landmark
+            f = np.arange(graph.n_line_factors) if factors is None else factors
+            lm = graph.factor_landmark[f]
+            fp = graph.factor_pose[f]
             if lin is None:
                 lin = linearize_line_factors(
-                    poses[graph.factor_pose],
+                    poses[fp],
                     landmarks[lm],
                     graph.anchors[lm],
-                    graph.factor_z,
-                    graph.factor_sqrt_info,
+                    graph.factor_z[f],
+                    graph.factor_sqrt_info[f],
                     self.config.robust_kernel,
                     self.config.robust_k,
                 )
-            np.add.at(dp, graph.factor_pose, np.sum(lin.A_pose**2, axis=1))
+            np.add.at(dp, fp, np.sum(lin.A_pose**2, axis=1))
             np.add.at(dl, lm, np.sum(lin.A_landmark**2, axis=1))
         if graph.n_odometry:
             info = np.sum(graph.odometry_sqrt_info**2, axis=1)  # diag(WᵀW)
@@ -229,14 +268,16 @@ class BatchSolver:
         scale_poses: FloatArray,
         scale_landmarks: FloatArray,
         lam: float,
+        free_from: int = 0,
     ) -> gtsam.GaussianFactorGraph:
-        """``gfg`` plus damping factors ``√(λ D)`` on every variable."""
+        """``gfg`` plus damping factors ``√(λ D)`` on every variable (poses from ``free_from``)."""
         out = gtsam.GaussianFactorGraph()
         out.push_back(gfg)
         z3, z2 = np.zeros(3), np.zeros(2)
-        sp = np.sqrt(lam * scale_poses)
+        sp = np.sqrt(lam * scale_poses[free_from:])
         sl = np.sqrt(lam * scale_landmarks[landmarks])
-        for k, d in zip(keys_of("x", np.arange(scale_poses.shape[0])), sp, strict=True):
+        free = np.arange(free_from, scale_poses.shape[0])
+        for k, d in zip(keys_of("x", free), sp, strict=True):
             out.push_back(gtsam.JacobianFactor(k, np.diag(d), z3, UNIT3))
         for k, d in zip(keys_of("l", landmarks), sl, strict=True):
             out.push_back(gtsam.JacobianFactor(k, np.diag(d), z2, UNIT2))
@@ -248,7 +289,9 @@ class BatchSolver:
         return gtsam.Ordering.ColamdGaussianFactorGraph(gfg)
 
     # -- the loop ---------------------------------------------------------------------------
-    def solve(self, graph: LineGraph, max_iterations: int | None = None) -> SolveStats:
+    def solve(
+        self, graph: LineGraph, max_iterations: int | None = None, free_from: int = 0
+    ) -> SolveStats:
         """Optimise ``graph``'s estimate in place.
 
         Parameters
@@ -257,6 +300,11 @@ class BatchSolver:
             Needs the gauge prior (:meth:`LineGraph.set_prior`).
         max_iterations : int, optional
             Most linearisations; default ``config.max_iterations``.
+        free_from : int, optional
+            Poses before this index are held at their current estimate; only the later poses
+            and the landmarks they observe are solved (with the held poses' factors on those
+            landmarks as constants).  E.g. judging a loop closure, where the map before the
+            loop is the reference.  Default 0: the whole graph.
 
         Returns
         -------
@@ -275,7 +323,16 @@ class BatchSolver:
             return stats
         if graph.prior_pose is None:
             raise EstimationError("the graph has no prior on its first pose (gauge)")
+        if not 0 <= free_from < graph.n_poses:
+            raise EstimationError(f"free_from={free_from} is not a pose of the graph")
         lms = self.active_landmarks(graph)
+        solved: NDArray[np.bool_] | None = None
+        if free_from > 0:
+            seen = np.zeros(graph.n_landmarks, dtype=bool)
+            seen[graph.factor_landmark[graph.factor_pose >= free_from]] = True
+            lms = lms[seen[lms]]
+            solved = np.zeros(graph.n_landmarks, dtype=bool)
+            solved[lms] = True
         poses = graph.poses.copy()
         landmarks = graph.landmarks.copy()
         cost = self.cost(graph, poses, landmarks)
@@ -285,6 +342,7 @@ class BatchSolver:
         lam, nu = 0.0, 2.0
         scale: tuple[FloatArray, FloatArray] | None = None
         lin: LineLinearization | None = None
+        used = np.zeros(0, dtype=np.intp)
         ordering = None
         gfg = gtsam.GaussianFactorGraph()
         relinearize = True
@@ -294,7 +352,7 @@ class BatchSolver:
                     stats.reason = "iteration limit"
                     break
                 t0 = time.perf_counter()
-                gfg, lin = self._linearize(graph, poses, landmarks)
+                gfg, lin, used = self._linearize(graph, poses, landmarks, free_from, solved)
                 stats.iterations += 1
                 scale = None
                 if ordering is None:
@@ -303,8 +361,8 @@ class BatchSolver:
             t0 = time.perf_counter()
             if lam > 0.0:
                 if scale is None:
-                    scale = self.damping_scale(graph, poses, landmarks, lin)
-                system = self._damped(gfg, lms, scale[0], scale[1], lam)
+                    scale = self.damping_scale(graph, poses, landmarks, lin, used)
+                system = self._damped(gfg, lms, scale[0], scale[1], lam, free_from)
             else:
                 system = gfg
             assert ordering is not None
@@ -315,9 +373,10 @@ class BatchSolver:
             predicted = float(gfg.error(delta.scale(0.0)) - gfg.error(delta))
             stats.time_s["solve"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            d_lm, d_pose = split_delta(delta, lms.shape[0], graph.n_poses)
+            d_lm, d_pose = split_delta(delta, lms.shape[0], graph.n_poses - free_from)
             step = float(max(np.max(np.abs(d_pose)), np.max(np.abs(d_lm), initial=0.0)))
-            new_poses = pose_retract(poses, d_pose)
+            new_poses = poses.copy()
+            new_poses[free_from:] = pose_retract(poses[free_from:], d_pose)
             new_landmarks = landmarks.copy()
             new_landmarks[lms] = retract_landmarks(landmarks[lms], d_lm)
             stats.time_s["retract"] += time.perf_counter() - t0

@@ -469,6 +469,10 @@ class LoopClosureConfig:
         back-end; a rejected candidate never reaches it).
     judge_relative_tolerance : float
         That solve stops when the cost decreases by less than this fraction.
+    judge_loop_only : bool
+        Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
+        matched old landmarks were last seen on, the earlier poses held at their estimate
+        (the map before the loop is the reference).  False: the whole graph.
     """
 
     enabled: bool = True
@@ -493,6 +497,7 @@ class LoopClosureConfig:
     max_updates: int = 20
     judge_iterations: int = 10
     judge_relative_tolerance: float = 1e-4
+    judge_loop_only: bool = True
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")

@@ -1081,8 +1081,10 @@ class LineSlam:
     def _apply_closure(self, local: IntArray, old: IntArray, found: Any, pose: int) -> int:
         """Spread the correction, merge the verified pairs, judge; keep only if explained.
 
-        The candidate is judged by a batch solve of the whole graph in our own loop
-        (:class:`slam.graph.batch.BatchSolver`, ``judge_iterations`` at most) without touching
+        The candidate is judged by a batch solve in our own loop
+        (:class:`slam.graph.batch.BatchSolver`, ``judge_iterations`` at most) of the loop (the
+        poses since ``local_keyframes`` before the old landmarks were last seen, the earlier
+        ones held; the whole graph with ``judge_loop_only = False``) without touching
         the back-end: a rejected closure is rolled back (merges and estimate) and the back-end
         never sees it; an accepted one restarts the back-end from the judged estimate.
         """
@@ -1112,8 +1114,10 @@ class LineSlam:
             g.poses[:] = saved[0]
             g.landmarks[:] = saved[1]
             return 0
+        # the map before the loop is the reference: held, only the loop is solved
+        free_from = max(int(old_last.min()) - lcc.local_keyframes, 0) if lcc.judge_loop_only else 0
         t0 = time.perf_counter()
-        judged = self._judge.solve(g, lcc.judge_iterations)
+        judged = self._judge.solve(g, lcc.judge_iterations, free_from=free_from)
         self.time_s["judge"] += time.perf_counter() - t0
         records = list(g.merge_log[n_log:])
         verdict = [self._merge_consistent(r) for r in records]
@@ -1127,6 +1131,7 @@ class LineSlam:
             "score": float(found.score),
             "runner_up": float(found.runner_up),
             "judge_iterations": judged.iterations,
+            "judge_free_from": free_from,
         }
         if good >= max(lcc.min_matches - 1, 2) and good >= 0.6 * len(records):
             # explained (up to a few wrong pairs, which are undone)

@@ -1,0 +1,115 @@
+"""How much does a real-log result move under small perturbations of the configuration?
+
+Line SLAM on a real log passes through many discrete decisions (which lines are extracted,
+which landmarks are fused, which loop closures are accepted); a tiny change can flip one and
+change the final error.  A single run therefore says little about how robust a number is.  This
+script runs ``lineslam slam`` on one log with the default configuration and with a set of
+small perturbations of it, one after another, and prints the relations error of each and the
+spread (mean, worst).
+
+    LINESLAM_DATA=/work/shared/datasets .venv/bin/python scripts/sensitivity.py fr079
+    .venv/bin/python scripts/sensitivity.py aces --variants default keyframe-0.19 sigma-range+2%
+
+The perturbations are changes no user would call a different configuration: the keyframe
+distance by ±5 %, the range noise of the line fits by ±2 %, the fusion and loop-closing
+intervals by one keyframe.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from slam.config import RunConfig
+from slam.runner import run_slam
+
+Perturbation = Callable[[RunConfig], RunConfig]
+
+
+def _slam(**kw: object) -> Perturbation:
+    def apply(c: RunConfig) -> RunConfig:
+        s = c.slam
+        for path, value in kw.items():
+            head, _, leaf = path.partition("__")
+            if leaf:
+                s = replace(s, **{head: replace(getattr(s, head), **{leaf: value})})
+            else:
+                s = replace(s, **{head: value})
+        return replace(c, slam=s)
+
+    return apply
+
+
+def _range_noise(factor: float) -> Perturbation:
+    def apply(c: RunConfig) -> RunConfig:
+        noise = c.linefit.noise
+        noise = replace(noise, sigma_range_m=noise.sigma_range_m * factor)
+        return replace(c, linefit=replace(c.linefit, noise=noise))
+
+    return apply
+
+
+VARIANTS: dict[str, Perturbation] = {
+    "default": lambda c: c,
+    "keyframe-0.19": _slam(keyframes__min_distance_m=0.19),
+    "keyframe-0.21": _slam(keyframes__min_distance_m=0.21),
+    "sigma-range-2%": _range_noise(0.98),
+    "sigma-range+2%": _range_noise(1.02),
+    "fusion-every-9": _slam(fusion__interval_keyframes=9),
+    "closing-every-4": _slam(loop_closure__interval_keyframes=4),
+    "closing-every-6": _slam(loop_closure__interval_keyframes=6),
+}
+
+
+def relations_error(out: Path, log: str) -> tuple[float, float]:
+    """Mean absolute translational (m) and rotational (deg) relations error of a run."""
+    from slam.evaluation import relations_metric, relations_within
+    from slam.io.catalog import resolve_log
+    from slam.io.relations import read_relations
+    from slam.io.tum import read_tum
+
+    resolved = resolve_log(log)
+    if resolved.relations is None:
+        raise SystemExit(f"{log}: no relations file in the catalogue")
+    trajectory = read_tum(out / "trajectory.tum")
+    relations = relations_within(read_relations(resolved.relations), trajectory.timestamps)
+    metric = relations_metric(trajectory, relations)
+    return metric.abs_trans_m.mean, metric.abs_rot_deg.mean
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("log", help="dataset name or log file with relations")
+    parser.add_argument(
+        "--variants", nargs="+", choices=sorted(VARIANTS), default=list(VARIANTS), metavar="V"
+    )
+    parser.add_argument("--max-scans", type=int, default=None)
+    args = parser.parse_args()
+    trans, rot = [], []
+    print(f"{'variant':<18}{'trans (m)':>11}{'rot (deg)':>11}{'time (s)':>10}", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.variants:
+            out = Path(tmp) / name
+            config = VARIANTS[name](RunConfig())
+            t0 = time.perf_counter()
+            run_slam(args.log, out, config, max_scans=args.max_scans)
+            dt = time.perf_counter() - t0
+            t, r = relations_error(out, args.log)
+            trans.append(t)
+            rot.append(r)
+            print(f"{name:<18}{t:>11.4f}{r:>11.3f}{dt:>10.1f}", flush=True)
+    print(
+        f"over {len(trans)} runs: translation mean {np.mean(trans):.4f} m, "
+        f"worst {np.max(trans):.4f} m, best {np.min(trans):.4f} m; "
+        f"rotation mean {np.mean(rot):.3f} deg"
+    )
+
+
+if __name__ == "__main__":
+    main()
