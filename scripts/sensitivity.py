@@ -9,6 +9,7 @@ spread (mean, worst).
 
     LINESLAM_DATA=/work/shared/datasets .venv/bin/python scripts/sensitivity.py fr079
     .venv/bin/python scripts/sensitivity.py aces --variants default keyframe-0.19 sigma-range+2%
+    .venv/bin/python scripts/sensitivity.py fr079 --config my.toml   # perturb another setting
 
 The perturbations are changes no user would call a different configuration: the keyframe
 distance by ±5 %, the range noise of the line fits by ±2 %, the fusion and loop-closing
@@ -90,13 +91,17 @@ def main() -> None:
         "--variants", nargs="+", choices=sorted(VARIANTS), default=list(VARIANTS), metavar="V"
     )
     parser.add_argument("--max-scans", type=int, default=None)
+    parser.add_argument(
+        "--config", type=Path, default=None, help="TOML to perturb instead of the defaults"
+    )
     args = parser.parse_args()
+    base = RunConfig() if args.config is None else RunConfig.from_toml(args.config)
     trans, rot = [], []
     print(f"{'variant':<18}{'trans (m)':>11}{'rot (deg)':>11}{'time (s)':>10}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.variants:
             out = Path(tmp) / name
-            config = VARIANTS[name](RunConfig())
+            config = VARIANTS[name](base)
             t0 = time.perf_counter()
             run_slam(args.log, out, config, max_scans=args.max_scans)
             dt = time.perf_counter() - t0

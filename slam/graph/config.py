@@ -469,6 +469,10 @@ class LoopClosureConfig:
         back-end; a rejected candidate never reaches it).
     judge_relative_tolerance : float
         That solve stops when the cost decreases by less than this fraction.
+    min_consistent_fraction : float
+        A judged closure is accepted when at least this fraction of its merged pairs (and at
+        least ``min_matches - 1``) are explained by the solved loop (both sides' median
+        whitened χ² below ``fusion.audit_max_median_chi2``); the others are undone.
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -498,6 +502,7 @@ class LoopClosureConfig:
     judge_iterations: int = 10
     judge_relative_tolerance: float = 1e-4
     judge_loop_only: bool = True
+    min_consistent_fraction: float = 0.6
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
@@ -526,6 +531,9 @@ class LoopClosureConfig:
         ):
             _pos(name, getattr(self, name))
         _require(0.0 < self.max_ambiguity <= 1.0, "max_ambiguity must be in (0, 1]")
+        _require(
+            0.0 < self.min_consistent_fraction <= 1.0, "min_consistent_fraction must be in (0, 1]"
+        )
 
 
 @dataclass(frozen=True)

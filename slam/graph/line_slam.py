@@ -1133,7 +1133,9 @@ class LineSlam:
             "judge_iterations": judged.iterations,
             "judge_free_from": free_from,
         }
-        if good >= max(lcc.min_matches - 1, 2) and good >= 0.6 * len(records):
+        if good >= max(lcc.min_matches - 1, 2) and good >= lcc.min_consistent_fraction * len(
+            records
+        ):
             # explained (up to a few wrong pairs, which are undone)
             self._audit(records)
             self._converge(reset=True)
