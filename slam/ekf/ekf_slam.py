@@ -66,6 +66,7 @@ from slam.errors import EstimationError, InputError
 from slam.frontend.anchored import model_error_covariance
 from slam.frontend.lineset import LineSet
 from slam.geometry import line_residual, pose_between
+from slam.lines import chi2_gate
 from slam.types import Scan
 
 if TYPE_CHECKING:
@@ -196,9 +197,8 @@ class EkfSlam:
             "jcbb_incomplete": 0,
             "updates": 0,
         }
-        # χ²₂ quantiles in closed form: −2 ln(1 − p)
-        self._new_gate = -2.0 * math.log1p(-self.config.new_landmark_probability)
-        self._merge_gate = -2.0 * math.log1p(-self.config.merge_probability)
+        self._new_gate = chi2_gate(self.config.new_landmark_probability)
+        self._merge_gate = chi2_gate(self.config.merge_probability)
 
     # ------------------------------------------------------------------ state access
     @property
