@@ -39,7 +39,7 @@ def consistency(
     runs: Annotated[int, typer.Option("--runs", help="Seeded runs per estimator.")] = 50,
     estimators: Annotated[
         str, typer.Option("--estimators", help="Comma-separated estimator names.")
-    ] = "ekf,graph-isam2,odometry",
+    ] = "ekf,graph-isam2,graph-batch,odometry",
     workers: Annotated[
         int, typer.Option("--workers", help="Local worker processes (1: serial).")
     ] = 1,
