@@ -13,7 +13,9 @@ Innovation and its covariance (first order, :func:`slam.geometry.predict_line_me
 
 * **Individual compatibility**: ``D²_kc = ν_kcᵀ S_kc⁻¹ ν_kc ≤ χ²₂(gate_probability)``, and the
   measured segment must overlap (or come within a margin of) the landmark's extent along the
-  line in the world frame: ``(r, α)`` alone would match every collinear wall of a building.
+  line in the world frame: ``(r, α)`` alone would match every collinear wall of a building
+  (:func:`individual_gate`, :func:`segment_gaps`; the registration uses them with
+  :func:`nearest_compatible`, where a landmark may serve several measurements).
 * **Nearest neighbour**: each measurement takes the compatible landmark with the smallest
   ``D²``, greedily in order of ``D²`` so that a landmark is used at most once per scan.
 * **Joint compatibility branch and bound** (Neira & Tardós 2001): the largest set of pairings
@@ -22,7 +24,8 @@ Innovation and its covariance (first order, :func:`slam.geometry.predict_line_me
 * **Landmark fusion test** (:func:`landmarks_compatible`): the paper's Eq. 34-35 on two
   landmarks' joint marginal, with :func:`slam.lines.mahalanobis2`.
 
-numpy and :mod:`slam.lines` only: no gtsam, so that the EKF can use it unchanged.
+numpy and :mod:`slam.lines` only (the χ² quantile is :func:`slam.lines.chi2_gate`): no gtsam, so
+that the EKF can use it unchanged.
 """
 
 from __future__ import annotations
@@ -45,10 +48,13 @@ __all__ = [
     "associate",
     "build_problem",
     "candidate_landmarks",
+    "individual_gate",
     "jcbb",
     "landmarks_compatible",
+    "nearest_compatible",
     "nearest_neighbour",
     "overlap_mask",
+    "segment_extents",
     "segment_gaps",
 ]
 
@@ -117,11 +123,9 @@ class AssociationConfig:
 
 @functools.lru_cache(maxsize=4096)
 def _chi2_quantile(probability: float, dof: int) -> float:
-    if dof == 2:
-        return float(-2.0 * math.log1p(-probability))  # closed form for 2 dof
-    from scipy.special import gammaincinv  # scipy.stats would take 1.5 s to import
+    from slam.lines import chi2_gate
 
-    return float(2.0 * gammaincinv(dof / 2.0, probability))
+    return chi2_gate(probability, dof)
 
 
 def _chi2_ppf(probability: float, dof: Any) -> Any:
@@ -141,6 +145,65 @@ def _mahalanobis2_2x2(nu: FloatArray, S: FloatArray) -> FloatArray:
     n0, n1 = nu[..., 0], nu[..., 1]
     d2 = (d * n0 * n0 - (b + c) * n0 * n1 + a * n1 * n1) / det_safe
     return np.where(ok, d2, np.inf)
+
+
+def individual_gate(
+    nu: FloatArray,
+    S: FloatArray,
+    gate_probability: float,
+    allowed: BoolArray | None = None,
+) -> FloatArray:
+    """Individual compatibility test of measurement-landmark pairs (vectorised).
+
+    ``D² = νᵀ S⁻¹ ν`` of each pair, kept where ``D² ≤ χ²₂(gate_probability)``, ``S`` is
+    positive definite and the pair is ``allowed`` (e.g. by :func:`segment_gaps`).
+
+    Parameters
+    ----------
+    nu : ndarray, shape (..., 2)
+        Innovations (either sign: ``D²`` is even in ``ν``).
+    S : ndarray, shape (..., 2, 2)
+        Their covariances.
+    gate_probability : float
+        Probability of the χ² gate (2 dof).
+    allowed : ndarray of bool, shape (...), optional
+        Pairs that passed the non-statistical tests; default all.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        ``D²`` inside the gate, ``inf`` outside it.
+    """
+    d2 = _mahalanobis2_2x2(np.asarray(nu, dtype=float), np.asarray(S, dtype=float))
+    ok = d2 <= float(_chi2_ppf(gate_probability, 2))
+    if allowed is not None:
+        ok &= np.asarray(allowed, dtype=bool)
+    return np.where(ok, d2, np.inf)
+
+
+def nearest_compatible(d2_gated: FloatArray) -> IntArray:
+    """Each measurement's compatible landmark with the smallest ``D²`` (−1: none).
+
+    Unlike :func:`nearest_neighbour` a landmark may serve several measurements (the
+    registration's choice: one wall seen as two segments pairs both with the wall).
+
+    Parameters
+    ----------
+    d2_gated : ndarray, shape (K, C)
+        From :func:`individual_gate` (``inf``: not compatible).
+
+    Returns
+    -------
+    ndarray of int, shape (K,)
+    """
+    d2 = np.asarray(d2_gated, dtype=float)
+    out = np.full(d2.shape[0], -1, dtype=np.intp)
+    if d2.shape[0] == 0 or d2.shape[1] == 0:
+        return out
+    best = np.argmin(d2, axis=1)
+    has = np.isfinite(d2[np.arange(d2.shape[0]), best])
+    out[has] = best[has]
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -298,6 +361,27 @@ def candidate_landmarks(
     if max_candidates is not None and idx.shape[0] > max_candidates:
         idx = np.sort(idx[np.argsort(dist[idx], kind="stable")[:max_candidates]])
     return idx
+
+
+def segment_extents(endpoints_world: FloatArray, landmarks_r_alpha: FloatArray) -> FloatArray:
+    """``(s_min, s_max)`` of segments along their lines' tangents, from the world origin.
+
+    Parameters
+    ----------
+    endpoints_world : ndarray, shape (C, 2, 2)
+        Each segment's two end points.
+    landmarks_r_alpha : ndarray, shape (C, 2)
+        The lines ``(r, α)`` they lie on.
+
+    Returns
+    -------
+    ndarray, shape (C, 2)
+        Extents as :func:`candidate_landmarks` and :func:`segment_gaps` take them (no anchors).
+    """
+    a = np.asarray(landmarks_r_alpha, dtype=float).reshape(-1, 2)[:, 1]
+    t = np.stack([-np.sin(a), np.cos(a)], -1)
+    s = np.einsum("cpd,cd->cp", np.asarray(endpoints_world, dtype=float), t)
+    return np.stack([s.min(axis=-1), s.max(axis=-1)], axis=-1)
 
 
 def segment_gaps(

@@ -10,9 +10,12 @@ from slam.association import (
     associate,
     build_problem,
     candidate_landmarks,
+    individual_gate,
     jcbb,
     landmarks_compatible,
+    nearest_compatible,
     nearest_neighbour,
+    segment_extents,
     segment_gaps,
 )
 from slam.errors import ConfigError
@@ -156,6 +159,44 @@ def test_residual_sign_convention_of_the_problem(rng):
     zp, _, _ = predict_line_measurement(lm, pose)
     res, _ = line_residual(zp, z + [0.01, 0.0])
     np.testing.assert_allclose(np.diagonal(prob.nu, axis1=0, axis2=1).T, -res, atol=1e-12)
+
+
+def test_individual_gate_matches_the_problem_and_the_chi2_quantile(rng):
+    pose, lm, z, ep, ext, R = scene(rng)
+    P = np.diag(rng.uniform(1e-4, 1e-2, 3 + 2 * len(lm)))
+    prob = build_problem(z + 0.05, R, ep, pose, P, lm, ext, AssociationConfig())
+    S = prob.innovation_covariances()
+    d2 = prob.individual_d2()
+    gate = -2.0 * np.log(1.0 - 0.9)  # χ²₂(0.9) = 4.605
+    gated = individual_gate(prob.nu, S, 0.9, prob.allowed)
+    inside = np.isfinite(d2) & (d2 <= gate)
+    assert inside.any() and (~inside).any()
+    np.testing.assert_array_equal(np.isfinite(gated), inside)
+    np.testing.assert_allclose(gated[inside], d2[inside], rtol=1e-12)
+    # D² by an explicit inverse; a negative definite S is never compatible
+    k, c = np.argwhere(inside)[0]
+    nu = prob.nu[k, c]
+    assert gated[k, c] == pytest.approx(nu @ np.linalg.solve(S[k, c], nu), rel=1e-12)
+    assert np.isinf(individual_gate(nu, -S[k, c], 0.9))
+
+
+def test_nearest_compatible_lets_a_landmark_serve_several_measurements():
+    d2 = np.array([[3.0, 1.0, np.inf], [np.inf, 0.5, 2.0], [np.inf, np.inf, np.inf]])
+    np.testing.assert_array_equal(nearest_compatible(d2), [1, 1, -1])
+    assert nearest_compatible(np.zeros((2, 0))).tolist() == [-1, -1]
+
+
+def test_segment_extents_round_trip_through_the_gaps(rng):
+    alpha = rng.uniform(-np.pi, np.pi, 5)
+    t = np.column_stack([-np.sin(alpha), np.cos(alpha)])
+    n = np.column_stack([np.cos(alpha), np.sin(alpha)])
+    r = rng.uniform(-3, 3, 5)
+    s0, s1 = rng.uniform(-4, 0, 5), rng.uniform(0.5, 4, 5)
+    ends = r[:, None, None] * n[:, None] + np.stack([s0, s1], 1)[:, :, None] * t[:, None]
+    ext = segment_extents(ends[:, ::-1], np.column_stack([r, alpha]))
+    np.testing.assert_allclose(ext, np.column_stack([s0, s1]), atol=1e-12)
+    gaps = segment_gaps(ends, np.column_stack([r, alpha]), ext)
+    np.testing.assert_allclose(np.diag(gaps), -(s1 - s0), atol=1e-12)  # overlaps itself
 
 
 def test_config_validation():

@@ -6,8 +6,11 @@ import numpy as np
 import pytest
 
 from linefit.errors import ConfigError
+from slam.config import RunConfig
 from slam.experiments.consistency import ConsistencyConfig, run_consistency
-from slam.experiments.nees import anees_bounds
+from slam.experiments.estimators import run_estimator
+from slam.experiments.linesim import matched_run_config, simulate_line_run, world_and_trajectory
+from slam.experiments.nees import anees_bounds, pose_nees
 from slam.experiments.parallel import map_tasks, task_seed
 
 
@@ -55,6 +58,30 @@ def test_serial_and_local_cluster_give_identical_results():
     assert np.all(ekf.pos_rmse_m < 0.2 * odo.pos_rmse_m)
     # runs differ from each other (distinct seeds), so equal arrays also prove task order
     assert len(set(serial.estimators["odometry"].pos_rmse_m.tolist())) == 3
+
+
+def test_batch_graph_nees_is_that_of_its_smoothed_trajectory_and_lands_in_the_results():
+    cfg = ConsistencyConfig(
+        n_runs=1, world="corridor_loop", loops=0.4, estimators=("graph-batch", "odometry")
+    )
+    assert "graph-batch" in ConsistencyConfig().estimators  # part of the default study
+    res = run_consistency(cfg)
+    batch, odo = res.estimators["graph-batch"], res.estimators["odometry"]
+    # the same run outside the study: its final trajectory and marginals give the same NEES
+    world, truth = world_and_trajectory(cfg.world, cfg.loops)
+    run = simulate_line_run(world, truth, cfg.linesim, seed=task_seed(cfg.seed, 0))
+    rc = matched_run_config(RunConfig(), cfg.linesim)
+    est = run_estimator("graph-batch", run.scans, run.lines, rc, truth[0])
+    assert est.pose_covariances is not None
+    expected = pose_nees(est.poses_world_laser, est.pose_covariances, truth)
+    np.testing.assert_array_equal(batch.nees[0], expected)
+    assert np.all(np.isfinite(batch.nees[0]))  # the first pose's prior is tight, not exact
+    assert 0.3 < batch.mean_anees < 15.0  # the order of 3 dof, not a unit mix-up
+    assert batch.pos_rmse_m[0] < 0.1 * odo.pos_rmse_m[0]
+    doc = res.to_dict()["estimators"]["graph-batch"]
+    assert doc["mean_anees"] == pytest.approx(batch.mean_anees)
+    assert doc["anees"] == pytest.approx(batch.anees.tolist())
+    assert len(doc["anees"]) == truth.shape[0]
 
 
 def test_bad_experiment_configuration_is_rejected():

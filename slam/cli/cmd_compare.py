@@ -10,7 +10,6 @@ time per scan, NEES over time with χ² bounds for simulated data).
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -18,12 +17,15 @@ import typer
 from slam.cli._app import app
 from slam.cli.common import (
     ConfigOpt,
+    DaskOpt,
+    OutDirOpt,
     QuietOpt,
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
     build_config,
     prepare_out_dir,
+    task_progress,
 )
 
 __all__ = ["compare"]
@@ -34,7 +36,7 @@ def compare(
     log: Annotated[
         str, typer.Argument(help="Log path, dataset name, or sim:WORLD[:LOOPS[:SEED]].")
     ],
-    out: Annotated[Path, typer.Option("--out", help="Results folder (created).")],
+    out: OutDirOpt,
     variants: Annotated[
         str | None,
         typer.Option(
@@ -47,9 +49,7 @@ def compare(
         int,
         typer.Option("--workers", help="Local worker processes (0: one per CPU core; 1: serial)."),
     ] = 0,
-    dask: Annotated[
-        str | None, typer.Option("--dask", help="Dask scheduler address (tcp://host:port).")
-    ] = None,
+    dask: DaskOpt = None,
     time_budget: Annotated[
         float | None,
         typer.Option(
@@ -101,29 +101,17 @@ def compare(
             raise ConfigError(f"--time-budget must be > 0, got {time_budget}")
         selected = tuple(replace(v, time_budget_s=time_budget) for v in selected)
     prepare_out_dir(out, run_config)
-    bar = None
-    if not quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(selected), desc="variants", unit="variant")
-
-    def progress(done: int, total: int) -> None:
-        if bar is not None:
-            bar.n = done
-            bar.refresh()
-
-    report = run_compare(
-        data,
-        selected,
-        run_config,
-        workers,
-        dask,
-        progress,
-        cache_dir=out / ".cache",
-        max_scans=max_scans,
-    )
-    if bar is not None:
-        bar.close()
+    with task_progress(len(selected), "variants", "variant", quiet) as progress:
+        report = run_compare(
+            data,
+            selected,
+            run_config,
+            workers,
+            dask,
+            progress,
+            cache_dir=out / ".cache",
+            max_scans=max_scans,
+        )
     write_report(report, out, figures=figures)
     if not quiet:
         typer.echo(report.markdown_table())

@@ -10,7 +10,6 @@ and the figures ``nees.png`` and ``error.png``.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -18,12 +17,15 @@ import typer
 from slam.cli._app import app
 from slam.cli.common import (
     ConfigOpt,
+    DaskOpt,
+    OutDirOpt,
     QuietOpt,
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
     build_config,
     prepare_out_dir,
+    task_progress,
 )
 
 __all__ = ["consistency"]
@@ -31,7 +33,7 @@ __all__ = ["consistency"]
 
 @app.command()
 def consistency(
-    out: Annotated[Path, typer.Option("--out", help="Results folder (created).")],
+    out: OutDirOpt,
     world: Annotated[
         str, typer.Option("--world", help="Simulated world: corridor_loop or gridNxM.")
     ] = "corridor_loop",
@@ -39,13 +41,11 @@ def consistency(
     runs: Annotated[int, typer.Option("--runs", help="Seeded runs per estimator.")] = 50,
     estimators: Annotated[
         str, typer.Option("--estimators", help="Comma-separated estimator names.")
-    ] = "ekf,graph-isam2,odometry",
+    ] = "ekf,graph-isam2,graph-batch,odometry",
     workers: Annotated[
         int, typer.Option("--workers", help="Local worker processes (1: serial).")
     ] = 1,
-    dask: Annotated[
-        str | None, typer.Option("--dask", help="Dask scheduler address (tcp://host:port).")
-    ] = None,
+    dask: DaskOpt = None,
     config: ConfigOpt = None,
     sigma_d: SigmaDOpt = None,
     sigma_phi: SigmaPhiOpt = None,
@@ -64,20 +64,8 @@ def consistency(
         seed=run_config.seed,
     )
     prepare_out_dir(out, run_config)
-    bar = None
-    if not quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(total=runs, desc="runs", unit="run")
-
-    def progress(done: int, total: int) -> None:
-        if bar is not None:
-            bar.n = done
-            bar.refresh()
-
-    result = run_consistency(study, run_config, workers, dask, progress)
-    if bar is not None:
-        bar.close()
+    with task_progress(runs, "runs", "run", quiet) as progress:
+        result = run_consistency(study, run_config, workers, dask, progress)
     (out / "consistency.json").write_text(json.dumps(result.to_dict(), indent=1))
     from slam.plotting_compare import plot_errors_over_time, plot_nees_over_time
 

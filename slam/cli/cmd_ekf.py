@@ -9,7 +9,6 @@ covers the scans processed and ``summary.json`` says at which scan and why.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated, Literal
 
 import typer
@@ -17,6 +16,7 @@ import typer
 from slam.cli._app import app
 from slam.cli.common import (
     ConfigOpt,
+    OutDirOpt,
     QuietOpt,
     SeedOpt,
     SigmaDOpt,
@@ -31,7 +31,7 @@ __all__ = ["ekf"]
 @app.command()
 def ekf(
     log: Annotated[str, typer.Argument(help="Log file or registered dataset name.")],
-    out: Annotated[Path, typer.Option("--out", help="Results folder (created).")],
+    out: OutDirOpt,
     association: Annotated[
         str | None, typer.Option("--association", help="nn or jcbb (default: config).")
     ] = None,

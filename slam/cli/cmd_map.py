@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -11,11 +10,15 @@ import typer
 from slam.cli._app import app
 from slam.cli.common import (
     ConfigOpt,
+    LogArg,
+    MaxScansOpt,
+    OutDirOpt,
     QuietOpt,
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
     build_config,
+    check_max_scans,
     prepare_out_dir,
 )
 
@@ -24,8 +27,8 @@ __all__ = ["map_command"]
 
 @app.command("map")
 def map_command(
-    log: Annotated[str, typer.Argument(help="Log file, or a dataset name (intel, aces, fr079).")],
-    out: Annotated[Path, typer.Option("--out", help="Results folder (created).")],
+    log: LogArg,
+    out: OutDirOpt,
     config_path: ConfigOpt = None,
     sigma_d: SigmaDOpt = None,
     sigma_phi: SigmaPhiOpt = None,
@@ -47,9 +50,7 @@ def map_command(
         float | None,
         typer.Option("--max-gap", help="Largest gap (m) between merged collinear pieces."),
     ] = None,
-    max_scans: Annotated[
-        int | None, typer.Option("--max-scans", help="Use only the first N scans.")
-    ] = None,
+    max_scans: MaxScansOpt = None,
     plot: Annotated[bool, typer.Option("--plot/--no-plot", help="Draw the figures.")] = True,
 ) -> None:
     """Fit lines to every scan and merge them across poses (paper Sec. V).
@@ -70,8 +71,7 @@ def map_command(
     overrides = {k: v for k, v in overrides.items() if v is not None}
     if overrides:
         config = replace(config, map=replace(config.map, **overrides))
-    if max_scans is not None and max_scans < 1:
-        raise typer.BadParameter("--max-scans must be >= 1")
+    check_max_scans(max_scans)
     prepare_out_dir(out, config)
     with tqdm(desc="map", unit="scan", disable=quiet, total=max_scans) as bar:
         summary = run_map(log, out, config, plot=plot, max_scans=max_scans, progress=bar.update)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -11,11 +10,15 @@ import typer
 from slam.cli._app import app
 from slam.cli.common import (
     ConfigOpt,
+    LogArg,
+    MaxScansOpt,
+    OutDirOpt,
     QuietOpt,
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
     build_config,
+    check_max_scans,
     prepare_out_dir,
 )
 
@@ -24,8 +27,8 @@ __all__ = ["slam_command"]
 
 @app.command("slam")
 def slam_command(
-    log: Annotated[str, typer.Argument(help="Log file, or a dataset name (intel, aces, fr079).")],
-    out: Annotated[Path, typer.Option("--out", help="Results folder (created).")],
+    log: LogArg,
+    out: OutDirOpt,
     backend: Annotated[
         str | None,
         typer.Option("--backend", help="batch (periodic Levenberg-Marquardt) or isam2."),
@@ -35,9 +38,7 @@ def slam_command(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
-    max_scans: Annotated[
-        int | None, typer.Option("--max-scans", help="Use only the first N scans.")
-    ] = None,
+    max_scans: MaxScansOpt = None,
     plot: Annotated[
         bool, typer.Option("--plot/--no-plot", help="Draw the trajectory and the line map.")
     ] = False,
@@ -56,8 +57,7 @@ def slam_command(
         if backend not in ("batch", "isam2"):
             raise typer.BadParameter("--backend must be batch or isam2")
         config = replace(config, slam=replace(config.slam, backend=backend))  # type: ignore[arg-type]
-    if max_scans is not None and max_scans < 1:
-        raise typer.BadParameter("--max-scans must be >= 1")
+    check_max_scans(max_scans)
     prepare_out_dir(out, config)
     with tqdm(
         desc=f"slam ({config.slam.backend})", unit="scan", disable=quiet, total=max_scans

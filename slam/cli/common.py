@@ -3,10 +3,15 @@
 Every command that writes results: takes ``--out``, creates it, writes ``config.toml`` (the full
 :class:`~slam.config.RunConfig` used), honours ``--config``, ``--sigma-d``, ``--sigma-phi``,
 ``--seed`` and ``--quiet``.  Values given on the command line override the file.
+
+The ``*Opt`` / ``*Arg`` aliases are typer parameter declarations used as type annotations
+(``out: OutDirOpt``); a command whose option has other help text declares its own.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
@@ -17,12 +22,25 @@ from slam.config import RunConfig
 
 __all__ = [
     "ConfigOpt",
+    "DaskOpt",
+    "LogArg",
+    "MaxScansOpt",
+    "OutDirOpt",
     "QuietOpt",
     "SeedOpt",
     "SigmaDOpt",
     "SigmaPhiOpt",
     "build_config",
+    "check_max_scans",
     "prepare_out_dir",
+    "task_progress",
+]
+
+LogArg = Annotated[str, typer.Argument(help="Log file, or a dataset name (intel, aces, fr079).")]
+OutDirOpt = Annotated[Path, typer.Option("--out", help="Results folder (created).")]
+MaxScansOpt = Annotated[int | None, typer.Option("--max-scans", help="Use only the first N scans.")]
+DaskOpt = Annotated[
+    str | None, typer.Option("--dask", help="Dask scheduler address (tcp://host:port).")
 ]
 
 ConfigOpt = Annotated[
@@ -60,3 +78,28 @@ def prepare_out_dir(out: Path, config: RunConfig) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     config.to_toml(out / "config.toml")
     return out
+
+
+def check_max_scans(max_scans: int | None) -> None:
+    """Reject ``--max-scans`` below 1 (a usage error)."""
+    if max_scans is not None and max_scans < 1:
+        raise typer.BadParameter("--max-scans must be >= 1")
+
+
+@contextmanager
+def task_progress(
+    total: int, desc: str, unit: str, quiet: bool
+) -> Iterator[Callable[[int, int], None]]:
+    """A ``progress(done, total)`` callback drawing a tqdm bar (none with ``quiet``)."""
+    if quiet:
+        yield lambda done, total: None
+        return
+    from tqdm import tqdm
+
+    with tqdm(total=total, desc=desc, unit=unit) as bar:
+
+        def progress(done: int, total: int) -> None:
+            bar.n = done
+            bar.refresh()
+
+        yield progress

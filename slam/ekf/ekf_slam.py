@@ -48,7 +48,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from linefit.line import Line, wrap_angle
-from slam.association import associate, build_problem, candidate_landmarks, overlap_mask
+from slam.association import (
+    associate,
+    build_problem,
+    candidate_landmarks,
+    individual_gate,
+    overlap_mask,
+)
 from slam.ekf.augment import augment_state
 from slam.ekf.config import EkfConfig
 from slam.ekf.conventions import cov_state_to_tangent, tangent_to_state_jacobian
@@ -66,6 +72,7 @@ from slam.errors import EstimationError, InputError
 from slam.frontend.anchored import model_error_covariance
 from slam.frontend.lineset import LineSet
 from slam.geometry import line_residual, pose_between
+from slam.lines import chi2_gate
 from slam.types import Scan
 
 if TYPE_CHECKING:
@@ -196,9 +203,7 @@ class EkfSlam:
             "jcbb_incomplete": 0,
             "updates": 0,
         }
-        # χ²₂ quantiles in closed form: −2 ln(1 − p)
-        self._new_gate = -2.0 * math.log1p(-self.config.new_landmark_probability)
-        self._merge_gate = -2.0 * math.log1p(-self.config.merge_probability)
+        self._new_gate = chi2_gate(self.config.new_landmark_probability)
 
     # ------------------------------------------------------------------ state access
     @property
@@ -466,17 +471,12 @@ class EkfSlam:
                     P_ij[:, a, b] = self.P[base_i + a, base_j + b]
             JP = Ji @ P_ij
             C = Ji @ P_ii @ Ji.swapaxes(-1, -2) + P_jj - JP - JP.swapaxes(-1, -2)
-            det = C[:, 0, 0] * C[:, 1, 1] - C[:, 0, 1] * C[:, 1, 0]
-            ok = (det > 0.0) & (C[:, 0, 0] > 0.0)
-            C_adj = np.stack([C[:, 1, 1], -C[:, 0, 1], C[:, 0, 0]], -1)  # adjugate (symmetric)
-            quad = C_adj[:, 0] * res[:, 0] ** 2 + 2 * C_adj[:, 1] * res[:, 0] * res[:, 1]
-            quad += C_adj[:, 2] * res[:, 1] ** 2
-            d2 = np.where(ok, quad / np.where(ok, det, 1.0), np.inf)
             lo, hi = self._extents.intervals(lm[:, 1])
             gap = np.maximum(lo[i], lo[j]) - np.minimum(hi[i], hi[j])
-            d2 = np.where(gap <= self.config.association.overlap_margin_m, d2, np.inf)
+            overlap = gap <= self.config.association.overlap_margin_m
+            d2 = individual_gate(res, C, self.config.merge_probability, overlap)
             best = int(np.argmin(d2))
-            if not d2[best] < self._merge_gate:
+            if not np.isfinite(d2[best]):
                 break
             a, b = int(i[best]), int(j[best])
             H_sub = np.zeros((2, 4))

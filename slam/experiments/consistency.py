@@ -74,7 +74,7 @@ class ConsistencyConfig:
     world: str = "corridor_loop"
     loops: float = 1.0
     n_runs: int = 50
-    estimators: tuple[str, ...] = ("ekf", "graph-isam2", "odometry")
+    estimators: tuple[str, ...] = ("ekf", "graph-isam2", "graph-batch", "odometry")
     probability: float = 0.95
     seed: int = 0
     linesim: LineSimConfig = field(default_factory=LineSimConfig)

@@ -15,7 +15,9 @@ directions (a corridor of parallel walls says nothing about the position along i
 Association: every (scan line, map line) pair is tested with the χ² gate on the innovation
 ``e`` with covariance ``S = H_x P̄ H_xᵀ + H_l P_m H_lᵀ + R_k`` and must also overlap along the map
 line (scan segment projected into the world at the current estimate, gap below
-``overlap_margin_m``); each scan line takes its nearest (smallest D²) map line.  After the first
+``overlap_margin_m``); each scan line takes its nearest (smallest D²) map line.  The gate, the
+overlap test and the choice are those of :mod:`slam.association` (shared with the EKF and the
+graph's loop closing).  After the first
 solve the pairs are found again at the new estimate with the posterior covariance, so wrong
 pairs from a poor initial guess drop out.
 
@@ -33,6 +35,12 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.association import (
+    individual_gate,
+    nearest_compatible,
+    segment_extents,
+    segment_gaps,
+)
 from slam.errors import ConfigError, InputError
 from slam.frontend.lineset import LineSet
 from slam.geometry import (
@@ -151,21 +159,6 @@ def _flip_rows(H: FloatArray, sign: FloatArray) -> FloatArray:
     return out
 
 
-def _pair_overlaps(
-    scan_world_ends: FloatArray, map_lines: LineSet, margin: float
-) -> NDArray[np.bool_]:
-    """(K, M) mask: scan segment and map segment overlap along the map line within ``margin``."""
-    alpha = map_lines.r_alpha[:, 1]
-    tangent = np.stack([-np.sin(alpha), np.cos(alpha)], -1)  # (M, 2)
-    # projections of scan endpoints on each map tangent: (K, M, 2)
-    s_scan = np.einsum("kei,mi->kme", scan_world_ends, tangent)
-    s_map = np.einsum("mei,mi->me", map_lines.endpoints, tangent)  # (M, 2)
-    scan_lo, scan_hi = s_scan.min(-1), s_scan.max(-1)
-    map_lo, map_hi = s_map.min(-1), s_map.max(-1)
-    gap = np.maximum(scan_lo, map_lo[None, :]) - np.minimum(scan_hi, map_hi[None, :])
-    return gap <= margin
-
-
 def _robust_weights(d2: FloatArray, kernel: str, k: float) -> FloatArray:
     if kernel == "none":
         return np.ones_like(d2)
@@ -180,17 +173,20 @@ def _associate(
     map_lines: LineSet,
     pose: FloatArray,
     pose_cov: FloatArray,
-    gate: float,
+    gate_probability: float,
     margin: float,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """Nearest compatible map line for each scan line at ``pose`` (−1: none).
 
-    Also returns how many map lines each scan line is compatible with.
+    The gate, the overlap test and the choice are :mod:`slam.association`'s
+    (:func:`~slam.association.individual_gate`, :func:`~slam.association.segment_gaps`,
+    :func:`~slam.association.nearest_compatible`); the map lines are independent of the pose,
+    so ``S`` has no cross terms.  Also returns how many map lines each scan line is
+    compatible with.
     """
     K, M = len(scan), len(map_lines)
-    matches = np.full(K, -1, dtype=np.int64)
     if K == 0 or M == 0:
-        return matches, np.zeros(K, dtype=np.int64)
+        return np.full(K, -1, dtype=np.int64), np.zeros(K, dtype=np.int64)
     z_pred, H_x, H_l = predict_line_measurement(map_lines.r_alpha, pose)  # (M,2), (M,2,3), (M,2,2)
     res, sign = line_residual(z_pred[None, :, :], scan.r_alpha[:, None, :])  # (K,M,2), (K,M)
     C_map = H_x @ pose_cov @ H_x.swapaxes(-1, -2) + H_l @ map_lines.cov @ H_l.swapaxes(-1, -2)
@@ -198,16 +194,14 @@ def _associate(
     S[..., 0, 1] *= sign
     S[..., 1, 0] *= sign
     S += scan.cov[:, None, :, :]
-    S_inv, det = _inv2(S)
-    d2 = np.einsum("kmi,kmij,kmj->km", res, S_inv, res)
-    ok = (det > 0) & (d2 < gate)
+    allowed = None
     if margin < np.inf:
-        ok &= _pair_overlaps(scan.endpoints_in(pose), map_lines, margin)
-    d2 = np.where(ok, d2, np.inf)
-    best = np.argmin(d2, axis=1)
-    has = np.isfinite(d2[np.arange(K), best])
-    matches[has] = best[has]
-    return matches, np.count_nonzero(ok, axis=1).astype(np.int64)
+        extents = segment_extents(map_lines.endpoints, map_lines.r_alpha)
+        gaps = segment_gaps(scan.endpoints_in(pose), map_lines.r_alpha, extents)
+        allowed = gaps <= margin
+    d2 = individual_gate(res, S, gate_probability, allowed)
+    matches = nearest_compatible(d2).astype(np.int64)
+    return matches, np.count_nonzero(np.isfinite(d2), axis=1).astype(np.int64)
 
 
 def register_lines(
@@ -250,7 +244,6 @@ def register_lines(
     except np.linalg.LinAlgError as exc:
         raise InputError("register_lines: pose_prior_cov is not positive definite") from exc
     info_prior = np.linalg.inv(L_prior @ L_prior.T)
-    gate = float(-2.0 * np.log1p(-cfg.gate_probability))  # χ²₂ quantile, closed form
 
     pose = pose_prior.copy()
     cov_assoc = P_prior
@@ -260,7 +253,9 @@ def register_lines(
     iterations = 0
     cost = 0.0
     for _round in range(cfg.association_rounds):
-        matches, n_compat = _associate(scan, map_lines, pose, cov_assoc, gate, cfg.overlap_margin_m)
+        matches, n_compat = _associate(
+            scan, map_lines, pose, cov_assoc, cfg.gate_probability, cfg.overlap_margin_m
+        )
         k_idx = np.flatnonzero(matches >= 0)
         if len(k_idx) < cfg.min_matches:
             break

@@ -26,6 +26,8 @@ propagation through that map.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -55,13 +57,17 @@ DEFAULT_GATE_PROBABILITY = 0.9973
 
 
 def chi2_gate(probability: float = DEFAULT_GATE_PROBABILITY, dof: int = 2) -> float:
-    """χ² threshold for a gate of the given probability (default: 3σ, 2 dof → 11.83)."""
+    """χ² threshold for a gate of the given probability (default: 3σ, 2 dof → 11.83).
+
+    The one χ² quantile of the gates: the map builder's merge test, :mod:`slam.association`
+    (EKF, graph, registration) and the EKF's own landmark tests all take it from here.
+    """
     if not (0.0 < probability < 1.0):
         raise ConfigError(f"gate probability must be in (0, 1), got {probability!r}")
     if dof < 1:
         raise ConfigError(f"dof must be >= 1, got {dof!r}")
     if dof == 2:
-        return float(-2.0 * np.log1p(-probability))  # closed form for 2 dof
+        return -2.0 * math.log1p(-float(probability))  # closed form for 2 dof
     from scipy.special import gammaincinv  # lighter than scipy.stats
 
     return float(2.0 * gammaincinv(dof / 2.0, probability))
