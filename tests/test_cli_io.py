@@ -105,3 +105,27 @@ def test_odometry_of_intel_evaluated_by_the_program(tmp_path, shared_data):
     assert "7.37298 +/- 14.45872" in done.stdout
     metrics = json.loads((tmp_path / "odo" / "metrics.json").read_text())
     assert metrics["frame"] == "base" and metrics["relations"]["n_used"] == 2984
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        "datasets",
+        "extract",
+        "map",
+        "slam",
+        "ekf",
+        "evaluate",
+        "simulate",
+        "compare",
+        "consistency",
+    ],
+)
+def test_every_command_prints_its_help(command, capsys):
+    """``--help`` renders (rich markup in a help text, e.g. an unescaped ``[...]``, broke it)."""
+    try:
+        main([command, "--help"])
+    except SystemExit as exc:  # pragma: no cover - typer may exit 0 after the help
+        assert exc.code in (0, None)
+    out = capsys.readouterr().out
+    assert "Usage" in out and "--help" in out

@@ -41,7 +41,7 @@ def compare(
         str | None,
         typer.Option(
             "--variants",
-            help="Comma-separated NAME=ESTIMATOR[/unweighted] or estimator names; "
+            help="Comma-separated NAME=ESTIMATOR\\[/unweighted] or estimator names; "
             "default: every available variant.",
         ),
     ] = None,
