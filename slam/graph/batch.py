@@ -370,7 +370,8 @@ class BatchSolver:
                 delta = system.optimize(ordering)
             except RuntimeError as exc:
                 raise EstimationError(f"linear system could not be solved: {exc}") from exc
-            predicted = float(gfg.error(delta.scale(0.0)) - gfg.error(delta))
+            # the model's predicted decrease, for the gain ratio of a damped step only
+            predicted = float(gfg.error(delta.scale(0.0)) - gfg.error(delta)) if lam > 0.0 else 0.0
             stats.time_s["solve"] += time.perf_counter() - t0
             t0 = time.perf_counter()
             d_lm, d_pose = split_delta(delta, lms.shape[0], graph.n_poses - free_from)
