@@ -945,8 +945,6 @@ class LineSlam:
             a = np.array([p[0] for p in pairs])
             b = np.array([p[1] for p in pairs])
             la = g.landmarks_r_alpha
-            Pa = self._landmark_cov(a)
-            Pb = self._landmark_cov(b)
             # drift between their last sightings
             last = self._lm_last_kf.data
             gap = np.abs(self._kf_path.data[last[a]] - self._kf_path.data[last[b]])
@@ -954,7 +952,8 @@ class LineSlam:
                 # far apart in path: loop closing's job (submap verification), not fusion's
                 near = gap <= cfg.fusion.max_path_gap_m
                 a, b, gap = a[near], b[near], gap[near]
-                Pa, Pb = Pa[near], Pb[near]
+            Pa = self._landmark_cov(a)
+            Pb = self._landmark_cov(b)
             fc = cfg.frontend
             # the drift rotates b about the robot where it last saw b
             seen_from = g.poses[last[b], :2]
