@@ -170,18 +170,24 @@ class LoopClosure:
 def _pairs_at(
     local: LoopLines, old: LoopLines, config: LoopConfig
 ) -> tuple[IntArray, IntArray, FloatArray]:
-    """Best old line for each local line (already transformed): rows and overlap lengths."""
+    """Best old line for each local line (already transformed): rows and overlap lengths.
+
+    Segment overlaps are computed only for the pairs within the angle and offset tolerances
+    (a small fraction of all pairs).
+    """
     da = np.abs(np.asarray(wrap_angle(local.alpha[:, None] - old.alpha[None, :])))
     dr = np.abs(local.r[:, None] - old.r[None, :])
     ok = (da < config.angle_tolerance_rad) & (dr < config.offset_tolerance_m)
     if not np.any(ok):
         return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0)
-    t = np.stack([-np.sin(old.alpha), np.cos(old.alpha)], -1)  # (M, 2)
-    s_loc = np.einsum("kpd,md->kmp", local.ends, t)
-    s_old = np.einsum("mpd,md->mp", old.ends, t)
-    lo = np.maximum(s_loc.min(-1), s_old.min(-1)[None, :])
-    hi = np.minimum(s_loc.max(-1), s_old.max(-1)[None, :])
-    overlap = hi - lo
+    k, m = np.nonzero(ok)
+    t = np.stack([-np.sin(old.alpha[m]), np.cos(old.alpha[m])], -1)  # (P, 2) old tangents
+    s_loc = np.einsum("npd,nd->np", local.ends[k], t)
+    s_old = np.einsum("npd,nd->np", old.ends[m], t)
+    overlap = np.full(ok.shape, -np.inf)
+    overlap[k, m] = np.minimum(s_loc.max(-1), s_old.max(-1)) - np.maximum(
+        s_loc.min(-1), s_old.min(-1)
+    )
     ok &= overlap > -config.overlap_margin_m
     cost = np.where(ok, dr / config.offset_tolerance_m + da / config.angle_tolerance_rad, np.inf)
     j = np.argmin(cost, axis=1)
@@ -301,6 +307,43 @@ def _rotation_candidates(
     return out
 
 
+def _samples_near_grid(
+    b: FloatArray,
+    n: FloatArray,
+    tdir: FloatArray,
+    s: FloatArray,
+    lo: float,
+    hi: float,
+    margin: float,
+) -> tuple[IntArray, IntArray]:
+    """Indices ``(line, sample)`` of the points ``b·n + s·t`` that may fall in ``[lo, hi)²``.
+
+    Per line, the interval of ``s`` whose point lies in the square (widened by ``margin``);
+    the caller tests the samples exactly.  Rows in line order, samples ascending (the order of
+    a full ``(P, S)`` grid).
+    """
+    s_lo = np.full(b.shape[0], -np.inf)
+    s_hi = np.full(b.shape[0], np.inf)
+    for axis in (0, 1):
+        base = b * n[:, axis]
+        step = tdir[:, axis]
+        moving = np.abs(step) > 1e-12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a1 = (lo - margin - base) / step
+            a2 = (hi + margin - base) / step
+        s_lo = np.where(moving, np.maximum(s_lo, np.minimum(a1, a2)), s_lo)
+        s_hi = np.where(moving, np.minimum(s_hi, np.maximum(a1, a2)), s_hi)
+        outside = ~moving & ((base < lo - margin) | (base > hi + margin))
+        s_hi = np.where(outside, -np.inf, s_hi)
+    q_lo = np.searchsorted(s, s_lo - margin, side="left")
+    q_hi = np.searchsorted(s, s_hi + margin, side="right")
+    counts = np.maximum(q_hi - q_lo, 0)
+    pp = np.repeat(np.arange(b.shape[0]), counts)
+    start = np.cumsum(counts) - counts
+    ss = q_lo[pp] + (np.arange(pp.shape[0]) - start[pp])
+    return pp, ss
+
+
 def _translation_peaks(
     local: LoopLines,
     old: LoopLines,
@@ -325,11 +368,14 @@ def _translation_peaks(
     cell = config.cell_m
     nc = int(np.ceil(2 * window_xy / cell))
     s = np.arange(-window_xy * np.sqrt(2.0), window_xy * np.sqrt(2.0) + cell, cell / 2.0)
-    pts = b[:, None, None] * n[:, None, :] + s[None, :, None] * tdir[:, None, :]  # (P, S, 2)
-    cx = np.floor((pts[..., 0] + window_xy) / cell).astype(np.int64)
-    cy = np.floor((pts[..., 1] + window_xy) / cell).astype(np.int64)
+    # each constraint line is sampled at b·n + s·t; only the samples near the grid are computed
+    pp, ss = _samples_near_grid(b, n, tdir, s, -window_xy, -window_xy + nc * cell, cell)
+    px = b[pp] * n[pp, 0] + s[ss] * tdir[pp, 0]
+    py = b[pp] * n[pp, 1] + s[ss] * tdir[pp, 1]
+    cx = np.floor((px + window_xy) / cell).astype(np.int64)
+    cy = np.floor((py + window_xy) / cell).astype(np.int64)
     inside = (cx >= 0) & (cx < nc) & (cy >= 0) & (cy < nc)
-    pair_of = np.broadcast_to(np.arange(ii.size)[:, None], cx.shape)[inside]
+    pair_of = pp[inside]
     if pair_of.size == 0:
         return []
     cells = (cx * nc + cy)[inside]
