@@ -177,3 +177,35 @@ def test_solve_with_held_poses_returns_to_the_full_optimum():
     np.testing.assert_allclose(g.landmarks[seen_late], best_landmarks[seen_late], atol=1e-7)
     with pytest.raises(EstimationError, match="free_from"):
         solver.solve(g, free_from=g.n_poses)
+
+
+def test_landmark_prior_factors_keep_the_normal_equations():
+    """Factors from held poses summed per landmark: the same AᵀA and Aᵀb (a rank-deficient
+    landmark keeps its factors one by one)."""
+    from slam.graph.linear import UNIT2, landmark_prior_factors
+
+    rng = np.random.default_rng(3)
+    lm = np.array([4, 4, 7, 4, 9, 7, 9])
+    A = rng.normal(size=(7, 2, 2))
+    A[lm == 9] = np.array([[1.0, 2.0], [2.0, 4.0]])  # landmark 9: rank one, twice
+    b = rng.normal(size=(7, 2))
+
+    def normal_equations(factors):
+        gfg = gtsam.GaussianFactorGraph()
+        for f in factors:
+            gfg.push_back(f)
+        ordering = gtsam.Ordering()
+        for key in keys_of("l", np.array([4, 7, 9])):
+            ordering.push_back(key)
+        A_full, b_full = gfg.jacobian(ordering)
+        return A_full.T @ A_full, A_full.T @ b_full
+
+    one_by_one = [
+        gtsam.JacobianFactor(k, a, r, UNIT2) for k, a, r in zip(keys_of("l", lm), A, b, strict=True)
+    ]
+    summed = landmark_prior_factors(lm, A, b)
+    assert len(summed) == 2 + 2  # landmarks 4 and 7 summed, 9's two factors kept
+    H1, g1 = normal_equations(one_by_one)
+    H2, g2 = normal_equations(summed)
+    np.testing.assert_allclose(H2, H1, atol=1e-12)
+    np.testing.assert_allclose(g2, g1, atol=1e-12)

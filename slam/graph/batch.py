@@ -41,6 +41,7 @@ from slam.graph.linear import (
     UNIT2,
     UNIT3,
     keys_of,
+    landmark_prior_factors,
     line_jacobian_factors,
     odometry_jacobian_factors,
     split_delta,
@@ -210,10 +211,7 @@ class BatchSolver:
                 )
                 factors = line_jacobian_factors(fp[free], lm[free], sub)
                 fixed = ~free
-                for key, A, rhs in zip(
-                    keys_of("l", lm[fixed]), lin.A_landmark[fixed], lin.b[fixed], strict=True
-                ):
-                    factors.append(gtsam.JacobianFactor(key, A, rhs, UNIT2))
+                factors += landmark_prior_factors(lm[fixed], lin.A_landmark[fixed], lin.b[fixed])
             for f in factors:
                 gfg.push_back(f)
         return gfg, lin, used
