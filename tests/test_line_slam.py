@@ -313,3 +313,14 @@ def test_rejected_loop_closure_leaves_graph_and_backend_untouched(loop_runs):
     np.testing.assert_array_equal(g.factor_landmark, state[2])
     assert len(g.merge_log) == state[3]
     assert slam.backend.solver.stats.updates == updates
+    # the same hypothesis found again shortly after, with no more pairs, is not judged again;
+    # with more pairs, another correction, or once the local submap has moved on, it is
+    lcc = slam.config.loop_closure
+    assert slam._repeated_rejection(found, pose + 1) == pose
+    nearby = LoopClosure(found.correction + [0.1, 0.0, 0.01], found.pairs, 10.0, 1.0)
+    assert slam._repeated_rejection(nearby, pose + 1) == pose
+    more = LoopClosure(found.correction, [(k, k) for k in range(5)], 12.0, 1.0)
+    assert slam._repeated_rejection(more, pose + 1) is None
+    other = LoopClosure(found.correction + [0.5, 0.0, 0.0], found.pairs, 10.0, 1.0)
+    assert slam._repeated_rejection(other, pose + 1) is None
+    assert slam._repeated_rejection(found, pose + lcc.local_keyframes) is None

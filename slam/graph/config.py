@@ -477,6 +477,12 @@ class LoopClosureConfig:
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
         (the map before the loop is the reference).  False: the whole graph.
+    skip_repeated_rejections : bool
+        A candidate that repeats a hypothesis judged and rejected during the last
+        ``local_keyframes`` keyframes (a correction within twice the angle and offset
+        tolerances of it) with no more paired lines than it had is not judged again: no new
+        evidence.  (A rejected candidate leaves the graph as it was, so the repeat would be
+        judged on the same estimate.)
     """
 
     enabled: bool = True
@@ -503,6 +509,7 @@ class LoopClosureConfig:
     judge_relative_tolerance: float = 1e-4
     judge_loop_only: bool = True
     min_consistent_fraction: float = 0.6
+    skip_repeated_rejections: bool = True
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")

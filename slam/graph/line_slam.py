@@ -242,6 +242,8 @@ class LineSlam:
         self._kf_since_fusion = 0
         self._kf_since_closure = 0
         self._closure_log: list[dict[str, Any]] = []
+        # judged and rejected loop-closure hypotheses: (keyframe, correction, paired lines)
+        self._rejected: list[tuple[int, FloatArray, int]] = []
         self._to_audit: list[Any] = []
         # pairs of landmarks whose merge an audit undid: never merged again by fusion
         self._vetoed: set[tuple[int, int]] = set()
@@ -266,6 +268,7 @@ class LineSlam:
             "loop_closure_candidates": 0,
             "loop_closures": 0,
             "loop_closures_undone": 0,
+            "loop_closures_repeated": 0,
             "keyframes_without_lines": 0,
             "keyframes_parallel_lines": 0,
             "keyframes_lost_association": 0,
@@ -1064,10 +1067,42 @@ class LineSlam:
                     }
                 )
                 return 0
+            repeated = self._repeated_rejection(found, pose)
+            if repeated is not None:
+                self._closure_log.append(
+                    {
+                        "keyframe": int(pose),
+                        "pairs": len(found.pairs),
+                        "correction": [float(v) for v in found.correction],
+                        "accepted": False,
+                        "reason": f"repeats the hypothesis rejected at keyframe {repeated}",
+                    }
+                )
+                self.counters["loop_closures_repeated"] += 1
+                return 0
             self.counters["loop_closure_candidates"] += 1
             return self._apply_closure(local, near, found, pose)
         finally:
             self.time_s["loop_closure"] += time.perf_counter() - t0
+
+    def _repeated_rejection(self, found: Any, pose: int) -> int | None:
+        """The keyframe of a recent rejected hypothesis that ``found`` repeats, if any.
+
+        See ``LoopClosureConfig.skip_repeated_rejections``.
+        """
+        lcc = self.config.loop_closure
+        self._rejected = [r for r in self._rejected if r[0] > pose - lcc.local_keyframes]
+        if not lcc.skip_repeated_rejections:
+            return None
+        corr = np.asarray(found.correction, dtype=float)
+        for kf, rejected, n_pairs in self._rejected:
+            same = (
+                np.hypot(*(corr[:2] - rejected[:2])) <= 2.0 * lcc.offset_tolerance_m
+                and abs(float(wrap_angle(corr[2] - rejected[2]))) <= 2.0 * lcc.angle_tolerance_rad
+            )
+            if same and len(found.pairs) <= n_pairs:
+                return kf
+        return None
 
     def _loop_lines(self, lms: IntArray) -> Any:
         from slam.frontend.loop_closure import LoopLines
@@ -1152,6 +1187,9 @@ class LineSlam:
         entry["accepted"] = False
         self._closure_log.append(entry)
         self.counters["loop_closures_undone"] += 1
+        self._rejected.append(
+            (int(pose), np.asarray(found.correction, dtype=float), len(found.pairs))
+        )
         return 0
 
     def _converge(self, reset: bool) -> None:
