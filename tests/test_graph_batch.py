@@ -209,3 +209,67 @@ def test_landmark_prior_factors_keep_the_normal_equations():
     H2, g2 = normal_equations(summed)
     np.testing.assert_allclose(H2, H1, atol=1e-12)
     np.testing.assert_allclose(g2, g1, atol=1e-12)
+
+
+def test_packed_factors_hold_the_same_rows():
+    """Line factors paired per pose and odometry paired along the chain: the same whitened
+    system ``[A | b]`` row for row as one factor each (breaks in the chain, a pose seeing one
+    landmark twice and odd counts included)."""
+    from slam.graph.factors import LineLinearization
+    from slam.graph.linear import (
+        UNIT2,
+        UNIT3,
+        line_factor_groups,
+        line_jacobian_factors,
+        odometry_jacobian_factors,
+    )
+
+    rng = np.random.default_rng(4)
+    pose = np.array([0, 0, 0, 1, 2, 2, 2, 2, 3, 3])
+    lm = np.array([0, 1, 2, 0, 1, 1, 2, 3, 0, 3])  # pose 2 sees landmark 1 twice in a row
+    n = pose.size
+    lin = LineLinearization(
+        rng.normal(size=(n, 2, 3)),
+        rng.normal(size=(n, 2, 2)),
+        rng.normal(size=(n, 2)),
+        np.zeros((n, 2)),
+        np.ones(n),
+    )
+    first = np.array([0, 1, 2, 4, 5, 6, 8])
+    second = np.array([1, 2, 3, 5, 6, 7, 9])
+    A1, A2, b = rng.normal(size=(7, 3, 3)), rng.normal(size=(7, 3, 3)), rng.normal(size=(7, 3))
+
+    def system(factors, keys):
+        gfg = gtsam.GaussianFactorGraph()
+        for f in factors:
+            gfg.push_back(f)
+        ordering = gtsam.Ordering()
+        for key in keys:
+            ordering.push_back(key)
+        return gfg.jacobian(ordering)
+
+    keys = keys_of("l", np.arange(4)) + keys_of("x", np.arange(4))
+    single = [
+        gtsam.JacobianFactor(kx, ax, kl, al, r, UNIT2)
+        for kx, ax, kl, al, r in zip(
+            keys_of("x", pose), lin.A_pose, keys_of("l", lm), lin.A_landmark, lin.b, strict=True
+        )
+    ]
+    packed = line_jacobian_factors(pose, lm, lin)
+    starts, paired = line_factor_groups(pose, lm)
+    # pose 2's repeated landmark breaks its first pair; pairs start at even places in a run
+    assert starts.tolist() == [0, 2, 3, 4, 5, 6, 8] and len(packed) == 7
+    assert paired.tolist() == [True, False, False, False, False, True, True]
+    for a, c in zip(system(single, keys), system(packed, keys), strict=True):
+        np.testing.assert_array_equal(c, a)
+    single = [
+        gtsam.JacobianFactor(ka, aa, kb, ab, r, UNIT3)
+        for ka, aa, kb, ab, r in zip(
+            keys_of("x", first), A1, keys_of("x", second), A2, b, strict=True
+        )
+    ]
+    packed = odometry_jacobian_factors(first, second, A1, A2, b)
+    assert len(packed) == 5  # 0→1→2 | 2→3 | 4→5→6 | 6→7 | 8→9
+    keys = keys_of("x", np.arange(10))
+    for a, c in zip(system(single, keys), system(packed, keys), strict=True):
+        np.testing.assert_array_equal(c, a)

@@ -43,7 +43,12 @@ from linefit.line import wrap_angle
 from slam.errors import EstimationError
 from slam.graph.config import Isam2Config, SolverConfig
 from slam.graph.factors import linearize_line_factors
-from slam.graph.linear import keys_of, line_jacobian_factors, native_odometry_factors
+from slam.graph.linear import (
+    keys_of,
+    line_factor_groups,
+    line_jacobian_factors,
+    native_odometry_factors,
+)
 from slam.graph.problem import GrowableArray, LineGraph
 
 __all__ = ["Isam2Solver", "Isam2Stats"]
@@ -173,24 +178,25 @@ class Isam2Solver:
             self.solver.robust_k,
         )
         jfs = line_jacobian_factors(fp, lm, lin)
+        first, _ = line_factor_groups(fp, lm)  # the line factors each of jfs starts with
+        bounds = np.searchsorted(first, np.cumsum([0] + [g.shape[0] for g in groups]))
         self._lin_pose.data[fs] = theta_p
         self._lin_lm.data[fs] = theta_l
+        # one Values with the linearisation point of every variable of these blocks (a
+        # LinearContainerFactor copies only its own keys from it)
+        values = gtsam.Values()
         key_p = keys_of("x", np.asarray(poses))
-        key_l = keys_of("l", lm)
-        blocks = []
-        start = 0
-        for pose, key, group in zip(poses, key_p, groups, strict=True):
-            stop = start + group.shape[0]
-            gfg = gtsam.GaussianFactorGraph()
-            values = gtsam.Values()
-            tp = self._theta_poses.data[pose]
+        for key, tp in zip(key_p, self._theta_poses.data[poses], strict=True):
             values.insert(key, gtsam.Pose2(tp[0], tp[1], tp[2]))
-            for f in range(start, stop):
-                gfg.push_back(jfs[f])
-                if not values.exists(key_l[f]):
-                    values.insert(key_l[f], gtsam.Point2(theta_l[f, 0], theta_l[f, 1]))
+        lms = np.unique(lm)
+        for key, tl in zip(keys_of("l", lms), self._theta_lms.data[lms], strict=True):
+            values.insert(key, gtsam.Point2(tl[0], tl[1]))
+        blocks = []
+        for b in range(len(poses)):
+            gfg = gtsam.GaussianFactorGraph()
+            for jf in jfs[bounds[b] : bounds[b + 1]]:
+                gfg.push_back(jf)
             blocks.append(gtsam.LinearContainerFactor(gtsam.JacobianFactor(gfg), values))
-            start = stop
         self.stats.blocks_built += len(blocks)
         return blocks
 
