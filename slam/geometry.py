@@ -59,6 +59,15 @@ def _as3(a: FloatArray | list[float] | tuple[float, ...]) -> FloatArray:
 # ---------------------------------------------------------------------------------------------
 # SE(2)
 # ---------------------------------------------------------------------------------------------
+def _last_axis(*columns: FloatArray) -> FloatArray:
+    """``np.stack(columns, axis=-1)`` for same-shape arrays, without its overhead (hot path)."""
+    first = np.asarray(columns[0])
+    out = np.empty((*first.shape, len(columns)))
+    for i, c in enumerate(columns):
+        out[..., i] = c
+    return out
+
+
 def pose_compose(a: FloatArray, b: FloatArray) -> FloatArray:
     """``a · b`` for poses ``(..., 3)``: ``pose_x_y · pose_y_z = pose_x_z``."""
     a = _as3(a)
@@ -67,7 +76,7 @@ def pose_compose(a: FloatArray, b: FloatArray) -> FloatArray:
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
     t = np.asarray(wrap_angle(a[..., 2] + b[..., 2]))
-    return np.stack([x, y, t], axis=-1)
+    return _last_axis(x, y, t)
 
 
 def pose_inverse(a: FloatArray) -> FloatArray:
@@ -76,7 +85,7 @@ def pose_inverse(a: FloatArray) -> FloatArray:
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]
-    return np.stack([x, y, np.asarray(wrap_angle(-a[..., 2]))], axis=-1)
+    return _last_axis(x, y, np.asarray(wrap_angle(-a[..., 2])))
 
 
 def pose_between(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -95,7 +104,7 @@ def pose_exp(xi: FloatArray) -> FloatArray:
     b = np.where(small, w / 2.0, (1.0 - cos_w) / w_safe)
     x = a * xi[..., 0] - b * xi[..., 1]
     y = b * xi[..., 0] + a * xi[..., 1]
-    return np.stack([x, y, np.asarray(wrap_angle(w))], axis=-1)
+    return _last_axis(x, y, np.asarray(wrap_angle(w)))
 
 
 def pose_log(pose: FloatArray) -> FloatArray:
@@ -109,7 +118,7 @@ def pose_log(pose: FloatArray) -> FloatArray:
     hcot = np.where(small, 1.0 - w**2 / 12.0, half / np.where(small, 1.0, tan_half))
     vx = hcot * pose[..., 0] + half * pose[..., 1]
     vy = -half * pose[..., 0] + hcot * pose[..., 1]
-    return np.stack([vx, vy, w], axis=-1)
+    return _last_axis(vx, vy, w)
 
 
 def pose_retract(pose: FloatArray, xi: FloatArray) -> FloatArray:
@@ -289,12 +298,15 @@ def predict_line_measurement(
     ca_w, sa_w = np.cos(a_w), np.sin(a_w)
     a_s = a_w - th
     ca_s, sa_s = np.cos(a_s), np.sin(a_s)
-    z = np.stack([r_w - x * ca_w - y * sa_w, np.asarray(wrap_angle(a_s))], -1)
-    zeros, ones = np.zeros_like(x), np.ones_like(x)
-    H_pose = np.stack(
-        [np.stack([-ca_s, -sa_s, zeros], -1), np.stack([zeros, zeros, -ones], -1)], -2
-    )
-    H_lm = np.stack([np.stack([ones, x * sa_w - y * ca_w], -1), np.stack([zeros, ones], -1)], -2)
+    z = _last_axis(r_w - x * ca_w - y * sa_w, np.asarray(wrap_angle(a_s)))
+    H_pose = np.zeros((*shape, 2, 3))
+    H_pose[..., 0, 0] = -ca_s
+    H_pose[..., 0, 1] = -sa_s
+    H_pose[..., 1, 2] = -1.0
+    H_lm = np.zeros((*shape, 2, 2))
+    H_lm[..., 0, 0] = 1.0
+    H_lm[..., 0, 1] = x * sa_w - y * ca_w
+    H_lm[..., 1, 1] = 1.0
     return z, H_pose, H_lm
 
 
@@ -318,4 +330,4 @@ def line_residual(z_pred: FloatArray, z_measured: FloatArray) -> tuple[FloatArra
     flip = np.abs(d_alpha) > np.pi / 2.0
     sign = np.where(flip, -1.0, 1.0)
     d_alpha = np.asarray(wrap_angle(np.where(flip, d_alpha + np.pi, d_alpha)))
-    return np.stack([sign * zp[..., 0] - zm[..., 0], d_alpha], -1), sign
+    return _last_axis(sign * zp[..., 0] - zm[..., 0], d_alpha), sign
