@@ -463,7 +463,12 @@ class LoopClosureConfig:
         factors on the merged landmarks (2 dof each).
     max_updates : int
         Most iSAM2 updates (``Isam2Solver.optimize``) run to settle the back-end after an
-        accepted closure (it restarts from the judged estimate).
+        accepted closure.
+    large_correction_m, large_correction_rad : float
+        A correction larger than either is large: it is spread along the loop before the
+        judgement (a starting point near the closed loop), and once accepted the back-end
+        restarts from the judged estimate.  A smaller one (the loop is already nearly closed)
+        reaches the back-end incrementally, like a fusion merge.
     judge_iterations : int
         Most linearisations of the batch solve that judges a candidate closure (outside the
         back-end; a rejected candidate never reaches it).
@@ -510,6 +515,8 @@ class LoopClosureConfig:
     judge_loop_only: bool = True
     min_consistent_fraction: float = 0.6
     skip_repeated_rejections: bool = True
+    large_correction_m: float = 0.1
+    large_correction_rad: float = 0.01
 
     def __post_init__(self) -> None:
         _require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
@@ -535,6 +542,8 @@ class LoopClosureConfig:
             "min_direction_angle_rad",
             "max_chi2_per_factor",
             "judge_relative_tolerance",
+            "large_correction_m",
+            "large_correction_rad",
         ):
             _pos(name, getattr(self, name))
         _require(0.0 < self.max_ambiguity <= 1.0, "max_ambiguity must be in (0, 1]")

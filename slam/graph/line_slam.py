@@ -1120,7 +1120,8 @@ class LineSlam:
         poses since ``local_keyframes`` before the old landmarks were last seen, the earlier
         ones held; the whole graph with ``judge_loop_only = False``) without touching
         the back-end: a rejected closure is rolled back (merges and estimate) and the back-end
-        never sees it; an accepted one restarts the back-end from the judged estimate.
+        never sees it; an accepted one with a large correction restarts the back-end from the
+        judged estimate, a small one reaches it incrementally (``large_correction_*``).
         """
         g = self.graph
         lcc = self.config.loop_closure
@@ -1132,7 +1133,10 @@ class LineSlam:
             a = self._loop_lines(old[[found.pairs[0][1]]]).alpha[0]
             n = np.array([np.cos(a), np.sin(a)])
             corr[:2] = (corr[:2] @ n) * n
-        big = bool(np.hypot(corr[0], corr[1]) > 0.1 or abs(corr[2]) > 0.01)
+        big = bool(
+            np.hypot(corr[0], corr[1]) > lcc.large_correction_m
+            or abs(corr[2]) > lcc.large_correction_rad
+        )
         if big:
             self._spread_correction(corr, g.poses[pose, :2].copy(), int(np.median(old_last)), pose)
         n_log = len(g.merge_log)
@@ -1172,8 +1176,9 @@ class LineSlam:
         ):
             # explained (up to a few wrong pairs, which are undone)
             self._audit(records)
-            self._converge(reset=True)
+            self._converge(reset=big)
             entry["accepted"] = True
+            entry["backend_restarted"] = big
             self._closure_log.append(entry)
             self.counters["loop_closures"] += 1
             return 1
