@@ -8,6 +8,7 @@ import pytest
 from slam.frontend.loop_closure import (
     LoopLines,
     _samples_near_grid,
+    _top_cells,
     search_loop_closure,
 )
 from slam.graph.config import LoopClosureConfig
@@ -90,3 +91,13 @@ def test_grid_samples_cover_every_sample_inside_the_square():
     # in the order of the full grid: line by line, samples ascending
     order = pp * s.shape[0] + ss
     assert np.all(np.diff(order) > 0)
+
+
+def test_top_cells_are_the_largest_in_order_with_ties_by_index():
+    rng = np.random.default_rng(2)
+    values = np.round(rng.uniform(-1.0, 3.0, 5000), 1)  # many ties
+    got = _top_cells(values, 40)
+    ref = sorted(np.flatnonzero(values > 0), key=lambda i: (-values[i], i))[:40]
+    assert got.tolist() == ref
+    assert _top_cells(np.array([0.0, -1.0]), 5).size == 0
+    assert _top_cells(np.array([0.5, 2.0, 0.5]), 5).tolist() == [1, 0, 2]

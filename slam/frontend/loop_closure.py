@@ -344,6 +344,20 @@ def _samples_near_grid(
     return pp, ss
 
 
+def _top_cells(values: FloatArray, k: int) -> IntArray:
+    """Indices of the ``k`` largest positive ``values``, largest first, ties by index.
+
+    (A full ``argsort`` costs ``O(n log n)`` and orders ties however the sort happens to;
+    this is ``O(n)`` and the same on every machine.)
+    """
+    positive = np.flatnonzero(values > 0.0)
+    if positive.size > k:
+        cut = np.partition(values[positive], positive.size - k)[positive.size - k]
+        positive = positive[values[positive] >= cut]  # the k largest and any ties with them
+    order = np.lexsort((positive, -values[positive]))
+    return positive[order][:k]
+
+
 def _translation_peaks(
     local: LoopLines,
     old: LoopLines,
@@ -390,12 +404,15 @@ def _translation_peaks(
     ).reshape(nc, nc)
     # smooth 3×3 (a crossing may straddle cells)
     pad = np.pad(votes, 1)
-    sm = np.sum([pad[dx : dx + nc, dy : dy + nc] for dx in range(3) for dy in range(3)], axis=0)
+    sm: FloatArray = pad[0:nc, 0:nc].astype(float)
+    for dx in range(3):
+        for dy in range(3):
+            if dx or dy:
+                sm += pad[dx : dx + nc, dy : dy + nc]
     peaks: list[FloatArray] = []
-    flat = np.argsort(sm.ravel())[::-1]
     min_sep = max(3, round(0.5 / cell))
     taken: list[tuple[int, int]] = []
-    for f in flat[: 50 * n_peaks]:
+    for f in _top_cells(sm.ravel(), 50 * n_peaks):
         x, y = divmod(int(f), nc)
         if sm[x, y] <= 0:
             break
