@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -102,36 +103,50 @@ class BatchSolver:
         return np.flatnonzero(graph.landmark_alive & (counts > 0))
 
     # -- cost and linearisation ----------------------------------------------------------------
-    def cost(self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray) -> float:
-        """Total cost at the given full-size estimate arrays (poses, anchored landmarks)."""
+    def cost(
+        self,
+        graph: LineGraph,
+        poses: FloatArray,
+        landmarks: FloatArray,
+        line_factors: IntArray | None = None,
+        odometry: IntArray | None = None,
+        with_prior: bool = True,
+    ) -> float:
+        """Total cost at the given full-size estimate arrays (poses, anchored landmarks).
+
+        ``line_factors`` / ``odometry`` (indices) and ``with_prior`` restrict it to some factors
+        (default: all).
+        """
         total = 0.0
-        if graph.n_line_factors:
-            lm = graph.factor_landmark
+        f = np.arange(graph.n_line_factors) if line_factors is None else line_factors
+        if f.size:
+            lm = graph.factor_landmark[f]
             total += float(
                 np.sum(
                     line_factor_costs(
-                        poses[graph.factor_pose],
+                        poses[graph.factor_pose[f]],
                         landmarks[lm],
                         graph.anchors[lm],
-                        graph.factor_z,
-                        graph.factor_sqrt_info,
+                        graph.factor_z[f],
+                        graph.factor_sqrt_info[f],
                         self.config.robust_kernel,
                         self.config.robust_k,
                     )
                 )
             )
-        if graph.n_odometry:
+        e = np.arange(graph.n_odometry) if odometry is None else odometry
+        if e.size:
             total += float(
                 np.sum(
                     between_costs(
-                        poses[graph.odometry_first],
-                        poses[graph.odometry_second],
-                        graph.odometry_measured,
-                        graph.odometry_sqrt_info,
+                        poses[graph.odometry_first[e]],
+                        poses[graph.odometry_second[e]],
+                        graph.odometry_measured[e],
+                        graph.odometry_sqrt_info[e],
                     )
                 )
             )
-        if graph.prior_pose is not None and graph.prior_sqrt_info is not None:
+        if with_prior and graph.prior_pose is not None and graph.prior_sqrt_info is not None:
             total += linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)[2]
         return total
 
@@ -336,6 +351,16 @@ class BatchSolver:
         cost = self.cost(graph, poses, landmarks)
         if not np.isfinite(cost):
             raise EstimationError("the initial estimate has a non-finite cost")
+        # with held poses only the factors on solved variables change: cost = theirs + constant
+        varying: dict[str, Any] = {}
+        constant = 0.0
+        if solved is not None:
+            varying = {
+                "line_factors": np.flatnonzero(solved[graph.factor_landmark]),
+                "odometry": np.flatnonzero(graph.odometry_second >= free_from),
+                "with_prior": False,
+            }
+            constant = cost - self.cost(graph, poses, landmarks, **varying)
         stats.initial_cost = cost
         lam, nu = 0.0, 2.0
         scale: tuple[FloatArray, FloatArray] | None = None
@@ -380,7 +405,7 @@ class BatchSolver:
             new_landmarks[lms] = retract_landmarks(landmarks[lms], d_lm)
             stats.time_s["retract"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            new_cost = self.cost(graph, new_poses, new_landmarks)
+            new_cost = self.cost(graph, new_poses, new_landmarks, **varying) + constant
             stats.time_s["cost"] += time.perf_counter() - t0
             accepted = bool(np.isfinite(new_cost)) and new_cost <= cost * (1.0 + 1e-12) + 1e-15
             stats.history.append((new_cost, lam, accepted))
