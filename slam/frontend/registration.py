@@ -148,8 +148,12 @@ def _inv2(S: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Inverse and determinant of stacked 2×2 matrices."""
     a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
     det = a * d - b * c
-    inv = np.stack([np.stack([d, -b], -1), np.stack([-c, a], -1)], -2) / det[..., None, None]
-    return inv, det
+    adj = np.empty(S.shape)
+    adj[..., 0, 0] = d
+    adj[..., 0, 1] = -b
+    adj[..., 1, 0] = -c
+    adj[..., 1, 1] = a
+    return adj / det[..., None, None], det
 
 
 def _flip_rows(H: FloatArray, sign: FloatArray) -> FloatArray:
