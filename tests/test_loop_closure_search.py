@@ -101,3 +101,14 @@ def test_top_cells_are_the_largest_in_order_with_ties_by_index():
     assert got.tolist() == ref
     assert _top_cells(np.array([0.0, -1.0]), 5).size == 0
     assert _top_cells(np.array([0.5, 2.0, 0.5]), 5).tolist() == [1, 0, 2]
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"large_correction_m": -0.1}, {"large_correction_rad": float("nan")}, {"local_keyframes": 0}],
+)
+def test_invalid_loop_closure_settings_are_rejected(kwargs):
+    from linefit import ConfigError
+
+    with pytest.raises(ConfigError, match=next(iter(kwargs))):
+        LoopClosureConfig(**kwargs)
