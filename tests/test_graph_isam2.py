@@ -98,6 +98,19 @@ def test_isam2_reaches_the_batch_solution(incremental):
     assert cost_isam == pytest.approx(cost_batch, rel=1e-3)
 
 
+def test_whole_estimate_read_back_equals_calculate_estimate(incremental):
+    """``read_all`` (iSAM2's δ retracted onto the mirrored θ in numpy) is iSAM2's estimate."""
+    g, solver, _ = incremental
+    solver.read_all(g)
+    est = solver.isam.calculateEstimate()
+    poses = np.asarray(gtsam.utilities.extractPose2(est)).reshape(-1, 3)
+    lms = np.asarray(gtsam.utilities.extractPoint2(est)).reshape(-1, 2)
+    np.testing.assert_allclose(g.poses[:, :2], poses[:, :2], atol=1e-9)
+    np.testing.assert_allclose(wrap_angle(g.poses[:, 2] - poses[:, 2]), 0.0, atol=1e-12)
+    np.testing.assert_allclose(g.landmarks[:, 0], lms[:, 0], atol=1e-12)
+    np.testing.assert_allclose(wrap_angle(g.landmarks[:, 1] - lms[:, 1]), 0.0, atol=1e-12)
+
+
 def test_isam2_marginals_match_batch(incremental):
     g, solver, batch = incremental
     m = BatchSolver(GAUSSIAN).marginals(batch)
