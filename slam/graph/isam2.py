@@ -242,14 +242,17 @@ class Isam2Solver:
         if new_f.size:
             self._lin_pose.append(np.zeros((new_f.size, 3)))
             self._lin_lm.append(np.zeros((new_f.size, 2)))
-            for f, p in zip(new_f, graph.factor_pose[new_f], strict=True):
-                self._factors_of_pose.setdefault(int(p), []).append(int(f))
-            self._pending.update(int(p) for p in np.unique(graph.factor_pose[new_f]))
+            fp_new = graph.factor_pose[new_f]
+            order = np.argsort(fp_new, kind="stable")
+            owners, starts = np.unique(fp_new[order], return_index=True)
+            for p, group in zip(owners.tolist(), np.split(new_f[order], starts[1:]), strict=True):
+                self._factors_of_pose.setdefault(p, []).extend(group.tolist())
+            self._pending.update(owners.tolist())
         self._n_factors = graph.n_line_factors
         # landmark fusion since the last update
         weak = gtsam.noiseModel.Isotropic.Sigma(2, 1.0)
         for rec in graph.merge_log[self._n_merges :]:
-            groups = {int(p) for p in np.unique(graph.factor_pose[rec.factors])}
+            groups = set(np.unique(graph.factor_pose[rec.factors]).tolist())
             self.stats.blocks_merged += len(groups)
             self._pending.update(groups)
             if rec.undo or rec.drop in self._weak_prior:
@@ -274,9 +277,10 @@ class Isam2Solver:
         n_before_blocks = nfg.size()
         for block in self._build_blocks(graph, rebuild):
             nfg.add(block)
-        for p in rebuild:
-            touched_poses.add(p)
-            touched_lms.update(int(j) for j in graph.factor_landmark[self._factors_of_pose[p]])
+        if rebuild:
+            touched_poses.update(rebuild)
+            fs = np.concatenate([self._factors_of_pose[p] for p in rebuild]).astype(np.intp)
+            touched_lms.update(np.unique(graph.factor_landmark[fs]).tolist())
         self.stats.time_s["build"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         try:
