@@ -251,10 +251,15 @@ class Isam2Solver:
         self._n_factors = graph.n_line_factors
         # landmark fusion since the last update
         weak = gtsam.noiseModel.Isotropic.Sigma(2, 1.0)
-        for rec in graph.merge_log[self._n_merges :]:
-            groups = set(np.unique(graph.factor_pose[rec.factors]).tolist())
-            self.stats.blocks_merged += len(groups)
-            self._pending.update(groups)
+        records = graph.merge_log[self._n_merges :]
+        if records:
+            # every keyframe block with a rewired factor is rebuilt (one vectorised pass)
+            rewired = np.concatenate([np.asarray(r.factors, dtype=np.intp) for r in records])
+            owner = np.repeat(np.arange(len(records)), [len(r.factors) for r in records])
+            poses = graph.factor_pose[rewired]
+            self.stats.blocks_merged += int(np.unique(owner * graph.n_poses + poses).size)
+            self._pending.update(np.unique(poses).tolist())
+        for rec in records:
             if rec.undo or rec.drop in self._weak_prior:
                 continue  # a revived landmark keeps its weak prior; only its blocks change
             self._weak_prior.add(rec.drop)
