@@ -164,3 +164,35 @@ def test_measurement_model_jacobians_and_residual(rng):
     res2, sign2 = line_residual(z, z + [0.01, 0.02])
     np.testing.assert_allclose(res2, np.tile([-0.01, -0.02], (100, 1)), atol=1e-9)
     assert np.all(sign2 == 1.0)
+
+
+def test_single_pose_fast_path_equals_the_batch_path():
+    """One pose goes through plain floats; the result equals the vectorised path's (rounding)."""
+    from slam.geometry import (
+        pose_between,
+        pose_compose,
+        pose_exp,
+        pose_inverse,
+        pose_log,
+        pose_retract,
+    )
+
+    rng = np.random.default_rng(12)
+    for k in range(500):
+        a = rng.normal(size=3) * [5.0, 5.0, 3.0]
+        b = rng.normal(size=3) * [5.0, 5.0, 3.0]
+        if k % 3 == 0:  # the small-angle branches of Exp / Log
+            a[2], b[2] = rng.normal() * 1e-10, rng.normal() * 1e-12
+        for f, args in [
+            (pose_compose, (a, b)),
+            (pose_between, (a, b)),
+            (pose_retract, (a, b)),
+            (pose_inverse, (a,)),
+            (pose_exp, (a,)),
+            (pose_log, (a,)),
+        ]:
+            one = f(*args)
+            many = f(*[x[None, :] for x in args])[0]
+            assert one.shape == (3,)
+            np.testing.assert_allclose(one[:2], many[:2], rtol=0, atol=1e-12)
+            assert abs(np.angle(np.exp(1j * (one[2] - many[2])))) < 1e-14
