@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from functools import partial
 
 import gtsam
@@ -28,11 +29,24 @@ import numpy as np
 
 from slam.geometry import line_to_parent, pose_compose
 from slam.graph import BatchSolver, Isam2Solver, LineGraph, line_custom_factor, synthetic_problem
-from slam.graph.factors import linearize_line_factors
+from slam.graph.factors import LineLinearization, linearize_line_factors
 from slam.graph.linear import keys_of, line_jacobian_factors, native_odometry_factors
 
 
-def best_of(fn, repeat: int) -> float:
+def one_factor_each(
+    pose: np.ndarray, lm: np.ndarray, lin: LineLinearization
+) -> list[gtsam.JacobianFactor]:
+    """The unpacked construction: one 2-key ``JacobianFactor`` per line factor."""
+    unit2 = gtsam.noiseModel.Unit.Create(2)
+    return [
+        gtsam.JacobianFactor(kx, ax, kl, al, b, unit2)
+        for kx, ax, kl, al, b in zip(
+            keys_of("x", pose), lin.A_pose, keys_of("l", lm), lin.A_landmark, lin.b, strict=True
+        )
+    ]
+
+
+def best_of(fn: Callable[[], object], repeat: int) -> float:
     times = []
     for _ in range(repeat):
         t0 = time.perf_counter()
@@ -109,7 +123,7 @@ def main() -> None:
         F = g.n_line_factors
         lm = g.factor_landmark
 
-        def fast_numpy(g: LineGraph = g, lm: np.ndarray = lm) -> object:
+        def fast_numpy(g: LineGraph = g, lm: np.ndarray = lm) -> LineLinearization:
             return linearize_line_factors(
                 g.poses[g.factor_pose],
                 g.landmarks[lm],
@@ -121,6 +135,7 @@ def main() -> None:
         lin = fast_numpy()
         t_np = best_of(fast_numpy, 5) / F
         t_jf = best_of(partial(line_jacobian_factors, g.factor_pose, lm, lin), 3) / F
+        t_jf1 = best_of(partial(one_factor_each, g.factor_pose, lm, lin), 3) / F
         t_lin = best_of(partial(solver.linearize, g), 3)
         gfg = solver.linearize(g)
         ordering = gtsam.Ordering.ColamdGaussianFactorGraph(gfg)
@@ -137,7 +152,9 @@ def main() -> None:
         t_isam = (float("nan"),) * 3
         if not args.no_isam2:
             t_isam = isam2_feed(synthetic_problem(n, lines_per_pose=5, seed=1).graph)
-        rows.append((n, F, t_np, t_jf, t_lin / n_factors, t_elim, t_cf_lin, t_cf_lm, *t_isam))
+        rows.append(
+            (n, F, t_np, t_jf, t_lin / n_factors, t_elim, t_cf_lin, t_cf_lm, *t_isam, t_jf1)
+        )
         print(f"done {n} poses", flush=True)
 
     print()
@@ -149,7 +166,7 @@ def main() -> None:
         f"{'':>6} {'':>8} | {'µs/f':>7} {'µs/f':>7} {'µs/f':>7} {'ms':>7} |"
         f" {'µs/f':>7} {'µs/f':>8} | {'ms':>9} {'ms':>7} {'ms':>7}"
     )
-    for n, F, t_np, t_jf, t_it, t_el, t_cfl, t_cflm, t_up, t_b, t_u in rows:
+    for n, F, t_np, t_jf, t_it, t_el, t_cfl, t_cflm, t_up, t_b, t_u, _ in rows:
         print(
             f"{n:>6} {F:>8} | {1e6 * t_np:7.2f} {1e6 * t_jf:7.2f} {1e6 * t_it:7.2f}"
             f" {1e3 * t_el:7.1f} | {1e6 * t_cfl:7.1f} {1e6 * t_cflm:8.1f} |"
@@ -164,6 +181,11 @@ def main() -> None:
             f"{fast_b / fast_a:.2f}x (target <= 1.5)"
         )
         print(f"whole batch iteration per factor, {b[0]} vs {a[0]} poses: {b[4] / a[4]:.2f}x")
+        for r in rows:
+            print(
+                f"JacobianFactors per line factor at {r[0]} poses: packed {1e6 * r[3]:.2f} µs,"
+                f" one each {1e6 * r[11]:.2f} µs ({r[11] / r[3]:.2f}x)"
+            )
         print(f"CustomFactor linearize per factor, {b[0]} vs {a[0]} poses: {b[6] / a[6]:.2f}x")
         print(
             f"CustomFactor linearize / fast path per factor at {b[0]} poses: {b[6] / fast_b:.1f}x"
