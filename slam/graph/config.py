@@ -468,7 +468,7 @@ class LoopClosureConfig:
         A correction larger than either is large: it is spread along the loop before the
         judgement (a starting point near the closed loop), and once accepted the back-end
         restarts from the judged estimate.  A smaller one (the loop is already nearly closed)
-        reaches the back-end incrementally, like a fusion merge.
+        reaches the back-end incrementally, like a fusion merge.  0: every closure is large.
     judge_iterations : int
         Most linearisations of the batch solve that judges a candidate closure (outside the
         back-end; a rejected candidate never reaches it).
@@ -531,6 +531,8 @@ class LoopClosureConfig:
             "min_window_theta_rad",
             "overlap_margin_m",
             "min_matched_length_m",
+            "large_correction_m",
+            "large_correction_rad",
         ):
             _nonneg(name, getattr(self, name))
         for name in (
@@ -542,8 +544,6 @@ class LoopClosureConfig:
             "min_direction_angle_rad",
             "max_chi2_per_factor",
             "judge_relative_tolerance",
-            "large_correction_m",
-            "large_correction_rad",
         ):
             _pos(name, getattr(self, name))
         _require(0.0 < self.max_ambiguity <= 1.0, "max_ambiguity must be in (0, 1]")
