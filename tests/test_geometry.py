@@ -168,15 +168,6 @@ def test_measurement_model_jacobians_and_residual(rng):
 
 def test_single_pose_fast_path_equals_the_batch_path():
     """One pose goes through plain floats; the result equals the vectorised path's (rounding)."""
-    from slam.geometry import (
-        pose_between,
-        pose_compose,
-        pose_exp,
-        pose_inverse,
-        pose_log,
-        pose_retract,
-    )
-
     rng = np.random.default_rng(12)
     for k in range(500):
         a = rng.normal(size=3) * [5.0, 5.0, 3.0]

@@ -257,9 +257,9 @@ def test_packed_factors_hold_the_same_rows():
     ]
     packed = line_jacobian_factors(pose, lm, lin)
     starts, paired = line_factor_groups(pose, lm)
-    # pose 2's repeated landmark breaks its first pair; pairs start at even places in a run
-    assert starts.tolist() == [0, 2, 3, 4, 5, 6, 8] and len(packed) == 7
-    assert paired.tolist() == [True, False, False, False, False, True, True]
+    # pose 2 sees landmark 1 twice in a row: 4 stays alone, 5 pairs with 6, 7 alone
+    assert starts.tolist() == [0, 2, 3, 4, 5, 7, 8] and len(packed) == 7
+    assert paired.tolist() == [True, False, False, False, True, False, True]
     for a, c in zip(system(single, keys), system(packed, keys), strict=True):
         np.testing.assert_array_equal(c, a)
     single = [

@@ -11,6 +11,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import Any
+
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
@@ -60,63 +63,78 @@ def line_jacobian_factors(
     the order of their rows; :func:`line_factor_groups` says which line factors each holds.
     """
     first, paired = line_factor_groups(pose_index, landmark_index)
-    out: list[gtsam.JacobianFactor] = [None] * first.shape[0]  # type: ignore[list-item]
     Ap, Al, b = lin.A_pose, lin.A_landmark, lin.b
-    # pairs: rows of factor f then f + 1, both landmarks
-    f = first[paired]
-    A_x = np.concatenate([Ap[f], Ap[f + 1]], axis=1)
+    f = first[paired]  # rows of factor f then f + 1, both landmarks
     A_1 = np.zeros((f.shape[0], 4, 2))
     A_1[:, :2] = Al[f]
     A_2 = np.zeros((f.shape[0], 4, 2))
     A_2[:, 2:] = Al[f + 1]
-    rhs = np.concatenate([b[f], b[f + 1]], axis=1)
-    for slot, kx, ax, k1, a1, k2, a2, r in zip(
-        np.flatnonzero(paired).tolist(),
+    pairs = zip(
         keys_of("x", pose_index[f]),
-        A_x,
+        np.concatenate([Ap[f], Ap[f + 1]], axis=1),
         keys_of("l", landmark_index[f]),
         A_1,
         keys_of("l", landmark_index[f + 1]),
         A_2,
-        rhs,
+        np.concatenate([b[f], b[f + 1]], axis=1),
         strict=True,
-    ):
-        out[slot] = gtsam.JacobianFactor(kx, ax, k1, a1, k2, a2, r, UNIT4)
-    # the others alone
-    f = first[~paired]
-    for slot, kx, ax, k1, a1, r in zip(
-        np.flatnonzero(~paired).tolist(),
-        keys_of("x", pose_index[f]),
-        Ap[f],
-        keys_of("l", landmark_index[f]),
-        Al[f],
-        b[f],
+    )
+    g = first[~paired]
+    singles = zip(
+        keys_of("x", pose_index[g]),
+        Ap[g],
+        keys_of("l", landmark_index[g]),
+        Al[g],
+        b[g],
         strict=True,
-    ):
-        out[slot] = gtsam.JacobianFactor(kx, ax, k1, a1, r, UNIT2)
-    return out
+    )
+    return _place(paired, pairs, UNIT4, singles, UNIT2)
 
 
-def line_factor_groups(pose_index: IntArray, landmark_index: IntArray) -> tuple[IntArray, IntArray]:
+def line_factor_groups(
+    pose_index: IntArray, landmark_index: IntArray
+) -> tuple[IntArray, NDArray[np.bool_]]:
     """How :func:`line_jacobian_factors` groups line factors.
 
     Returns the first line factor of each group and whether the group also holds the next
-    one (same pose, another landmark; pairs taken in order within each run of one pose).
+    one (same pose, another landmark; pairs taken in order, :func:`_pairs_in_order`).
     """
-    n = pose_index.shape[0]
-    if n == 0:
-        return np.zeros(0, np.intp), np.zeros(0, bool)
-    starts = np.r_[True, pose_index[1:] != pose_index[:-1]]
-    run_start = np.maximum.accumulate(np.where(starts, np.arange(n), 0))
-    can = np.zeros(n, bool)
+    can = np.zeros(pose_index.shape[0], bool)
     can[:-1] = (pose_index[1:] == pose_index[:-1]) & (landmark_index[1:] != landmark_index[:-1])
-    # greedy in order: a factor pairs with the next if it is not itself the second of a pair
-    even = ((np.arange(n) - run_start) % 2) == 0
-    lead = can & even
+    return _pairs_in_order(can)
+
+
+def _pairs_in_order(can: NDArray[np.bool_]) -> tuple[IntArray, NDArray[np.bool_]]:
+    """Greedy pairing of neighbours: ``can[i]`` says item ``i`` may pair with ``i + 1``.
+
+    Within each run of such items every other one leads a pair (the 1st, 3rd, ...).  Returns
+    the first item of each group and whether the group is a pair.
+    """
+    n = can.shape[0]
+    run_first = can & ~np.r_[False, can[:-1]]
+    run_start = np.maximum.accumulate(np.where(run_first, np.arange(n), 0))
+    lead = can & ((np.arange(n) - run_start) % 2 == 0)
     taken = np.zeros(n, bool)
     taken[1:] = lead[:-1]
     first = np.flatnonzero(~taken)
     return first, lead[first]
+
+
+def _place(
+    paired: NDArray[np.bool_],
+    pairs: Iterable[tuple[Any, ...]],
+    pair_noise: gtsam.noiseModel.Base,
+    singles: Iterable[tuple[Any, ...]],
+    single_noise: gtsam.noiseModel.Base,
+) -> list[gtsam.JacobianFactor]:
+    """``JacobianFactor(*args, noise)`` for the groups in order: pairs where ``paired``."""
+    out: list[gtsam.JacobianFactor] = [None] * paired.shape[0]  # type: ignore[list-item]
+    make: Any = gtsam.JacobianFactor  # (its stubs list the overloads, not *args)
+    for slot, args in zip(np.flatnonzero(paired).tolist(), pairs, strict=True):
+        out[slot] = make(*args, pair_noise)
+    for slot, args in zip(np.flatnonzero(~paired).tolist(), singles, strict=True):
+        out[slot] = make(*args, single_noise)
+    return out
 
 
 def landmark_prior_factors(
@@ -169,49 +187,26 @@ def odometry_jacobian_factors(
     (6 rows, zero blocks where a row does not involve a pose): the same rows in order, half
     the constructor calls.
     """
-    n = first.shape[0]
-    chained = np.zeros(n, bool)
-    if n > 1:
-        chained[:-1] = (second[:-1] == first[1:]) & (first[1:] != first[:-1])
-    # pairs taken in order within each run of chained factors: every other one leads
-    run_first = chained & ~np.r_[False, chained[:-1]]
-    run_start = np.maximum.accumulate(np.where(run_first, np.arange(n), 0))
-    lead = chained & ((np.arange(n) - run_start) % 2 == 0)
-    taken = np.zeros(n, bool)
-    taken[1:] = lead[:-1]
-    heads = np.flatnonzero(~taken)
-    out: list[gtsam.JacobianFactor] = [None] * heads.shape[0]  # type: ignore[list-item]
-    paired = lead[heads]
+    can = np.zeros(first.shape[0], bool)
+    can[:-1] = (second[:-1] == first[1:]) & (first[1:] != first[:-1])
+    heads, paired = _pairs_in_order(can)
     f = heads[paired]
     z = np.zeros((f.shape[0], 3, 3))
-    A_a = np.concatenate([A_first[f], z], axis=1)
-    A_b = np.concatenate([A_second[f], A_first[f + 1]], axis=1)
-    A_c = np.concatenate([z, A_second[f + 1]], axis=1)
-    rhs = np.concatenate([b[f], b[f + 1]], axis=1)
-    for slot, ka, aa, kb, ab, kc, ac, r in zip(
-        np.flatnonzero(paired).tolist(),
+    pairs = zip(
         keys_of("x", first[f]),
-        A_a,
+        np.concatenate([A_first[f], z], axis=1),
         keys_of("x", second[f]),
-        A_b,
+        np.concatenate([A_second[f], A_first[f + 1]], axis=1),
         keys_of("x", second[f + 1]),
-        A_c,
-        rhs,
+        np.concatenate([z, A_second[f + 1]], axis=1),
+        np.concatenate([b[f], b[f + 1]], axis=1),
         strict=True,
-    ):
-        out[slot] = gtsam.JacobianFactor(ka, aa, kb, ab, kc, ac, r, UNIT6)
-    f = heads[~paired]
-    for slot, ka, aa, kb, ab, r in zip(
-        np.flatnonzero(~paired).tolist(),
-        keys_of("x", first[f]),
-        A_first[f],
-        keys_of("x", second[f]),
-        A_second[f],
-        b[f],
-        strict=True,
-    ):
-        out[slot] = gtsam.JacobianFactor(ka, aa, kb, ab, r, UNIT3)
-    return out
+    )
+    g = heads[~paired]
+    singles = zip(
+        keys_of("x", first[g]), A_first[g], keys_of("x", second[g]), A_second[g], b[g], strict=True
+    )
+    return _place(paired, pairs, UNIT6, singles, UNIT3)
 
 
 def split_delta(
