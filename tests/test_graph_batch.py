@@ -273,3 +273,18 @@ def test_packed_factors_hold_the_same_rows():
     keys = keys_of("x", np.arange(10))
     for a, c in zip(system(single, keys), system(packed, keys), strict=True):
         np.testing.assert_array_equal(c, a)
+
+
+def test_solve_stops_when_the_caller_says_so():
+    """``stop`` sees every accepted step's estimate and can end the solve there."""
+    g = synthetic_problem(60, seed=5).graph
+    seen = []
+
+    def stop(iterations, poses, landmarks):
+        seen.append((iterations, poses.shape, landmarks.shape))
+        return iterations == 2
+
+    stats = BatchSolver(GAUSSIAN).solve(g, stop=stop)
+    assert stats.reason == "stopped" and stats.iterations == 2 and not stats.converged
+    assert [s[0] for s in seen] == [1, 2]
+    assert seen[0][1] == (g.n_poses, 3) and seen[0][2] == (g.n_landmarks, 2)

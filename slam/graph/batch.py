@@ -26,6 +26,7 @@ decrease or the largest update component falls below its tolerance
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -303,7 +304,11 @@ class BatchSolver:
 
     # -- the loop ---------------------------------------------------------------------------
     def solve(
-        self, graph: LineGraph, max_iterations: int | None = None, free_from: int = 0
+        self,
+        graph: LineGraph,
+        max_iterations: int | None = None,
+        free_from: int = 0,
+        stop: Callable[[int, FloatArray, FloatArray], bool] | None = None,
     ) -> SolveStats:
         """Optimise ``graph``'s estimate in place.
 
@@ -318,6 +323,9 @@ class BatchSolver:
             and the landmarks they observe are solved (with the held poses' factors on those
             landmarks as constants).  E.g. judging a loop closure, where the map before the
             loop is the reference.  Default 0: the whole graph.
+        stop : callable, optional
+            ``stop(iterations, poses, landmarks)`` after every accepted step (full-size
+            arrays of the new estimate); True ends the solve there (reason "stopped").
 
         Returns
         -------
@@ -419,6 +427,9 @@ class BatchSolver:
                     nu = 2.0
                     if lam < cfg.lambda_min:
                         lam = 0.0
+                if stop is not None and stop(stats.iterations, poses, landmarks):
+                    stats.reason = "stopped"
+                    break
                 if step < cfg.step_tolerance:
                     stats.converged, stats.reason = True, "step below tolerance"
                     break

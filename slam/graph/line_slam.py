@@ -1155,9 +1155,20 @@ class LineSlam:
         # the map before the loop is the reference: held, only the loop is solved
         free_from = max(int(old_last.min()) - lcc.local_keyframes, 0) if lcc.judge_loop_only else 0
         t0 = time.perf_counter()
-        judged = self._judge.solve(g, lcc.judge_iterations, free_from=free_from)
-        self.time_s["judge"] += time.perf_counter() - t0
         records = list(g.merge_log[n_log:])
+
+        def hopeless(iterations: int, poses: FloatArray, landmarks: FloatArray) -> bool:
+            """At most one pair explained after ``judge_hopeless_after`` linearisations."""
+            if iterations != lcc.judge_hopeless_after:
+                return False
+            kept = (g.poses.copy(), g.landmarks.copy())
+            g.poses[:], g.landmarks[:] = poses, landmarks
+            good = sum(self._merge_consistent(r) is True for r in records)
+            g.poses[:], g.landmarks[:] = kept
+            return good <= 1
+
+        judged = self._judge.solve(g, lcc.judge_iterations, free_from=free_from, stop=hopeless)
+        self.time_s["judge"] += time.perf_counter() - t0
         verdict = [self._merge_consistent(r) for r in records]
         good = sum(v is True for v in verdict)
         entry: dict[str, Any] = {
@@ -1169,6 +1180,7 @@ class LineSlam:
             "score": float(found.score),
             "runner_up": float(found.runner_up),
             "judge_iterations": judged.iterations,
+            "judge_stop": judged.reason,
             "judge_free_from": free_from,
         }
         if good >= max(lcc.min_matches - 1, 2) and good >= lcc.min_consistent_fraction * len(
