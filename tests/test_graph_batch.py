@@ -288,3 +288,17 @@ def test_solve_stops_when_the_caller_says_so():
     assert stats.reason == "stopped" and stats.iterations == 2 and not stats.converged
     assert [s[0] for s in seen] == [1, 2]
     assert seen[0][1] == (g.n_poses, 3) and seen[0][2] == (g.n_landmarks, 2)
+
+
+def test_pairing_order_groups_poses_and_spreads_repeated_landmarks():
+    from slam.graph.linear import line_factor_groups, pairing_order
+
+    pose = np.array([3, 1, 3, 1, 3, 2, 3, 1])
+    lm = np.array([7, 4, 7, 5, 8, 4, 9, 4])
+    o = pairing_order(pose, lm)
+    assert sorted(o.tolist()) == list(range(8))
+    assert pose[o].tolist() == sorted(pose.tolist())  # grouped by pose
+    # pose 3 sees landmark 7 twice: not next to each other, so all four pair up
+    assert lm[o][pose[o] == 3].tolist() == [7, 8, 9, 7]
+    _, paired = line_factor_groups(pose[o], lm[o])
+    assert (~paired).sum() == 2  # pose 1: (4, 5) then 4 alone; pose 2: alone

@@ -46,6 +46,7 @@ from slam.graph.linear import (
     landmark_prior_factors,
     line_jacobian_factors,
     odometry_jacobian_factors,
+    pairing_order,
     split_delta,
 )
 from slam.graph.odometry import between_costs, linearize_between, linearize_prior
@@ -215,17 +216,13 @@ class BatchSolver:
                 self.config.robust_k,
             )
             free = fp >= free_from
-            if free.all():
-                factors = line_jacobian_factors(fp, lm, lin)
-            else:
-                sub = LineLinearization(
-                    lin.A_pose[free],
-                    lin.A_landmark[free],
-                    lin.b[free],
-                    lin.whitened_residual[free],
-                    lin.weights[free],
-                )
-                factors = line_jacobian_factors(fp[free], lm[free], sub)
+            o = np.flatnonzero(free)
+            o = o[pairing_order(fp[o], lm[o])]  # most factors two to a JacobianFactor
+            sub = LineLinearization(
+                lin.A_pose[o], lin.A_landmark[o], lin.b[o], lin.whitened_residual[o], lin.weights[o]
+            )
+            factors = line_jacobian_factors(fp[o], lm[o], sub)
+            if not free.all():
                 fixed = ~free
                 factors += landmark_prior_factors(lm[fixed], lin.A_landmark[fixed], lin.b[fixed])
             for f in factors:

@@ -30,6 +30,7 @@ __all__ = [
     "line_jacobian_factors",
     "native_odometry_factors",
     "odometry_jacobian_factors",
+    "pairing_order",
     "split_delta",
 ]
 
@@ -102,6 +103,26 @@ def line_factor_groups(
     can = np.zeros(pose_index.shape[0], bool)
     can[:-1] = (pose_index[1:] == pose_index[:-1]) & (landmark_index[1:] != landmark_index[:-1])
     return _pairs_in_order(can)
+
+
+def pairing_order(pose_index: IntArray, landmark_index: IntArray) -> IntArray:
+    """An order of line factors in which :func:`line_jacobian_factors` pairs the most.
+
+    Grouped by pose; within a pose the first factor on each landmark, then the second ones,
+    ... (so that a pose's two factors on one landmark are not neighbours).  The factors of a
+    graph come in the order they were added, which interleaves poses (a tentative landmark's
+    factors arrive when it is promoted) and repeats landmarks.
+    """
+    n = pose_index.shape[0]
+    if n == 0:
+        return np.zeros(0, np.intp)
+    by_pair = np.lexsort((landmark_index, pose_index))
+    p, m = pose_index[by_pair], landmark_index[by_pair]
+    new_run = np.r_[True, (p[1:] != p[:-1]) | (m[1:] != m[:-1])]
+    run_start = np.maximum.accumulate(np.where(new_run, np.arange(n), 0))
+    rank = np.empty(n, np.intp)
+    rank[by_pair] = np.arange(n) - run_start
+    return np.lexsort((landmark_index, rank, pose_index)).astype(np.intp)
 
 
 def _pairs_in_order(can: NDArray[np.bool_]) -> tuple[IntArray, NDArray[np.bool_]]:
