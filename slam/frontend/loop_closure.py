@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
 
-__all__ = ["LoopClosure", "LoopLines", "search_loop_closure"]
+__all__ = ["LoopClosure", "LoopLines", "same_correction", "search_loop_closure"]
 
 LAST_REASON = ""
 
@@ -268,12 +268,22 @@ class _Hypothesis:
 
     def distinct(self, other: _Hypothesis, config: LoopConfig) -> bool:
         """Whether ``other`` is a different solution (not this one moved along a corridor)."""
+        if not self.single:
+            return not same_correction(self.corr, other.corr, config)
         if abs(float(wrap_angle(other.corr[2] - self.corr[2]))) > 2.0 * config.angle_tolerance_rad:
             return True
         dt = other.corr[:2] - self.corr[:2]
-        if self.single:
-            return bool(abs(dt @ self.normal) > 2.0 * config.offset_tolerance_m)
-        return bool(np.hypot(dt[0], dt[1]) > 2.0 * config.offset_tolerance_m)
+        return bool(abs(dt @ self.normal) > 2.0 * config.offset_tolerance_m)
+
+
+def same_correction(a: FloatArray, b: FloatArray, config: LoopConfig) -> bool:
+    """Whether two corrections ``(t_x, t_y, dθ)`` are one solution.
+
+    Within twice the angle and the offset tolerance of each other.
+    """
+    if abs(float(wrap_angle(b[2] - a[2]))) > 2.0 * config.angle_tolerance_rad:
+        return False
+    return bool(np.hypot(b[0] - a[0], b[1] - a[1]) <= 2.0 * config.offset_tolerance_m)
 
 
 def _rotation_candidates(

@@ -1094,13 +1094,11 @@ class LineSlam:
         self._rejected = [r for r in self._rejected if r[0] > pose - lcc.local_keyframes]
         if not lcc.skip_repeated_rejections:
             return None
+        from slam.frontend.loop_closure import same_correction
+
         corr = np.asarray(found.correction, dtype=float)
         for kf, rejected, n_pairs in self._rejected:
-            same = (
-                np.hypot(*(corr[:2] - rejected[:2])) <= 2.0 * lcc.offset_tolerance_m
-                and abs(float(wrap_angle(corr[2] - rejected[2]))) <= 2.0 * lcc.angle_tolerance_rad
-            )
-            if same and len(found.pairs) <= n_pairs:
+            if same_correction(corr, rejected, lcc) and len(found.pairs) <= n_pairs:
                 return kf
         return None
 
