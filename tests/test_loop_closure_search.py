@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import slam.frontend.loop_closure as lc
 from slam.frontend.loop_closure import (
     LoopLines,
     _samples_near_grid,
@@ -56,6 +57,16 @@ def test_search_recovers_a_known_correction(correction):
 
 def test_search_rejects_a_repeating_corridor_of_identical_rooms():
     """Two identical rooms side by side, the local view fits both: ambiguous, no closure."""
+    old, na = two_identical_rooms()
+    a = LoopLines(old.alpha[:na], old.r[:na], old.ends[:na])
+    local = a.transformed(np.array([2.5, 0.0, 0.0]), np.zeros(2))  # halfway between the rooms
+    found = search_loop_closure(local, old, np.array([4.5, 1.5]), 4.0, 0.2, LoopClosureConfig())
+    assert found is None
+    assert lc.LAST_REASON.startswith("ambiguous")  # both rooms verified, not a failed search
+
+
+def two_identical_rooms() -> tuple[LoopLines, int]:
+    """Rooms ``a`` (rows ``0..3``) and ``b`` (rows ``4..7``), 5 m apart along x."""
     a = room_lines([(0.0, 0.0), (4.0, 0.0), (4.0, 3.0), (0.0, 3.0)])
     b = room_lines([(5.0, 0.0), (9.0, 0.0), (9.0, 3.0), (5.0, 3.0)])
     old = LoopLines(
@@ -63,9 +74,7 @@ def test_search_rejects_a_repeating_corridor_of_identical_rooms():
         np.concatenate([a.r, b.r]),
         np.concatenate([a.ends, b.ends]),
     )
-    local = a.transformed(np.array([2.5, 0.0, 0.0]), np.zeros(2))  # halfway between the rooms
-    found = search_loop_closure(local, old, np.array([4.5, 1.5]), 4.0, 0.2, LoopClosureConfig())
-    assert found is None
+    return old, len(a)
 
 
 def test_grid_samples_cover_every_sample_inside_the_square():

@@ -304,7 +304,9 @@ def _rotation_candidates(
     kernel = np.ones(2 * k + 1)
     sm = np.convolve(hist, kernel, mode="same")
     out: list[float] = []
-    order = np.argsort(sm)[::-1]
+    # highest smoothed count first; among equal ones the fullest bin (exact data fill the
+    # bins around a peak equally)
+    order = np.lexsort((hist, sm))[::-1]
     for idx in order:
         if len(out) >= n_max or sm[idx] <= 0:
             break
