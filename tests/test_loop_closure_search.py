@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import slam.frontend.loop_closure as lc
 from slam.frontend.loop_closure import (
     LoopLines,
     _samples_near_grid,
@@ -46,7 +45,7 @@ def test_search_recovers_a_known_correction(correction):
     Rinv = np.array([[c, -s], [s, c]])
     shift = -Rinv @ np.array([tx, ty])
     local = old.transformed(np.array([shift[0], shift[1], -dth]), center)
-    found = search_loop_closure(local, old, center, 3.0, 0.3, LoopClosureConfig())
+    found = search_loop_closure(local, old, center, 3.0, 0.3, LoopClosureConfig()).closure
     assert found is not None
     np.testing.assert_allclose(found.correction, corr, atol=0.02)
     assert sorted(found.pairs) == [(k, k) for k in range(len(old))]
@@ -60,9 +59,9 @@ def test_search_rejects_a_repeating_corridor_of_identical_rooms():
     old, na = two_identical_rooms()
     a = LoopLines(old.alpha[:na], old.r[:na], old.ends[:na])
     local = a.transformed(np.array([2.5, 0.0, 0.0]), np.zeros(2))  # halfway between the rooms
-    found = search_loop_closure(local, old, np.array([4.5, 1.5]), 4.0, 0.2, LoopClosureConfig())
-    assert found is None
-    assert lc.LAST_REASON.startswith("ambiguous")  # both rooms verified, not a failed search
+    search = search_loop_closure(local, old, np.array([4.5, 1.5]), 4.0, 0.2, LoopClosureConfig())
+    assert search.closure is None
+    assert search.reason.startswith("ambiguous")  # both rooms verified, not a failed search
 
 
 def two_identical_rooms() -> tuple[LoopLines, int]:

@@ -39,9 +39,13 @@ from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
 
-__all__ = ["LoopClosure", "LoopLines", "same_correction", "search_loop_closure"]
-
-LAST_REASON = ""
+__all__ = [
+    "LoopClosure",
+    "LoopLines",
+    "LoopSearch",
+    "same_correction",
+    "search_loop_closure",
+]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -165,6 +169,23 @@ class LoopClosure:
     score: float
     runner_up: float
     single_direction: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class LoopSearch:
+    """What a search found.
+
+    Attributes
+    ----------
+    closure : LoopClosure or None
+        The verified, unambiguous correction; None when there is none.
+    reason : str
+        Why there is none (``"too few lines"``, ``"no hypothesis"``, ``"none verified (…)"``,
+        ``"ambiguous (winner vs runner-up)"``), or ``"found"``.
+    """
+
+    closure: LoopClosure | None
+    reason: str
 
 
 def _pairs_at(
@@ -446,7 +467,7 @@ def search_loop_closure(
     config: LoopConfig,
     n_rotations: int = 3,
     n_peaks: int = 4,
-) -> LoopClosure | None:
+) -> LoopSearch:
     """Search, verify and refine a correction of ``local`` onto ``old`` (module docstring).
 
     Parameters
@@ -462,13 +483,12 @@ def search_loop_closure(
 
     Returns
     -------
-    LoopClosure or None
-        None when no hypothesis passes the verification or the best is ambiguous.
+    LoopSearch
+        Its ``closure`` is None when no hypothesis passes the verification or the best is
+        ambiguous; ``reason`` says which.
     """
-    global LAST_REASON
-    LAST_REASON = "too few lines"
     if len(local) < 2 or len(old) < 2:
-        return None
+        return LoopSearch(None, "too few lines")
     c = np.asarray(center, dtype=float).reshape(2)
     hyps: list[_Hypothesis] = []
     for dth in _rotation_candidates(
@@ -479,21 +499,19 @@ def search_loop_closure(
             if np.hypot(corr[0], corr[1]) > window_xy * 1.5 or abs(corr[2]) > window_theta * 1.5:
                 continue
             hyps.append(_Hypothesis(corr, i, j, float(w.sum()), old.alpha[j], w, config))
-    LAST_REASON = "no hypothesis"
     if not hyps:
-        return None
+        return LoopSearch(None, "no hypothesis")
     valid = [h for h in hyps if h.valid]
-    top = max(hyps, key=lambda h: h.score)
-    LAST_REASON = (
-        f"none verified (best {top.score:.1f} m, {top.i.size} pairs, "
-        f"{'one direction' if top.single else 'two directions'})"
-    )
     if not valid:
-        return None
+        top = max(hyps, key=lambda h: h.score)
+        return LoopSearch(
+            None,
+            f"none verified (best {top.score:.1f} m, {top.i.size} pairs, "
+            f"{'one direction' if top.single else 'two directions'})",
+        )
     best = max(valid, key=lambda h: h.score)
     runner = max((h.score for h in hyps if best.distinct(h, config)), default=0.0)
-    LAST_REASON = f"ambiguous ({best.score:.1f} vs {runner:.1f})"
     if runner > config.max_ambiguity * best.score:
-        return None
+        return LoopSearch(None, f"ambiguous ({best.score:.1f} vs {runner:.1f})")
     pairs = [(int(a), int(b)) for a, b in zip(best.i, best.j, strict=True)]
-    return LoopClosure(best.corr, pairs, best.score, runner, best.single)
+    return LoopSearch(LoopClosure(best.corr, pairs, best.score, runner, best.single), "found")

@@ -721,7 +721,7 @@ class LineSlam:
         map_ll = LoopLines.from_anchored(local.rho_phi, local.anchors, local.extents, local.side)
         found = search_loop_closure(
             scan_ll, map_ll, x_pred[:2], rc.window_xy_m, rc.window_theta_rad, rc
-        )
+        ).closure
         self.counters["relocalisations"] += 1
         if found is None:
             return reg
@@ -1045,7 +1045,7 @@ class LineSlam:
                 )
             )
             self.counters["loop_closure_attempts"] += 1
-            found = search_loop_closure(
+            search = search_loop_closure(
                 self._loop_lines(local),
                 self._loop_lines(near),
                 x[:2],
@@ -1053,9 +1053,8 @@ class LineSlam:
                 wth,
                 lcc,
             )
+            found = search.closure
             if found is None:
-                import slam.frontend.loop_closure as _lc
-
                 self._closure_log.append(
                     {
                         "keyframe": int(pose),
@@ -1063,7 +1062,7 @@ class LineSlam:
                         "old": int(near.size),
                         "window": [wxy, wth],
                         "accepted": False,
-                        "reason": _lc.LAST_REASON,
+                        "reason": search.reason,
                     }
                 )
                 return 0
