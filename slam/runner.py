@@ -106,17 +106,25 @@ def run_estimator_on_log(
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
+    odometry_sign: str = "logged",
 ) -> dict[str, Any]:
     """Resolve ``log`` (file or dataset name), run ``estimator`` on it, write ``out``.
 
-    Returns the summary written to ``out/summary.json``.
+    ``odometry_sign="velocity"`` feeds the scans through
+    :func:`slam.io.carmen.velocity_signed_scans`.  Returns the summary written to
+    ``out/summary.json``.
     """
-    from slam.io.carmen import iter_scans
+    from slam.io.carmen import CarmenReader, iter_scans, velocity_signed_scans
     from slam.io.catalog import resolve_log
 
     resolved = resolve_log(log)
     t_start = time.perf_counter()
-    clock = feed_scans(estimator, iter_scans(resolved.log), max_scans=max_scans, progress=progress)
+    scans = (
+        velocity_signed_scans(CarmenReader(resolved.log).messages())
+        if odometry_sign == "velocity"
+        else iter_scans(resolved.log)
+    )
+    clock = feed_scans(estimator, scans, max_scans=max_scans, progress=progress)
     t0 = time.perf_counter()
     estimator.optimize()
     clock["optimize"] = time.perf_counter() - t0
@@ -183,6 +191,12 @@ def run_slam(
 
     slam = LineSlam(slam_config_for_log(config.slam, log), config.linefit)
     summary = run_estimator_on_log(
-        log, out, slam, max_scans=max_scans, progress=progress, plot=plot
+        log,
+        out,
+        slam,
+        max_scans=max_scans,
+        progress=progress,
+        plot=plot,
+        odometry_sign=slam.config.odometry_sign,
     )
     return summary

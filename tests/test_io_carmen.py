@@ -268,3 +268,42 @@ def test_bad_arguments_are_config_errors(tmp_path):
         list(iter_scans(path, laser="SONAR"))
     with pytest.raises(ConfigError, match="frame must be"):
         scan_trajectory(path, frame="world")
+
+
+def test_velocity_signed_scans_negate_forward_increments_while_reversing(tmp_path):
+    from slam.io.carmen import velocity_signed_scans
+
+    # the robot (heading 0) drives forward 1 m, then backward 1 m; the log integrates |tv|,
+    # so its pose keeps moving forward (x = 0, 1, 2) while tv < 0 in the second half
+    lines = [
+        odom((0.0, 0.0, 0.0), 0.0, tv=0.0),
+        flaser([1.0] * 5, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.05),
+        odom((1.0, 0.0, 0.0), 1.0, tv=0.5),
+        flaser([1.0] * 5, (1.0, 0.0, 0.0), (1.0, 0.0, 0.0), 1.05),
+        odom((1.5, 0.0, 0.1), 2.0, tv=-0.5),
+        flaser([1.0] * 5, (1.75, 0.0, 0.1), (1.75, 0.0, 0.1), 2.05),
+        odom((2.0, 0.0, 0.1), 3.0, tv=-0.5),
+        flaser([1.0] * 5, (2.0, 0.0, 0.1), (2.0, 0.0, 0.1), 3.05),
+    ]
+    path = write(tmp_path, lines)
+    logged = list(iter_scans(path))
+    scans = list(velocity_signed_scans(CarmenReader(path).messages()))
+    for k in (0, 1):  # untouched before reversing
+        np.testing.assert_array_equal(scans[k].pose_odom_base, logged[k].pose_odom_base)
+    # mean tv of (0.5, -0.5) is 0: the ODOM step 1 -> 1.5 stays forward; after it, backward
+    # (the logged steps run along +x: negated, they run along -x)
+    np.testing.assert_allclose(scans[2].pose_odom_base, [1.25, 0.0, 0.1], atol=1e-12)
+    np.testing.assert_allclose(scans[3].pose_odom_base, [1.0, 0.0, 0.1], atol=1e-12)
+    np.testing.assert_allclose(scans[3].pose_odom_laser, scans[3].pose_odom_base, atol=1e-12)
+
+
+def test_velocity_signed_scans_leave_logs_without_negative_speed_alone(tmp_path):
+    from slam.io.carmen import velocity_signed_scans
+
+    lines = [odom((0.1 * k, 0.0, 0.01 * k), float(k), tv=0.0) for k in range(3)]
+    lines += [flaser([1.0] * 5, (0.3, 0.0, 0.0), (0.3, 0.0, 0.0), 3.5)]
+    path = write(tmp_path, lines)
+    logged = list(iter_scans(path))
+    scans = list(velocity_signed_scans(CarmenReader(path).messages()))
+    assert len(scans) == 1 and scans[0] is not None
+    np.testing.assert_array_equal(scans[0].pose_odom_base, logged[0].pose_odom_base)

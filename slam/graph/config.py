@@ -589,6 +589,12 @@ class SlamConfig:
         ``Scan.pose_odom_base ∘ pose_base_laser`` (logs whose laser pose lacks the mounting).
     output_frame : {"laser", "base"}
         Frame of the trajectory in the result (``summary.json`` says which).
+    odometry_sign : {"velocity", "logged"}
+        ``"velocity"``: when the runner reads a CARMEN log, pose increments that moved forwards
+        while the ``ODOM`` speed ``tv`` was negative are negated
+        (:func:`slam.io.carmen.velocity_signed_scans`; fr079 logs reversing as forward
+        motion); logs whose ``tv`` is never negative are unchanged.  ``"logged"``: the
+        odometry poses as logged.
     line_model_sigma_r_m, line_model_sigma_alpha_rad : float
         Model error added to every measured line's covariance, at the segment's mid-point
         (:func:`slam.frontend.anchored.model_error_covariance`); 0 for simulated data whose
@@ -624,6 +630,7 @@ class SlamConfig:
     mount_source: Literal["catalog", "config"] = "catalog"
     laser_odometry: Literal["logged", "base"] = "logged"
     output_frame: Literal["laser", "base"] = "laser"
+    odometry_sign: Literal["velocity", "logged"] = "velocity"
     line_model_sigma_r_m: float = 0.02
     line_model_sigma_alpha_rad: float = 0.01
     min_line_points: int = 5
@@ -647,6 +654,10 @@ class SlamConfig:
             self.mount_source in ("catalog", "config"), "mount_source must be catalog or config"
         )
         _require(self.output_frame in ("laser", "base"), "output_frame must be laser or base")
+        _require(
+            self.odometry_sign in ("velocity", "logged"),
+            "odometry_sign must be velocity or logged",
+        )
         _nonneg("line_model_sigma_r_m", self.line_model_sigma_r_m)
         _nonneg("line_model_sigma_alpha_rad", self.line_model_sigma_alpha_rad)
         _require(self.min_line_points >= 2, "min_line_points must be >= 2")

@@ -4,6 +4,7 @@ Main entry points (stable, used across the project)::
 
     iter_scans(path, *, lenient=False, geometry=None, stats=None, laser="auto") -> Iterator[Scan]
     iter_odometry(path, *, lenient=False, stats=None) -> Iterator[Odometry]
+    velocity_signed_scans(messages) -> Iterator[Scan]  # odometry re-signed by ODOM tv
     CarmenReader(path, ...).messages()  # scans and odometry interleaved, in file order
 
 A log is read line by line and yielded as it is read: nothing is loaded whole into Python
@@ -83,6 +84,7 @@ __all__ = [
     "iter_odometry",
     "iter_scans",
     "scan_trajectory",
+    "velocity_signed_scans",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -533,6 +535,61 @@ def iter_scans(
     if stats is not None:
         reader.stats = stats
     yield from reader.scans()
+
+
+def velocity_signed_scans(messages: Iterator[Scan | Odometry]) -> Iterator[Scan]:
+    """The scans of ``messages`` (file order) with odometry that moves backwards when ``tv < 0``.
+
+    Some logs integrate the pose from the speed without its sign: fr079's odometry pose never
+    moves backwards (no increment between its laser lines has a negative forward component),
+    while its ``ODOM`` lines report ``tv < 0`` in 410 messages and the relations show 8.1 m of
+    reversing, all logged as forward motion.  Here every pose increment between ``ODOM``
+    messages whose mean ``tv`` is negative but which moved forwards has its translation negated,
+    ``(dx, dy, dθ) → (−dx, −dy, dθ)`` (the backward arc with the same heading change), and the
+    poses are integrated again.  A laser line takes the corrected pose of the last ``ODOM``
+    message composed with its own residual increment (negated the same way when the last
+    ``tv < 0``); its laser pose keeps its offset from the base pose.  Logs whose ``tv`` is
+    never negative (Intel and ACES write 0) come out unchanged.
+    """
+    from dataclasses import replace
+
+    from slam.geometry import pose_between, pose_compose
+
+    def signed(step: FloatArray, tv: float) -> FloatArray:
+        if tv < 0.0 and step[0] > 0.0:
+            return np.array([-step[0], -step[1], step[2]])
+        return step
+
+    raw: FloatArray | None = None
+    fixed: FloatArray | None = None
+    changed = False  # until the first negated increment the messages pass through untouched
+    tv_last = 0.0
+    for message in messages:
+        if isinstance(message, Odometry):
+            pose = np.asarray(message.pose_odom_base, dtype=float)
+            if raw is None or fixed is None:
+                fixed = pose.copy()
+            else:
+                step = pose_between(raw, pose)
+                new = signed(step, 0.5 * (tv_last + message.tv_mps))
+                changed = changed or new is not step
+                fixed = pose_compose(fixed, new) if changed else pose.copy()
+            raw = pose
+            tv_last = message.tv_mps
+            continue
+        if raw is None or fixed is None or message.pose_odom_base is None:
+            yield message
+            continue
+        step = pose_between(raw, message.pose_odom_base)
+        new = signed(step, tv_last)
+        if not changed and new is step:
+            yield message
+            continue
+        base = pose_compose(fixed, new)
+        laser = message.pose_odom_laser
+        if laser is not None:
+            laser = pose_compose(base, pose_between(message.pose_odom_base, laser))
+        yield replace(message, pose_odom_base=base, pose_odom_laser=laser)
 
 
 def iter_odometry(
