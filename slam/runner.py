@@ -110,20 +110,15 @@ def run_estimator_on_log(
 ) -> dict[str, Any]:
     """Resolve ``log`` (file or dataset name), run ``estimator`` on it, write ``out``.
 
-    ``odometry_sign="velocity"`` feeds the scans through
-    :func:`slam.io.carmen.velocity_signed_scans`.  Returns the summary written to
-    ``out/summary.json``.
+    ``odometry_sign`` chooses the odometry (:func:`slam.io.carmen.iter_log_scans`).  Returns the
+    summary written to ``out/summary.json``.
     """
-    from slam.io.carmen import CarmenReader, iter_scans, velocity_signed_scans
+    from slam.io.carmen import iter_log_scans, iter_scans
     from slam.io.catalog import resolve_log
 
     resolved = resolve_log(log)
     t_start = time.perf_counter()
-    scans = (
-        velocity_signed_scans(CarmenReader(resolved.log).messages())
-        if odometry_sign == "velocity"
-        else iter_scans(resolved.log)
-    )
+    scans = iter_log_scans(resolved.log, odometry_sign)
     clock = feed_scans(estimator, scans, max_scans=max_scans, progress=progress)
     t0 = time.perf_counter()
     estimator.optimize()

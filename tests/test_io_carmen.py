@@ -11,7 +11,7 @@ from carmen_lines import flaser, odom, rawlaser, robotlaser
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from slam.errors import InputError, LogFormatError
+from slam.errors import ConfigError, InputError, LogFormatError
 from slam.io import CarmenReader, CarmenStats, LaserGeometry, iter_odometry, iter_scans
 from slam.io.carmen import scan_trajectory
 
@@ -307,3 +307,22 @@ def test_velocity_signed_scans_leave_logs_without_negative_speed_alone(tmp_path)
     scans = list(velocity_signed_scans(CarmenReader(path).messages()))
     assert len(scans) == 1 and scans[0] is not None
     np.testing.assert_array_equal(scans[0].pose_odom_base, logged[0].pose_odom_base)
+
+
+def test_iter_log_scans_chooses_the_odometry(tmp_path):
+    from slam.io.carmen import iter_log_scans
+
+    lines = [
+        odom((0.0, 0.0, 0.0), 0.0, tv=0.0),
+        odom((1.0, 0.0, 0.0), 1.0, tv=-0.5),
+        flaser([1.0] * 5, (1.5, 0.0, 0.0), (1.5, 0.0, 0.0), 1.5),
+    ]
+    path = write(tmp_path, lines)
+    logged = next(iter(iter_log_scans(path, "logged")))
+    raw = next(iter(iter_scans(path)))
+    np.testing.assert_array_equal(logged.pose_odom_base, raw.pose_odom_base)
+    # reversing: the logged +x steps run along -x
+    velocity = list(iter_log_scans(path))
+    np.testing.assert_allclose(velocity[0].pose_odom_base, [-1.5, 0.0, 0.0], atol=1e-12)
+    with pytest.raises(ConfigError, match="odometry_sign"):
+        list(iter_log_scans(path, "absolute"))

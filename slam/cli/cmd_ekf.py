@@ -73,7 +73,9 @@ def ekf(
             bar.update(n - bar.n)
 
     t0 = time.perf_counter()
-    data = load_log(log, run_config.linefit, max_scans, extracted)
+    data = load_log(
+        log, run_config.linefit, max_scans, extracted, odometry_sign=run_config.slam.odometry_sign
+    )
     if bar is not None:
         bar.close()
         bar = tqdm(total=len(data.scans), desc="ekf", unit="scan")

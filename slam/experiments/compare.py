@@ -266,7 +266,13 @@ def _run_on_log(task: CompareTask) -> VariantOutcome:
     from slam.runner import slam_config_for_log
 
     cache = Path(task.cache_dir) if task.cache_dir else None
-    data = cached_log_data(task.data.name, _linefit_for(task), cache, task.max_scans)
+    data = cached_log_data(
+        task.data.name,
+        _linefit_for(task),
+        cache,
+        task.max_scans,
+        odometry_sign=task.run_config.slam.odometry_sign,
+    )
     # the laser mounting of a catalogued log, for every estimator alike (the graph applies it
     # itself; the EKF and odometry follow the same slam.* frame settings)
     slam_cfg = slam_config_for_log(task.run_config.slam, task.data.name)

@@ -64,6 +64,7 @@ def load_log(
     linefit_config: LineFitConfig,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
+    odometry_sign: str = "velocity",
 ) -> LogData:
     """Read a log and extract every scan's lines.
 
@@ -76,11 +77,14 @@ def load_log(
         Read only the first scans.
     progress : callable, optional
         Called with the number of scans read so far (every 100 scans).
+    odometry_sign : {"velocity", "logged"}
+        Which odometry (``SlamConfig.odometry_sign``, :func:`slam.io.carmen.iter_log_scans`).
     """
     import time
 
     from slam.extraction import iter_scan_lines
-    from slam.io import iter_scans, resolve_log
+    from slam.io import resolve_log
+    from slam.io.carmen import iter_log_scans
 
     resolved = resolve_log(str(source))
     scans: list[Scan] = []
@@ -88,7 +92,7 @@ def load_log(
     t0 = time.perf_counter()
 
     def limited() -> Iterator[Scan]:
-        for scan in iter_scans(resolved.log):
+        for scan in iter_log_scans(resolved.log, odometry_sign):
             if max_scans is not None and len(scans) >= max_scans:
                 return
             scans.append(scan)
@@ -117,10 +121,12 @@ def load_log(
 
 
 # Bump when what a cache file holds changes meaning (2: max-range readings excluded).
-_CACHE_VERSION = 2
+_CACHE_VERSION = 3
 
 
-def _cache_key(source: str | Path, linefit_config: LineFitConfig, max_scans: int | None) -> str:
+def _cache_key(
+    source: str | Path, linefit_config: LineFitConfig, max_scans: int | None, odometry_sign: str
+) -> str:
     from slam.io import resolve_log
 
     log = Path(resolve_log(str(source)).log)
@@ -128,6 +134,7 @@ def _cache_key(source: str | Path, linefit_config: LineFitConfig, max_scans: int
     text = (
         to_toml_string(config_to_dict(linefit_config))
         + f"{_CACHE_VERSION}|{log.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{max_scans}"
+        + f"|{odometry_sign}"
     )
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -137,17 +144,19 @@ def cached_log_data(
     linefit_config: LineFitConfig,
     cache_dir: Path | None,
     max_scans: int | None = None,
+    odometry_sign: str = "velocity",
 ) -> LogData:
     """:func:`load_log` through a pickle cache in ``cache_dir`` (keyed by log and config)."""
     if cache_dir is None:
-        return load_log(source, linefit_config, max_scans)
-    path = Path(cache_dir) / f"lines-{_cache_key(source, linefit_config, max_scans)}.pkl"
+        return load_log(source, linefit_config, max_scans, odometry_sign=odometry_sign)
+    key = _cache_key(source, linefit_config, max_scans, odometry_sign)
+    path = Path(cache_dir) / f"lines-{key}.pkl"
     if path.is_file():
         with path.open("rb") as fh:
             data: Any = pickle.load(fh)
         if isinstance(data, LogData):
             return data
-    data = load_log(source, linefit_config, max_scans)
+    data = load_log(source, linefit_config, max_scans, odometry_sign=odometry_sign)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     with tmp.open("wb") as fh:

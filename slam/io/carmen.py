@@ -5,6 +5,7 @@ Main entry points (stable, used across the project)::
     iter_scans(path, *, lenient=False, geometry=None, stats=None, laser="auto") -> Iterator[Scan]
     iter_odometry(path, *, lenient=False, stats=None) -> Iterator[Odometry]
     velocity_signed_scans(messages) -> Iterator[Scan]  # odometry re-signed by ODOM tv
+    iter_log_scans(path, odometry_sign="velocity") -> Iterator[Scan]  # either of the two
     CarmenReader(path, ...).messages()  # scans and odometry interleaved, in file order
 
 A log is read line by line and yielded as it is read: nothing is loaded whole into Python
@@ -81,6 +82,7 @@ __all__ = [
     "CarmenReader",
     "CarmenStats",
     "Odometry",
+    "iter_log_scans",
     "iter_odometry",
     "iter_scans",
     "scan_trajectory",
@@ -590,6 +592,20 @@ def velocity_signed_scans(messages: Iterator[Scan | Odometry]) -> Iterator[Scan]
         if laser is not None:
             laser = pose_compose(base, pose_between(message.pose_odom_base, laser))
         yield replace(message, pose_odom_base=base, pose_odom_laser=laser)
+
+
+def iter_log_scans(path: str | Path, odometry_sign: str = "velocity") -> Iterator[Scan]:
+    """The scans of a log as the estimators read them.
+
+    ``odometry_sign = "velocity"``: through :func:`velocity_signed_scans` (reversing logged as
+    forward motion is repaired; logs without negative ``tv`` are unchanged); ``"logged"``: as
+    :func:`iter_scans` reads them.
+    """
+    if odometry_sign == "velocity":
+        return velocity_signed_scans(CarmenReader(path).messages())
+    if odometry_sign == "logged":
+        return iter_scans(path)
+    raise ConfigError(f"odometry_sign must be velocity or logged, got {odometry_sign!r}")
 
 
 def iter_odometry(
