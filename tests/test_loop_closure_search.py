@@ -7,11 +7,12 @@ import pytest
 
 from slam.frontend.loop_closure import (
     LoopLines,
+    _refine,
     _samples_near_grid,
     _top_cells,
     search_loop_closure,
 )
-from slam.graph.config import LoopClosureConfig
+from slam.graph.config import LoopClosureConfig, RelocalisationConfig
 
 
 def room_lines(corners: list[tuple[float, float]]) -> LoopLines:
@@ -62,6 +63,31 @@ def test_search_rejects_a_repeating_corridor_of_identical_rooms():
     search = search_loop_closure(local, old, np.array([4.5, 1.5]), 4.0, 0.2, LoopClosureConfig())
     assert search.closure is None
     assert search.reason.startswith("ambiguous")  # both rooms verified, not a failed search
+
+
+def test_refine_keeps_an_unconstrained_direction_inside_the_window():
+    """Two parallel walls (a corridor) fix the offset and rotation but not the position along
+    them; with slightly inconsistent fitted angles the plain least squares moved metres along
+    the corridor (out of the window: the hypothesis was dropped, fr079 relocalisation "no
+    hypothesis"); the window as a weak prior keeps that component small."""
+    old = LoopLines(
+        np.array([-np.pi / 2, np.pi / 2]),
+        np.array([0.0, 2.0]),
+        np.array([[[-4.0, 0.0], [4.0, 0.0]], [[-4.0, 2.0], [4.0, 2.0]]]),
+    )
+    local = LoopLines(
+        np.array([-np.pi / 2 + 0.02, np.pi / 2 + 0.01]),
+        np.array([0.03, 2.0]),
+        np.array([[[1.0, 0.0], [3.0, 0.04]], [[1.0, 2.0], [3.0, 2.02]]]),
+    )
+    centre, cfg = np.array([0.0, 1.0]), RelocalisationConfig()
+    free, _, _, _ = _refine(local, old, centre, np.zeros(3), cfg)
+    assert abs(free[0]) > 1.0  # the near-singular system (the behaviour this guards against)
+    corr, i, j, _ = _refine(local, old, centre, np.zeros(3), cfg, (0.5, 0.4))
+    assert sorted(zip(i.tolist(), j.tolist(), strict=True)) == [(0, 0), (1, 1)]
+    assert abs(corr[0]) < 0.1  # along the corridor: stays near the start
+    assert corr[1] == pytest.approx(0.015, abs=0.01)  # across: the mean offset
+    assert corr[2] == pytest.approx(-0.015, abs=0.01)  # rotation: the mean angle error
 
 
 def two_identical_rooms() -> tuple[LoopLines, int]:

@@ -218,10 +218,26 @@ def _pairs_at(
 
 
 def _refine(
-    local: LoopLines, old: LoopLines, center: FloatArray, correction: FloatArray, config: LoopConfig
+    local: LoopLines,
+    old: LoopLines,
+    center: FloatArray,
+    correction: FloatArray,
+    config: LoopConfig,
+    window: tuple[float, float] | None = None,
 ) -> tuple[FloatArray, IntArray, IntArray, FloatArray]:
-    """Alternate pairing and weighted least squares on ``(t_x, t_y, dθ)``."""
+    """Alternate pairing and weighted least squares on ``(t_x, t_y, dθ)``.
+
+    ``window = (W, Θ)`` adds the search window as a weak zero-mean prior on the correction
+    (standard deviations ``W``, ``W``, ``Θ``): when the pairs constrain only some directions
+    (parallel lines: the position along them), the correction stays inside the window in the
+    others instead of taking an arbitrary value from a near-singular system.
+    """
     corr = np.asarray(correction, dtype=float).copy()
+    prior = (
+        np.diag([window[0] ** -2, window[0] ** -2, window[1] ** -2])
+        if window is not None
+        else np.zeros((3, 3))
+    )
     i = j = np.zeros(0, np.intp)
     w = np.zeros(0)
     for _ in range(3):
@@ -249,8 +265,8 @@ def _refine(
         wl = np.maximum(w, 0.1)
         W[0::2] = wl / sig_r**2
         W[1::2] = wl / sig_a**2
-        H = A.T @ (A * W[:, None]) + 1e-9 * np.eye(3)
-        step = np.linalg.solve(H, A.T @ (W * b))
+        H = A.T @ (A * W[:, None]) + prior + 1e-9 * np.eye(3)
+        step = np.linalg.solve(H, A.T @ (W * b) - prior @ corr)
         corr[:2] += step[:2]
         corr[2] += step[2]
     return corr, i, j, w
@@ -467,6 +483,7 @@ def search_loop_closure(
     config: LoopConfig,
     n_rotations: int = 3,
     n_peaks: int = 4,
+    window_prior: bool = False,
 ) -> LoopSearch:
     """Search, verify and refine a correction of ``local`` onto ``old`` (module docstring).
 
@@ -480,6 +497,11 @@ def search_loop_closure(
     config : LoopClosureConfig
     n_rotations, n_peaks : int
         Rotation candidates, and translation peaks per rotation, that are verified.
+    window_prior : bool
+        Refine each hypothesis with the window as a weak prior on the correction
+        (:func:`_refine`): parallel pairs then keep the position along them near the window
+        instead of sliding out of it (the front end's relocalisation, whose window is centred
+        on the odometry prediction).
 
     Returns
     -------
@@ -495,7 +517,9 @@ def search_loop_closure(
         local, old, window_theta, config.angle_tolerance_rad, n_rotations
     ):
         for peak in _translation_peaks(local, old, c, dth, window_xy, config, n_peaks):
-            corr, i, j, w = _refine(local, old, c, peak, config)
+            corr, i, j, w = _refine(
+                local, old, c, peak, config, (window_xy, window_theta) if window_prior else None
+            )
             if np.hypot(corr[0], corr[1]) > window_xy * 1.5 or abs(corr[2]) > window_theta * 1.5:
                 continue
             hyps.append(_Hypothesis(corr, i, j, float(w.sum()), old.alpha[j], w, config))

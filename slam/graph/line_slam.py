@@ -720,7 +720,7 @@ class LineSlam:
         scan_ll = LoopLines(a_w, r_w, ends)
         map_ll = LoopLines.from_anchored(local.rho_phi, local.anchors, local.extents, local.side)
         found = search_loop_closure(
-            scan_ll, map_ll, x_pred[:2], rc.window_xy_m, rc.window_theta_rad, rc
+            scan_ll, map_ll, x_pred[:2], rc.window_xy_m, rc.window_theta_rad, rc, window_prior=True
         ).closure
         self.counters["relocalisations"] += 1
         if found is None:
