@@ -106,7 +106,7 @@ def run_estimator_on_log(
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
-    odometry_sign: str = "logged",
+    odometry_sign: str = "velocity",
 ) -> dict[str, Any]:
     """Resolve ``log`` (file or dataset name), run ``estimator`` on it, write ``out``.
 

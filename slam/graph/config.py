@@ -590,7 +590,8 @@ class SlamConfig:
     output_frame : {"laser", "base"}
         Frame of the trajectory in the result (``summary.json`` says which).
     odometry_sign : {"velocity", "logged"}
-        ``"velocity"``: when the runner reads a CARMEN log, pose increments that moved forwards
+        ``"velocity"``: when a CARMEN log is read for an estimator (the graph, and the EKF
+        and the comparisons, which read this setting too), pose increments that moved forwards
         while the ``ODOM`` speed ``tv`` was negative are negated
         (:func:`slam.io.carmen.velocity_signed_scans`; fr079 logs reversing as forward
         motion); logs whose ``tv`` is never negative are unchanged.  ``"logged"``: the
