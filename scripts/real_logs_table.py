@@ -21,15 +21,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Literal, cast
 
-import numpy as np
-
 from slam.config import RunConfig
 from slam.evaluation import relations_metric
 from slam.evaluation.relations_metric import RelationsMetric
-from slam.io.carmen import iter_log_scans, scan_trajectory
+from slam.io.carmen import scan_trajectory
 from slam.io.catalog import load_catalog, resolve_log
 from slam.io.relations import read_relations
-from slam.io.trajectory import Trajectory
 from slam.io.tum import read_tum
 from slam.runner import run_slam
 
@@ -39,22 +36,6 @@ TARGETS_M = {"intel": 0.08, "aces": 0.08, "fr079": 0.10}
 def _fmt(metric: RelationsMetric) -> tuple[str, str]:
     t, r = metric.abs_trans_m, metric.abs_rot_deg
     return f"{t.mean:.4f} ± {t.std:.4f}", f"{r.mean:.2f}"
-
-
-def _read_odometry(log: Path, frame: str, odometry_sign: str) -> Trajectory:
-    """The odometry of every scan as the estimators read it, in ``frame`` (laser or base)."""
-    stamps: list[float] = []
-    poses: list[np.ndarray] = []
-    for scan in iter_log_scans(log, odometry_sign):
-        first, second = scan.pose_odom_base, scan.pose_odom_laser
-        if frame != "base":
-            first, second = second, first
-        pose = first if first is not None else second
-        if pose is None:
-            raise SystemExit(f"{log}: scan {scan.index} has no odometry")
-        stamps.append(scan.timestamp)
-        poses.append(pose)
-    return Trajectory.from_arrays(stamps, poses)
 
 
 def main() -> None:
@@ -83,7 +64,9 @@ def main() -> None:
                 # the logged odometry in the frame the run wrote (laser or base)
                 odo_traj = scan_trajectory(resolved.log, frame=summary["frame"])
                 odo = relations_metric(odo_traj, relations)
-                read = _read_odometry(resolved.log, summary["frame"], config.slam.odometry_sign)
+                read = scan_trajectory(
+                    resolved.log, frame=summary["frame"], odometry_sign=config.slam.odometry_sign
+                )
                 odo_read = relations_metric(read, relations)
                 target = TARGETS_M.get(name)
                 ok = "" if target is None else (" ✓" if ours.abs_trans_m.mean <= target else " ✗")

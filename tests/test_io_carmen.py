@@ -326,3 +326,8 @@ def test_iter_log_scans_chooses_the_odometry(tmp_path):
     np.testing.assert_allclose(velocity[0].pose_odom_base, [-1.5, 0.0, 0.0], atol=1e-12)
     with pytest.raises(ConfigError, match="odometry_sign"):
         list(iter_log_scans(path, "absolute"))
+    # scan_trajectory reads either odometry the same way
+    np.testing.assert_allclose(
+        scan_trajectory(path, odometry_sign="velocity").poses[0], velocity[0].pose_odom_base
+    )
+    np.testing.assert_array_equal(scan_trajectory(path).poses[0], raw.pose_odom_base)

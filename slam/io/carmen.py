@@ -594,7 +594,9 @@ def velocity_signed_scans(messages: Iterator[Scan | Odometry]) -> Iterator[Scan]
         yield replace(message, pose_odom_base=base, pose_odom_laser=laser)
 
 
-def iter_log_scans(path: str | Path, odometry_sign: str = "velocity") -> Iterator[Scan]:
+def iter_log_scans(
+    path: str | Path, odometry_sign: str = "velocity", *, lenient: bool = False
+) -> Iterator[Scan]:
     """The scans of a log as the estimators read them.
 
     ``odometry_sign = "velocity"``: through :func:`velocity_signed_scans` (reversing logged as
@@ -602,9 +604,9 @@ def iter_log_scans(path: str | Path, odometry_sign: str = "velocity") -> Iterato
     :func:`iter_scans` reads them.
     """
     if odometry_sign == "velocity":
-        return velocity_signed_scans(CarmenReader(path).messages())
+        return velocity_signed_scans(CarmenReader(path, lenient=lenient).messages())
     if odometry_sign == "logged":
-        return iter_scans(path)
+        return iter_scans(path, lenient=lenient)
     raise ConfigError(f"odometry_sign must be velocity or logged, got {odometry_sign!r}")
 
 
@@ -619,18 +621,22 @@ def iter_odometry(
     yield from reader.odometry()
 
 
-def scan_trajectory(path: str | Path, *, frame: str = "base", lenient: bool = False) -> Trajectory:
+def scan_trajectory(
+    path: str | Path, *, frame: str = "base", lenient: bool = False, odometry_sign: str = "logged"
+) -> Trajectory:
     """The log's own pose of every laser scan, at the scan's time stamp, in file order.
 
     ``frame="base"`` takes ``pose_odom_base`` (CARMEN ``odom_x odom_y odom_theta``),
-    ``frame="laser"`` takes ``pose_odom_laser`` (``x y theta``).  This is the odometry-only
-    trajectory that the datasets README evaluates against the relations.
+    ``frame="laser"`` takes ``pose_odom_laser`` (``x y theta``).  With the default
+    ``odometry_sign="logged"`` this is the odometry-only trajectory that the datasets README
+    evaluates against the relations; ``"velocity"`` gives the odometry the estimators read
+    (:func:`iter_log_scans`).
     """
     if frame not in ("base", "laser"):
         raise ConfigError(f"frame must be 'base' or 'laser', got {frame!r}")
     stamps: list[float] = []
     poses: list[FloatArray] = []
-    for scan in iter_scans(path, lenient=lenient):
+    for scan in iter_log_scans(path, odometry_sign, lenient=lenient):
         pose = scan.pose_odom_base if frame == "base" else scan.pose_odom_laser
         if pose is None:
             raise LogFormatError(
