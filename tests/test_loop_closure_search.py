@@ -65,6 +65,28 @@ def test_search_rejects_a_repeating_corridor_of_identical_rooms():
     assert search.reason.startswith("ambiguous")  # both rooms verified, not a failed search
 
 
+@pytest.mark.parametrize(("room_window_m", "found"), [(1.0, False), (8.0, True)])
+def test_a_correction_must_lie_within_the_window_of_the_walls_it_matches(room_window_m, found):
+    """The local view matches a room 5 m away.  The search window is that of the oldest wall
+    in reach (8 m); the room's walls were seen recently (window 1 m: drift since then cannot
+    be 5 m), so the 5 m match is not a closure, however well it fits.  Seen long ago (8 m),
+    it is one."""
+    room, _ = two_identical_rooms()
+    a = LoopLines(room.alpha[:4], room.r[:4], room.ends[:4])
+    far = LoopLines(np.array([0.0]), np.array([30.0]), np.array([[[30.0, 0.0], [30.0, 4.0]]]))
+    old = LoopLines(
+        np.r_[a.alpha, far.alpha], np.r_[a.r, far.r], np.concatenate([a.ends, far.ends])
+    )
+    local = a.transformed(np.array([5.0, 0.0, 0.0]), np.zeros(2))
+    windows = (np.r_[np.full(4, room_window_m), 8.0], np.r_[np.full(4, 0.1), 0.4])
+    centre, cfg = np.array([7.0, 1.5]), LoopClosureConfig()
+    search = search_loop_closure(local, old, centre, 8.0, 0.4, cfg, old_windows=windows)
+    assert (search.closure is not None) == found
+    plain = search_loop_closure(local, old, centre, 8.0, 0.4, cfg).closure
+    assert plain is not None
+    np.testing.assert_allclose(plain.correction, [-5.0, 0.0, 0.0], atol=0.02)
+
+
 def test_refine_keeps_an_unconstrained_direction_inside_the_window():
     """Two parallel walls (a corridor) fix the offset and rotation but not the position along
     them; with slightly inconsistent fitted angles the plain least squares moved metres along

@@ -484,6 +484,7 @@ def search_loop_closure(
     n_rotations: int = 3,
     n_peaks: int = 4,
     window_prior: bool = False,
+    old_windows: tuple[FloatArray, FloatArray] | None = None,
 ) -> LoopSearch:
     """Search, verify and refine a correction of ``local`` onto ``old`` (module docstring).
 
@@ -502,6 +503,12 @@ def search_loop_closure(
         (:func:`_refine`): parallel pairs then keep the position along them near the window
         instead of sliding out of it (the front end's relocalisation, whose window is centred
         on the odometry prediction).
+    old_windows : (ndarray, ndarray), shape (M,) each, optional
+        Each old line's own window half-widths (m, rad), from the path since it was seen (the
+        search window is then the widest of them).  A hypothesis must lie within the window
+        of the old lines it pairs (the median of theirs), not only within the window of the
+        oldest line in reach: the drift since the walls it matches were seen bounds the
+        correction.
 
     Returns
     -------
@@ -521,6 +528,15 @@ def search_loop_closure(
                 local, old, c, peak, config, (window_xy, window_theta) if window_prior else None
             )
             if np.hypot(corr[0], corr[1]) > window_xy * 1.5 or abs(corr[2]) > window_theta * 1.5:
+                continue
+            if (
+                old_windows is not None
+                and j.size
+                and (
+                    np.hypot(corr[0], corr[1]) > np.median(old_windows[0][j])
+                    or abs(corr[2]) > np.median(old_windows[1][j])
+                )
+            ):
                 continue
             hyps.append(_Hypothesis(corr, i, j, float(w.sum()), old.alpha[j], w, config))
     if not hyps:

@@ -440,6 +440,16 @@ class LoopClosureConfig:
     window_xy_per_m, window_theta_per_m : float
         Search half-widths per metre of path since the old landmarks were seen.
     min_window_xy_m, min_window_theta_rad, max_window_xy_m, max_window_theta_rad : float
+        ``max_window_xy_m``: the front end's drift with loop closing off, against the best
+        runs' trajectories, stayed under 3.1 m (99th percentile) over every 10-400 m of path
+        on Intel, ACES and fr079 (largest 6.8 m, one Intel stretch; 2026-11-29).  Wider
+        windows mostly admit aliases: fr079's repeating rooms offered 5-13 m corrections where
+        well under 1 m was needed.
+    window_of_pairs : bool
+        A hypothesis must lie within the window of the old lines it pairs (the median of
+        their windows), not only within the search window (that of the oldest line in
+        reach): where the local lines match walls seen 20 m ago, a 9 m correction is not
+        allowed because a wall in reach was seen 200 m ago.
     cell_m : float
         Translation grid of the vote.
     angle_tolerance_rad, offset_tolerance_m : float
@@ -503,8 +513,9 @@ class LoopClosureConfig:
     window_theta_per_m: float = 0.005
     min_window_xy_m: float = 0.5
     min_window_theta_rad: float = 0.05
-    max_window_xy_m: float = 10.0
+    max_window_xy_m: float = 5.0
     max_window_theta_rad: float = 0.5
+    window_of_pairs: bool = True
     cell_m: float = 0.1
     angle_tolerance_rad: float = 0.04
     offset_tolerance_m: float = 0.15

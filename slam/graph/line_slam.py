@@ -1025,6 +1025,9 @@ class LineSlam:
             )
             d_old = self._path - self._kf_path.data[last]
             win_xy = np.clip(lcc.window_xy_per_m * d_old, lcc.min_window_xy_m, lcc.max_window_xy_m)
+            win_th = np.clip(
+                lcc.window_theta_per_m * d_old, lcc.min_window_theta_rad, lcc.max_window_theta_rad
+            )
             reach = cfg.association.max_range_m + win_xy
             near = candidate_landmarks(
                 x,
@@ -1036,14 +1039,10 @@ class LineSlam:
             )
             if near.size < lcc.min_matches:
                 return 0
-            # the window: what the oldest candidate allows (capped)
-            d = float(np.max(d_old[near]))
-            wxy = float(np.clip(lcc.window_xy_per_m * d, lcc.min_window_xy_m, lcc.max_window_xy_m))
-            wth = float(
-                np.clip(
-                    lcc.window_theta_per_m * d, lcc.min_window_theta_rad, lcc.max_window_theta_rad
-                )
-            )
+            # the window: what the oldest candidate allows (capped); a hypothesis must also lie
+            # within what the old lines it pairs allow (window_of_pairs)
+            wxy = float(np.max(win_xy[near]))
+            wth = float(np.max(win_th[near]))
             self.counters["loop_closure_attempts"] += 1
             search = search_loop_closure(
                 self._loop_lines(local),
@@ -1052,6 +1051,7 @@ class LineSlam:
                 wxy,
                 wth,
                 lcc,
+                old_windows=(win_xy[near], win_th[near]) if lcc.window_of_pairs else None,
             )
             found = search.closure
             if found is None:
