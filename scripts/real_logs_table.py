@@ -8,6 +8,10 @@ closures accepted / judged.  Prints a Markdown table.
 
     LINESLAM_DATA=/work/shared/datasets .venv/bin/python scripts/real_logs_table.py
     .venv/bin/python scripts/real_logs_table.py --logs aces --backend isam2 --backend batch
+    .venv/bin/python scripts/real_logs_table.py --backend batch --config batch10.toml
+
+``--config`` starts from a TOML run configuration (as ``lineslam slam --config``) instead of
+the defaults, e.g. ``[slam.solver] batch_interval = 10`` for a faster batch back-end.
 
 Runs one log after another (the times are only comparable on an otherwise idle machine).
 """
@@ -42,7 +46,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--logs", nargs="+", default=None, help="default: every catalogued log")
     parser.add_argument("--backend", action="append", choices=("isam2", "batch"))
+    parser.add_argument("--config", type=Path, default=None, help="TOML run configuration")
     args = parser.parse_args()
+    base = RunConfig() if args.config is None else RunConfig.from_toml(args.config)
     backends = args.backend or ["isam2"]
     names = args.logs or [n for n, d in load_catalog().items() if d.relations]
     rows = []
@@ -53,7 +59,7 @@ def main() -> None:
                 raise SystemExit(f"{name}: no relations file")
             relations = read_relations(resolved.relations)
             for backend in backends:
-                config = RunConfig()
+                config = base
                 kind = cast(Literal["batch", "isam2"], backend)
                 config = replace(config, slam=replace(config.slam, backend=kind))
                 out = Path(tmp) / f"{name}-{backend}"
