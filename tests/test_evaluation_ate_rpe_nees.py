@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from slam.errors import EvaluationError
-from slam.evaluation import align_se2, ate, distance_pairs, evaluate_results, pose_nees, rpe
+from slam.evaluation import (
+    align_se2,
+    ate,
+    distance_pairs,
+    evaluate_results,
+    pose_nees,
+    rpe,
+    rpe_errors,
+)
 from slam.geometry import pose_compose, pose_exp, pose_inverse
 from slam.io import Trajectory
 
@@ -65,6 +73,26 @@ def test_rpe_known_answer_for_a_scale_error():
         assert result.translation_m.n == (20 if not all_pairs else 96)
     pairs = distance_pairs(truth[:, :2], 5.0)
     assert pairs[0].tolist() == [0, 5] and pairs[-1].tolist() == [95, 100]
+
+
+def test_rpe_errors_are_the_pairs_behind_the_statistics():
+    """A heading drift of 0.01 rad per metre: over 5 m every relative pose is off by 0.05 rad;
+    rpe's statistics are those of the rows."""
+    n = 101
+    s = np.arange(n) * 1.0
+    truth = np.column_stack([s, np.zeros(n), np.zeros(n)])
+    estimate = np.zeros((n, 3))
+    for k in range(1, n):  # 1 m ahead, then a 0.01 rad turn
+        estimate[k] = pose_compose(estimate[k - 1], np.array([1.0, 0.0, 0.01]))
+    stamps = np.arange(n) * 0.5
+    e = rpe_errors(Trajectory(stamps, estimate), Trajectory(stamps, truth), 5.0, all_pairs=True)
+    assert e.shape == (96, 3)
+    np.testing.assert_allclose(e[:, 2], 0.05, atol=1e-12)
+    result = rpe(Trajectory(stamps, estimate), Trajectory(stamps, truth), 5.0, all_pairs=True)
+    t = np.hypot(e[:, 0], e[:, 1])
+    assert result.translation_m.max == pytest.approx(t.max())
+    assert result.translation_m.rmse == pytest.approx(np.sqrt(np.mean(t**2)))
+    assert result.rotation_deg.mean == pytest.approx(np.degrees(0.05))
 
 
 def test_rpe_ignores_a_global_rigid_motion(rng):

@@ -20,7 +20,7 @@ from slam.evaluation.relations_metric import (
     relations_within,
 )
 from slam.evaluation.report import EvaluationReport, evaluate_results
-from slam.evaluation.rpe import RpeResult, distance_pairs, rpe
+from slam.evaluation.rpe import RpeResult, distance_pairs, rpe, rpe_errors
 from slam.evaluation.stats import ErrorStats
 from slam.evaluation.timestamps import associate, match_timestamps
 
@@ -44,4 +44,5 @@ __all__ = [
     "relations_metric",
     "relations_within",
     "rpe",
+    "rpe_errors",
 ]

@@ -26,7 +26,7 @@ from slam.evaluation.timestamps import associate
 from slam.geometry import pose_between, pose_compose, pose_inverse, wrap_angle
 from slam.io.trajectory import Trajectory
 
-__all__ = ["RpeResult", "distance_pairs", "rpe"]
+__all__ = ["RpeResult", "distance_pairs", "rpe", "rpe_errors"]
 
 
 @dataclass(frozen=True)
@@ -93,6 +93,35 @@ def rpe(
     max_unmatched_fraction: float = 0.02,
 ) -> RpeResult:
     """RPE of ``estimate`` against ``ground_truth`` over ``delta_m`` of travelled path."""
+    error = rpe_errors(
+        estimate,
+        ground_truth,
+        delta_m,
+        all_pairs=all_pairs,
+        tolerance_s=tolerance_s,
+        max_unmatched_fraction=max_unmatched_fraction,
+    )
+    return RpeResult(
+        delta_m=float(delta_m),
+        all_pairs=all_pairs,
+        translation_m=ErrorStats.of(np.hypot(error[:, 0], error[:, 1])),
+        rotation_deg=ErrorStats.of(np.degrees(np.abs(wrap_angle(error[:, 2])))),
+    )
+
+
+def rpe_errors(
+    estimate: Trajectory,
+    ground_truth: Trajectory,
+    delta_m: float = 1.0,
+    *,
+    all_pairs: bool = False,
+    tolerance_s: float = 1e-5,
+    max_unmatched_fraction: float = 0.02,
+) -> NDArray[np.float64]:
+    """The relative pose errors ``E_ij`` of :func:`rpe`, one row ``(x, y, θ)`` per pair.
+
+    For statistics :class:`ErrorStats` does not give (percentiles, the worst pairs).
+    """
     i_est, i_ref, _ = associate(
         estimate,
         ground_truth,
@@ -106,10 +135,4 @@ def rpe(
         raise EvaluationError(f"the ground truth travels less than delta = {delta_m} m")
     rel_ref = pose_between(ref[pairs[:, 0]], ref[pairs[:, 1]])
     rel_est = pose_between(est[pairs[:, 0]], est[pairs[:, 1]])
-    error = pose_compose(pose_inverse(rel_ref), rel_est)
-    return RpeResult(
-        delta_m=float(delta_m),
-        all_pairs=all_pairs,
-        translation_m=ErrorStats.of(np.hypot(error[:, 0], error[:, 1])),
-        rotation_deg=ErrorStats.of(np.degrees(np.abs(wrap_angle(error[:, 2])))),
-    )
+    return np.asarray(pose_compose(pose_inverse(rel_ref), rel_est), dtype=np.float64)
