@@ -440,11 +440,11 @@ class LoopClosureConfig:
     window_xy_per_m, window_theta_per_m : float
         Search half-widths per metre of path since the old landmarks were seen.
     min_window_xy_m, min_window_theta_rad, max_window_xy_m, max_window_theta_rad : float
-        ``max_window_xy_m``: the front end's drift with loop closing off, against the best
-        runs' trajectories, stayed under 3.1 m (99th percentile) over every 10-400 m of path
-        on Intel, ACES and fr079 (largest 6.8 m, one Intel stretch; 2026-11-29).  Wider
-        windows mostly admit aliases: fr079's repeating rooms offered 5-13 m corrections where
-        well under 1 m was needed.
+        ``max_window_xy_m``: the front end's drift with loop closing off, against the default
+        runs' trajectories, stayed under 3.1 m (99th percentile) over every 10-200 m of path
+        on Intel, ACES and fr079, largest 3.4 m (``scripts/front_end_drift.py``,
+        2026-11-29).  Wider windows mostly admit aliases: fr079's repeating rooms offered
+        5-13 m corrections where well under 1 m was needed.
     window_of_pairs : bool
         A hypothesis must lie within the window of the old lines it pairs (the median of
         their windows), not only within the search window (that of the oldest line in
