@@ -89,7 +89,7 @@ def test_isam2_reaches_the_batch_solution(incremental):
     g, _, batch = incremental
     np.testing.assert_allclose(g.poses[:, :2], batch.poses[:, :2], atol=2e-3)
     # (each graph anchors its landmarks where it first saw them: compare the lines themselves)
-    # iSAM2 linearises up to relinearize_threshold (0.01) away from the estimate: sub-mm effects
+    # iSAM2 linearises up to its relinearisation thresholds away from the estimate
     np.testing.assert_allclose(wrap_angle(g.poses[:, 2] - batch.poses[:, 2]), 0.0, atol=3e-4)
     # (each graph anchors its landmarks where it first saw them: compare the lines themselves)
     np.testing.assert_allclose(g.landmarks_r_alpha, batch.landmarks_r_alpha, atol=2e-3)
@@ -146,7 +146,9 @@ def test_coarser_thresholds_trade_accuracy_for_fewer_rebuilds():
     src = synthetic_problem(80, seed=12).graph
     fine, coarse = (
         Isam2Solver(solver=GAUSSIAN),
-        Isam2Solver(Isam2Config(relinearize_threshold=0.1), GAUSSIAN),
+        Isam2Solver(
+            Isam2Config(relinearize_threshold_m=0.1, relinearize_threshold_rad=0.1), GAUSSIAN
+        ),
     )
     g_fine, g_coarse = feed(src, fine), feed(src, coarse)
     fine.optimize(g_fine)
@@ -157,6 +159,32 @@ def test_coarser_thresholds_trade_accuracy_for_fewer_rebuilds():
     err_fine = np.max(np.abs(g_fine.poses[:, :2] - batch.poses[:, :2]))
     err_coarse = np.max(np.abs(g_coarse.poses[:, :2] - batch.poses[:, :2]))
     assert err_fine < 2e-3 and err_fine <= err_coarse
+
+
+def test_exact_optimize_relinearises_to_the_batch_solution():
+    """With coarse thresholds iSAM2 leaves updates below them linear; ``optimize(exact=True)``
+    rebuilds it at the estimate until the Gauss-Newton step vanishes: the batch optimum."""
+    src = synthetic_problem(80, seed=12).graph
+    coarse = Isam2Config(relinearize_threshold_m=0.1, relinearize_threshold_rad=0.1)
+    linear, exact = Isam2Solver(coarse, GAUSSIAN), Isam2Solver(coarse, GAUSSIAN)
+    g_linear, g_exact = feed(src, linear), feed(src, exact)
+    linear.optimize(g_linear)
+    exact.optimize(g_exact, exact=True)
+    assert linear.stats.final_relinearizations == 0
+    assert 1 <= exact.stats.final_relinearizations <= coarse.final_relinearizations
+    assert exact.stats.final_step < coarse.final_step_tolerance
+    batch = feed(src, None)
+    BatchSolver(GAUSSIAN).solve(batch)
+    err_linear = np.max(np.abs(g_linear.poses[:, :2] - batch.poses[:, :2]))
+    err_exact = np.max(np.abs(g_exact.poses[:, :2] - batch.poses[:, :2]))
+    assert err_exact < 1e-4 < err_linear
+    np.testing.assert_allclose(
+        g_exact.landmarks_r_alpha, batch.landmarks_r_alpha, atol=coarse.final_step_tolerance
+    )
+    # the restarted iSAM2 holds the graph once: one block per keyframe, odometry, the prior
+    factors = exact.isam.getFactorsUnsafe()
+    n_factors = sum(1 for k in range(factors.size()) if factors.exists(k))
+    assert n_factors == g_exact.n_poses + g_exact.n_odometry + 1
 
 
 def test_landmark_fusion_rewires_isam2_blocks():

@@ -324,3 +324,49 @@ def test_rejected_loop_closure_leaves_graph_and_backend_untouched(loop_runs):
     other = LoopClosure(found.correction + [0.5, 0.0, 0.0], found.pairs, 10.0, 1.0)
     assert slam._repeated_rejection(other, pose + 1) is None
     assert slam._repeated_rejection(found, pose + lcc.local_keyframes) is None
+
+
+@pytest.mark.parametrize("max_pair_chi2", [np.inf, 1000.0])
+def test_closure_with_a_pair_left_metres_apart_is_rejected_whole(max_pair_chi2):
+    """Three right pairs and one pairing a wall with a perpendicular one: the fraction rule
+    (3 of 4 explained) accepts it, ``judge_max_pair_chi2`` rejects it whole."""
+    from dataclasses import replace
+
+    from slam.frontend.loop_closure import LoopClosure
+
+    world = corridor_loop(piece=3.0, door=1.0)
+    path = loop_path(16, 8, 0.4, laps=1.25)
+    run = simulate_run(world, path, seed=3, motion=MOTION)
+    slam, _, _ = run_slam(run, SlamConfig(motion=MOTION, **EXACT_LINES))
+    g = slam.graph
+    # right pairs: fusion merges of the run, undone (each a wall seen as two landmarks)
+    records = [
+        r
+        for r in g.merge_log
+        if not r.undo and not g.landmark_alive[r.drop] and g.landmark_alive[r.keep]
+    ]
+    records = [r for r in records if np.count_nonzero(g.factor_landmark == r.keep) > r.factors.size]
+    right = records[-3:]
+    assert len(right) == 3
+    for rec in right:
+        g.unmerge(rec)
+    slam._recompute_info(np.array([i for r in right for i in (r.keep, r.drop)]))
+    slam.backend.update(g)
+    slam.backend.optimize(g)
+    slam._extents = g.landmark_extents()
+    # the wrong pair: a well-observed landmark and one about 90° from it
+    counts = g.observation_counts()
+    used = {i for r in right for i in (r.keep, r.drop)}
+    alive = [int(j) for j in np.flatnonzero(g.landmark_alive) if j not in used and counts[j] >= 3]
+    alpha = g.landmarks_r_alpha[:, 1]
+    a = alive[0]
+    b = next(j for j in alive if abs(np.cos(alpha[j] - alpha[a])) < 0.2)
+    local = np.array([r.drop for r in right] + [a])
+    old = np.array([r.keep for r in right] + [b])
+    lcc = replace(slam.config.loop_closure, judge_max_pair_chi2=max_pair_chi2)
+    slam.config = replace(slam.config, loop_closure=lcc)
+    found = LoopClosure(np.zeros(3), [(k, k) for k in range(4)], 10.0, 1.0)
+    accepted = slam._apply_closure(local, old, found, g.n_poses - 1)
+    entry = slam._closure_log[-1]
+    assert entry["consistent_pairs"] == 3 and entry["worst_pair_chi2"] > 1000.0
+    assert accepted == (1 if max_pair_chi2 == np.inf else 0)

@@ -88,11 +88,8 @@ class Isam2Backend:
 
         Used after a large correction of it, e.g. a loop closure spread over the trajectory.
         """
-        stats = self.solver.stats
-        self.solver = Isam2Solver(self.solver.config, self.solver.solver)
-        self.solver.stats = stats
         self.resets += 1
-        self.update(graph)
+        self.solver.restart(graph)
         self.estimate_moved = True
 
     def update(self, graph: LineGraph) -> None:
@@ -103,9 +100,13 @@ class Isam2Backend:
         self._last_full = full
 
     def optimize(self, graph: LineGraph, max_updates: int | None = None) -> dict[str, Any]:
-        """Extra updates until iSAM2 settles (at most ``max_updates``, default the config's)."""
+        """Extra updates until iSAM2 settles (at most ``max_updates``, default the config's).
+
+        Without ``max_updates`` (the final convergence) every factor is then relinearised at
+        the estimate until converged (``Isam2Solver.optimize(exact=True)``).
+        """
         t0 = time.perf_counter()
-        runs = self.solver.optimize(graph, max_updates)
+        runs = self.solver.optimize(graph, max_updates, exact=max_updates is None)
         self.optimize_updates += runs
         self.estimate_moved = True
         return {"updates": runs, "time_s": time.perf_counter() - t0}
@@ -139,6 +140,8 @@ class Isam2Backend:
             "variables_relinearized": s.variables_relinearized,
             "full_refreshes": s.full_refreshes,
             "resets": self.resets,
+            "final_relinearizations": s.final_relinearizations,
+            "final_step": s.final_step,
             "time_s": dict(s.time_s),
         }
 

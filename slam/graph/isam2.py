@@ -10,7 +10,7 @@ Design (measured in ``scripts/bench_graph.py``; see ``docs/graph.md``):
   ``gtsam.LinearContainerFactor`` (native C++): one Python object per keyframe instead of per
   line, and iSAM2 never calls back into Python.
 * **Relinearisation policy.**  A ``LinearContainerFactor`` keeps its Jacobian; when iSAM2
-  moves ``θ`` of one of its variables (its own relinearisation, ``relinearize_threshold``) it
+  moves ``θ`` of one of its variables (its own relinearisation, ``relinearize_threshold_*``) it
   only shifts the right-hand side.  After every update whose result reports relinearised
   variables, ``θ`` is read back (one C++ call) and every keyframe block with a variable that
   moved since the block was built (beyond ``relin_*`` thresholds; default: any move) is queued;
@@ -77,6 +77,10 @@ class Isam2Stats:
         Sum of iSAM2's own relinearised-variable counts.
     full_refreshes : int
         Whole-estimate read-backs.
+    final_relinearizations : int
+        Rebuilds of iSAM2 at the estimate by ``optimize(exact=True)``.
+    final_step : float
+        The largest component of the last such rebuild's step (nan before any).
     time_s : dict
         ``build`` (numpy + factor objects), ``update`` (GTSAM), ``readback``.
     """
@@ -87,6 +91,8 @@ class Isam2Stats:
     blocks_merged: int = 0
     variables_relinearized: int = 0
     full_refreshes: int = 0
+    final_relinearizations: int = 0
+    final_step: float = float("nan")
     time_s: dict[str, float] = field(
         default_factory=lambda: {"build": 0.0, "update": 0.0, "readback": 0.0}
     )
@@ -105,12 +111,20 @@ class Isam2Solver:
     def __init__(self, config: Isam2Config | None = None, solver: SolverConfig | None = None):
         self.config = config or Isam2Config()
         self.solver = solver or SolverConfig()
+        self.stats = Isam2Stats()
+        self._start()
+
+    def _start(self) -> None:
+        """A new ``gtsam.ISAM2`` holding nothing (the statistics carry on)."""
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(self.config.relinearize_threshold)
+        thresholds = gtsam.ISAM2ThresholdMap()
+        m, rad = self.config.relinearize_threshold_m, self.config.relinearize_threshold_rad
+        thresholds.insert(("x", np.array([m, m, rad])))  # Pose2 tangent: (x, y, θ)
+        thresholds.insert(("l", np.array([m, rad])))  # anchored landmark chart: (ρ, φ)
+        params.setRelinearizeThreshold(thresholds)
         params.relinearizeSkip = self.config.relinearize_skip
         params.enablePartialRelinearizationCheck = self.config.partial_relinearization_check
         self.isam = gtsam.ISAM2(params)
-        self.stats = Isam2Stats()
         self._n_poses = 0
         self._n_landmarks = 0
         self._n_odometry = 0
@@ -344,10 +358,26 @@ class Isam2Solver:
             v = np.asarray(self.isam.calculateEstimatePoint2(key), dtype=float)
             graph.landmarks[j] = (v[0], float(wrap_angle(v[1])))
 
-    def optimize(self, graph: LineGraph, max_updates: int | None = None) -> int:
+    def restart(self, graph: LineGraph) -> None:
+        """A new iSAM2 linearised at ``graph``'s estimate (every factor), solved, read back.
+
+        The statistics carry on.  Used after a large change of the estimate from outside (a
+        loop closure spread over the trajectory) and by :meth:`optimize`.
+        """
+        self._start()
+        self.update(graph)  # every variable is new: the whole estimate is read back
+
+    def optimize(
+        self, graph: LineGraph, max_updates: int | None = None, exact: bool = False
+    ) -> int:
         """Extra updates (no new factors) until iSAM2 and the block policy settle.
 
-        Returns the number of updates run.
+        With ``exact``, iSAM2 is then rebuilt at the estimate (:meth:`restart`: every factor
+        relinearised, one Gauss-Newton step) until the step's largest component is below
+        ``final_step_tolerance``, ``final_relinearizations`` times at most.  Updates below the
+        relinearisation thresholds stay linear in iSAM2; they do not in the result.
+
+        Returns the number of updates run (restarts not counted).
         """
         n = self.config.final_updates if max_updates is None else max_updates
         runs = 0
@@ -358,6 +388,21 @@ class Isam2Solver:
             if int(result.getVariablesRelinearized()) == 0 and not self._pending:
                 break
         self.read_all(graph)
+        if not exact:
+            return runs
+        for _ in range(self.config.final_relinearizations):
+            poses, landmarks = graph.poses.copy(), graph.landmarks.copy()
+            self.restart(graph)
+            d_poses, d_lms = graph.poses - poses, graph.landmarks - landmarks
+            d_poses[:, 2] = np.asarray(wrap_angle(d_poses[:, 2]))
+            d_lms[:, 1] = np.asarray(wrap_angle(d_lms[:, 1]))
+            self.stats.final_relinearizations += 1
+            self.stats.final_step = max(
+                float(np.max(np.abs(d_poses), initial=0.0)),
+                float(np.max(np.abs(d_lms), initial=0.0)),
+            )
+            if self.stats.final_step < self.config.final_step_tolerance:
+                break
         return runs
 
     # -- covariances -----------------------------------------------------------------------

@@ -866,6 +866,16 @@ class LineSlam:
         ``audit_max_median_chi2``: after a wrong merge the optimum sits on one side and the
         other side's measurements are all off.
         """
+        worst = self._merge_chi2(rec)
+        if worst is None:
+            return None
+        return worst <= self.config.fusion.audit_max_median_chi2
+
+    def _merge_chi2(self, rec: Any) -> float | None:
+        """The larger of a merge's two sides' median whitened squared residuals.
+
+        None when no longer checkable; see :meth:`_merge_consistent`.
+        """
         g = self.graph
         if rec.undo or not g.landmark_alive[rec.keep] or g.landmark_alive[rec.drop]:
             return None
@@ -885,8 +895,7 @@ class LineSlam:
         )
         c2 = np.sum(ew**2, axis=1)
         side = np.isin(f_keep, rec.factors)
-        limit = self.config.fusion.audit_max_median_chi2
-        return bool(np.median(c2[side]) <= limit and np.median(c2[~side]) <= limit)
+        return float(max(np.median(c2[side]), np.median(c2[~side])))
 
     def _audit(self, records: list[Any]) -> int:
         """Undo the merges among ``records`` that the estimate does not explain.
@@ -1166,12 +1175,14 @@ class LineSlam:
 
         judged = self._judge.solve(g, lcc.judge_iterations, free_from=free_from, stop=hopeless)
         self.time_s["judge"] += time.perf_counter() - t0
-        verdict = [self._merge_consistent(r) for r in records]
-        good = sum(v is True for v in verdict)
+        chi2 = [c for c in (self._merge_chi2(r) for r in records) if c is not None]
+        good = sum(c <= self.config.fusion.audit_max_median_chi2 for c in chi2)
+        worst = max(chi2, default=0.0)
         entry: dict[str, Any] = {
             "keyframe": int(pose),
             "pairs": len(done),
             "consistent_pairs": good,
+            "worst_pair_chi2": worst,
             "correction": [float(v) for v in found.correction],
             "single_direction": bool(found.single_direction),
             "score": float(found.score),
@@ -1180,8 +1191,10 @@ class LineSlam:
             "judge_stop": judged.reason,
             "judge_free_from": free_from,
         }
-        if good >= max(lcc.min_matches - 1, 2) and good >= lcc.min_consistent_fraction * len(
-            records
+        if (
+            good >= max(lcc.min_matches - 1, 2)
+            and good >= lcc.min_consistent_fraction * len(records)
+            and worst <= lcc.judge_max_pair_chi2
         ):
             # explained (up to a few wrong pairs, which are undone)
             self._audit(records)
