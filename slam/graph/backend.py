@@ -90,6 +90,7 @@ class Isam2Backend:
         """
         self.resets += 1
         self.solver.restart(graph)
+        self._last_full = self.solver.stats.full_refreshes
         self.estimate_moved = True
 
     def update(self, graph: LineGraph) -> None:

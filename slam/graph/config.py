@@ -245,10 +245,10 @@ class Isam2Config:
     relinearize_threshold_m, relinearize_threshold_rad : float
         iSAM2's own thresholds on the update of a variable (in its tangent space) above which
         the variable is relinearised: metres for a pose's translation and a landmark's ``ρ``,
-        radians for a pose's heading and a landmark's ``φ``.  The final
-        :meth:`~slam.graph.backend.Isam2Backend.optimize` relinearises everything at the
-        estimate until the step is below ``final_step_tolerance``, so they trade the accuracy
-        of the online estimate (not of the final one) for time.  But the online estimate
+        radians for a pose's heading and a landmark's ``φ``.  With ``final_relinearizations``
+        the final :meth:`~slam.graph.backend.Isam2Backend.optimize` relinearises everything
+        at the estimate until the step is below ``final_step_tolerance``, so they trade the
+        accuracy of the online estimate (not of the final one) for time.  But the online estimate
         decides which loop closures pass: on Intel 0.03 / 0.03 took 117 s against 163 s with
         0.01 / 0.01 (iSAM2's own time 34 s against 61 s), while fr079 went to 1.08 m and the
         simulated loop of ``tests/test_graph_sim.py`` accepted two wrong closures with any
@@ -268,8 +268,12 @@ class Isam2Config:
         After those, the final :meth:`~slam.graph.backend.Isam2Backend.optimize` rebuilds
         iSAM2 at the estimate (every factor relinearised: one Gauss-Newton step) at most this
         many times, until the largest step component is below ``final_step_tolerance``.
-        0: the final estimate keeps iSAM2's linear updates below the relinearisation
-        thresholds.
+        0 (default): the final estimate keeps iSAM2's linear updates below the
+        relinearisation thresholds.  With the default thresholds the rebuilds buy little: on
+        the simulated loop of ``tests/test_graph_sim.py`` ATE 2.3 → 1.7 mm; on Intel, 5 per
+        ``optimize`` call, 25 rebuilds cost ~9 s and the step was still 1.8 mm (with the
+        Cauchy kernel's weights refreshed at each rebuild the iteration converges linearly),
+        relations error 0.0308 against 0.0292 m.  Meant for coarser thresholds.
     final_step_tolerance : float
         Metres or radians, any component of any variable.
     relinearize_skip : int
@@ -290,7 +294,7 @@ class Isam2Config:
     full_refresh_variables: int = 200
     full_refresh_interval: int = 50
     final_updates: int = 20
-    final_relinearizations: int = 5
+    final_relinearizations: int = 0
     final_step_tolerance: float = 1e-4
     relinearize_skip: int = 10
     partial_relinearization_check: bool = True
