@@ -139,7 +139,8 @@ def config_from_dict(cls: type[T], data: dict[str, Any], _where: str = "") -> T:
     """Build the frozen dataclass ``cls`` from a nested ``dict``.
 
     Missing keys take the dataclass defaults; unknown keys raise :class:`ConfigError` (a typo
-    in a configuration file must not be silently ignored).  Validation happens in the
+    in a configuration file must not be silently ignored), naming the replacement of a key the
+    class lists in its ``RENAMED_KEYS`` (old name → what to use instead).  Validation happens in the
     dataclass's own ``__post_init__``.
     """
     if not (dataclasses.is_dataclass(cls) and isinstance(cls, type)):
@@ -149,7 +150,12 @@ def config_from_dict(cls: type[T], data: dict[str, Any], _where: str = "") -> T:
     unknown = set(data) - names
     if unknown:
         prefix = f"[{_where}] " if _where else ""
-        raise ConfigError(f"{prefix}unknown configuration key(s): {', '.join(sorted(unknown))}")
+        renamed: dict[str, str] = getattr(cls, "RENAMED_KEYS", {})
+        hints_renamed = [f"{k} is now {renamed[k]}" for k in sorted(unknown) if k in renamed]
+        hint = f" ({'; '.join(hints_renamed)})" if hints_renamed else ""
+        raise ConfigError(
+            f"{prefix}unknown configuration key(s): {', '.join(sorted(unknown))}{hint}"
+        )
     kwargs = {}
     for key, value in data.items():
         where = f"{_where}.{key}" if _where else key

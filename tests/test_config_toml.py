@@ -99,3 +99,17 @@ def test_sensor_noise_override_keeps_the_bearing_error_model():
     assert run.linefit.noise.sigma_range_m == 0.02
     with pytest.raises(ConfigError):
         SensorNoiseConfig(bearing_error="both")
+
+
+def test_a_renamed_key_names_its_replacement(tmp_path):
+    from slam.config import RunConfig
+
+    path = tmp_path / "old.toml"
+    path.write_text("[slam.isam2]\nrelinearize_threshold = 0.02\n")
+    with pytest.raises(ConfigError, match=r"old\.toml.*relinearize_threshold is now .*_m and "):
+        RunConfig.from_toml(path)
+    path.write_text(
+        "[slam.isam2]\nrelinearize_threshold_m = 0.02\nrelinearize_threshold_rad = 0.02\n"
+    )
+    isam2 = RunConfig.from_toml(path).slam.isam2
+    assert (isam2.relinearize_threshold_m, isam2.relinearize_threshold_rad) == (0.02, 0.02)

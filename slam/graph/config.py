@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -285,6 +285,10 @@ class Isam2Config:
         iSAM2's ``enablePartialRelinearizationCheck``: only the top of the tree is checked for
         variables to relinearise (cheap; deep variables may keep large updates).
     """
+
+    RENAMED_KEYS: ClassVar[dict[str, str]] = {
+        "relinearize_threshold": "relinearize_threshold_m and relinearize_threshold_rad"
+    }
 
     relinearize_threshold_m: float = 0.01
     relinearize_threshold_rad: float = 0.01
