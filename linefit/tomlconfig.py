@@ -139,9 +139,9 @@ def config_from_dict(cls: type[T], data: dict[str, Any], _where: str = "") -> T:
     """Build the frozen dataclass ``cls`` from a nested ``dict``.
 
     Missing keys take the dataclass defaults; unknown keys raise :class:`ConfigError` (a typo
-    in a configuration file must not be silently ignored), naming the replacement of a key the
-    class lists in its ``RENAMED_KEYS`` (old name → what to use instead).  Validation happens in the
-    dataclass's own ``__post_init__``.
+    in a configuration file must not be silently ignored); a key the class lists in its
+    ``RENAMED_KEYS`` (old name → what became of it) gets that said in the message.
+    Validation happens in the dataclass's own ``__post_init__``.
     """
     if not (dataclasses.is_dataclass(cls) and isinstance(cls, type)):
         raise ConfigError(f"{cls!r} is not a dataclass type")
@@ -151,7 +151,7 @@ def config_from_dict(cls: type[T], data: dict[str, Any], _where: str = "") -> T:
     if unknown:
         prefix = f"[{_where}] " if _where else ""
         renamed: dict[str, str] = getattr(cls, "RENAMED_KEYS", {})
-        hints_renamed = [f"{k} is now {renamed[k]}" for k in sorted(unknown) if k in renamed]
+        hints_renamed = [f"{k}: {renamed[k]}" for k in sorted(unknown) if k in renamed]
         hint = f" ({'; '.join(hints_renamed)})" if hints_renamed else ""
         raise ConfigError(
             f"{prefix}unknown configuration key(s): {', '.join(sorted(unknown))}{hint}"

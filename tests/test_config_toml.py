@@ -106,7 +106,12 @@ def test_a_renamed_key_names_its_replacement(tmp_path):
 
     path = tmp_path / "old.toml"
     path.write_text("[slam.isam2]\nrelinearize_threshold = 0.02\n")
-    with pytest.raises(ConfigError, match=r"old\.toml.*relinearize_threshold is now .*_m and "):
+    with pytest.raises(
+        ConfigError, match=r"old\.toml.*relinearize_threshold: split into .*_m and "
+    ):
+        RunConfig.from_toml(path)
+    path.write_text("[slam.loop_closure]\nmax_chi2_per_factor = 6.0\n")
+    with pytest.raises(ConfigError, match=r"max_chi2_per_factor: removed .*delete the line"):
         RunConfig.from_toml(path)
     path.write_text(
         "[slam.isam2]\nrelinearize_threshold_m = 0.02\nrelinearize_threshold_rad = 0.02\n"

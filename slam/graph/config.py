@@ -287,7 +287,7 @@ class Isam2Config:
     """
 
     RENAMED_KEYS: ClassVar[dict[str, str]] = {
-        "relinearize_threshold": "relinearize_threshold_m and relinearize_threshold_rad"
+        "relinearize_threshold": "split into relinearize_threshold_m and relinearize_threshold_rad"
     }
 
     relinearize_threshold_m: float = 0.01
@@ -538,6 +538,11 @@ class LoopClosureConfig:
         evidence.  (A rejected candidate leaves the graph as it was, so the repeat would be
         judged on the same estimate.)
     """
+
+    RENAMED_KEYS: ClassVar[dict[str, str]] = {
+        "max_chi2_per_factor": "removed (it had no effect; the verdict is judge_* and "
+        "min_consistent_fraction): delete the line"
+    }
 
     enabled: bool = True
     interval_keyframes: int = 5
