@@ -234,3 +234,19 @@ def test_landmark_fusion_rewires_isam2_blocks():
         g.landmarks_r_alpha[dup_of], batch.landmarks_r_alpha[dup_of], atol=2e-3
     )
     assert not g.landmark_alive[dup] and np.all(g.factor_landmark != dup)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"relinearize_threshold_m": 0.0},
+        {"relinearize_threshold_rad": float("nan")},
+        {"final_relinearizations": -1},
+        {"final_step_tolerance": 0.0},
+    ],
+)
+def test_invalid_isam2_settings_are_rejected(kwargs):
+    from linefit import ConfigError
+
+    with pytest.raises(ConfigError, match=next(iter(kwargs))):
+        Isam2Config(**kwargs)

@@ -161,7 +161,13 @@ def test_top_cells_are_the_largest_in_order_with_ties_by_index():
 
 @pytest.mark.parametrize(
     "kwargs",
-    [{"large_correction_m": -0.1}, {"large_correction_rad": float("nan")}, {"local_keyframes": 0}],
+    [
+        {"large_correction_m": -0.1},
+        {"large_correction_rad": float("nan")},
+        {"local_keyframes": 0},
+        {"judge_max_pair_chi2": 0.0},
+        {"judge_max_pair_chi2": float("nan")},
+    ],
 )
 def test_invalid_loop_closure_settings_are_rejected(kwargs):
     from linefit import ConfigError
