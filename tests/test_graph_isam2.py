@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from linefit.line import wrap_angle
+from slam.errors import EstimationError
 from slam.geometry import line_to_parent, pose_compose
 from slam.graph import (
     BatchSolver,
@@ -250,3 +251,41 @@ def test_invalid_isam2_settings_are_rejected(kwargs):
 
     with pytest.raises(ConfigError, match=next(iter(kwargs))):
         Isam2Config(**kwargs)
+
+
+def test_joint_pose_covariance_of_both_backends_matches_the_marginals(incremental):
+    """Two poses' joint covariance: iSAM2's and the batch back-end's equal GTSAM's marginals;
+    the batch back-end compounds poses added since its last solve along their odometry, which
+    is exact when nothing else constrains them."""
+    from slam.graph import SlamConfig
+    from slam.graph.backend import BatchBackend, Isam2Backend
+
+    g, solver, batch = incremental
+    config = SlamConfig(backend="batch", solver=GAUSSIAN)
+    pair = np.array([20, 140])
+    keys = gtsam.KeyVector(keys_of("x", pair))
+    P_exact = BatchSolver(GAUSSIAN).marginals(batch).jointMarginalCovariance(keys).fullMatrix()
+    backend_b = BatchBackend(config)
+    close_covariances(backend_b.joint_pose_covariance(batch, pair), P_exact, 1e-6)
+    backend_i = Isam2Backend(SlamConfig(solver=GAUSSIAN))
+    backend_i.solver = solver  # the fixture's iSAM2, fed pose by pose
+    close_covariances(backend_i.joint_pose_covariance(g, pair), P_exact, 0.01)
+    # three poses more, on odometry only and not solved: compounded from pose 149
+    longer = feed(synthetic_problem(150, seed=11).graph, None)
+    BatchSolver(GAUSSIAN).solve(longer)
+    backend_b = BatchBackend(config)
+    backend_b.joint_pose_covariance(longer, pair)  # marginals of the 150 solved poses
+    step, Q = np.array([0.5, 0.1, 0.2]), np.diag([0.01, 0.004, 0.002])
+    for i in range(150, 153):
+        longer.add_pose(pose_compose(longer.poses[i - 1], step))
+        longer.add_odometry(i - 1, i, step, Q)
+    new_pair = np.array([20, 152])
+    P_exact = (
+        BatchSolver(GAUSSIAN)
+        .marginals(longer)
+        .jointMarginalCovariance(gtsam.KeyVector(keys_of("x", new_pair)))
+        .fullMatrix()
+    )
+    close_covariances(backend_b.joint_pose_covariance(longer, new_pair), P_exact, 1e-6)
+    with pytest.raises(EstimationError, match="distinct"):
+        backend_b.joint_pose_covariance(longer, np.array([3, 3]))

@@ -22,6 +22,7 @@ from slam.graph import (
     FusionConfig,
     KeyframeConfig,
     LineSlam,
+    LoopClosureConfig,
     MotionNoiseConfig,
     SlamConfig,
     SlamResult,
@@ -81,6 +82,28 @@ def test_loop_closing_beats_odometry_by_far(loop_runs):
     early = np.unique(g.factor_landmark[g.factor_pose < 5])
     late_poses = g.factor_pose[np.isin(g.factor_landmark, early)]
     assert late_poses.max() > 0.8 * g.n_poses
+
+
+def test_loop_closures_lie_within_the_marginals_gate(loop_runs):
+    """With the true noise models the back-end's marginals are right: every accepted closure's
+    correction is a plausible draw (squared Mahalanobis distance below χ²(3)'s 99.9 % point),
+    and a gate below all of them turns every hypothesis away before it is judged."""
+    _, _, run, out = loop_runs
+    for backend in ("isam2", "batch"):
+        slam = out[backend][0]
+        accepted = [e for e in slam._closure_log if e["accepted"]]
+        assert accepted
+        assert all(0.0 <= e["correction_chi2"] < 16.27 for e in accepted)
+    tight = min(e["correction_chi2"] for e in out["isam2"][0]._closure_log if e["accepted"])
+    config = SlamConfig(
+        motion=MOTION,
+        **EXACT_LINES,
+        loop_closure=LoopClosureConfig(max_correction_chi2=0.5 * tight),
+    )
+    slam, _, _ = run_slam(run, config)
+    assert slam.counters["loop_closures"] == 0
+    assert slam.counters["loop_closures_gated"] >= 3
+    assert all("gate" in e["reason"] for e in slam._closure_log if "correction_chi2" in e)
 
 
 def test_map_lines_match_the_true_walls(loop_runs):

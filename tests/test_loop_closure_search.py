@@ -10,6 +10,7 @@ from slam.frontend.loop_closure import (
     _refine,
     _samples_near_grid,
     _top_cells,
+    correction_chi2,
     search_loop_closure,
 )
 from slam.graph.config import LoopClosureConfig, RelocalisationConfig
@@ -167,6 +168,8 @@ def test_top_cells_are_the_largest_in_order_with_ties_by_index():
         {"local_keyframes": 0},
         {"judge_max_pair_chi2": 0.0},
         {"judge_max_pair_chi2": float("nan")},
+        {"max_correction_chi2": 0.0},
+        {"max_correction_chi2": float("nan")},
     ],
 )
 def test_invalid_loop_closure_settings_are_rejected(kwargs):
@@ -174,3 +177,51 @@ def test_invalid_loop_closure_settings_are_rejected(kwargs):
 
     with pytest.raises(ConfigError, match=next(iter(kwargs))):
         LoopClosureConfig(**kwargs)
+
+
+def _exp(xi: np.ndarray) -> np.ndarray:
+    """SE(2) exponential ``(vx, vy, ω) → (x, y, θ)``."""
+    vx, vy, w = xi
+    if abs(w) < 1e-12:
+        return np.array([vx, vy, w])
+    s, c = np.sin(w), np.cos(w)
+    return np.array([(s * vx - (1 - c) * vy) / w, ((1 - c) * vx + s * vy) / w, w])
+
+
+def test_correction_chi2_is_chi2_distributed_monte_carlo():
+    """Perturb two poses by right perturbations drawn from their joint covariance (correlated);
+    the correction that moves the newer pose to the perturbed relative pose (about its own
+    position, the old pose held) has the χ²(3) distribution under ``correction_chi2``."""
+    from slam.geometry import pose_between, pose_compose
+
+    rng = np.random.default_rng(5)
+    x_old = np.array([2.0, -1.0, 0.7])
+    x_now = np.array([14.0, 6.0, -2.3])
+    L = rng.normal(size=(6, 6)) * np.array([0.02, 0.02, 0.004, 0.05, 0.05, 0.01])[:, None]
+    P = L @ L.T + np.diag([1e-4, 1e-4, 1e-6, 4e-4, 4e-4, 1e-5])
+    C = np.linalg.cholesky(P)
+    n = 4000
+    d2 = np.empty(n)
+    for k in range(n):
+        xi = C @ rng.normal(size=6)
+        r = pose_between(pose_compose(x_old, _exp(xi[:3])), pose_compose(x_now, _exp(xi[3:])))
+        x_corr = pose_compose(x_old, r)  # where the perturbed relative pose puts the new pose
+        t = np.r_[x_corr[:2] - x_now[:2], x_corr[2] - x_now[2]]
+        d2[k] = correction_chi2(x_old, x_now, P, t)
+    # mean of n χ²(3) draws: 3 ± 3·√(6/n)
+    assert abs(d2.mean() - 3.0) < 3.0 * np.sqrt(6.0 / n)
+    assert abs(np.mean(d2 > 7.815) - 0.05) < 3.0 * np.sqrt(0.05 * 0.95 / n)  # 95 % quantile
+
+
+def test_correction_chi2_known_answers():
+    """The old pose exact: the correction, in the new pose's frame, against its covariance."""
+    Q = np.diag([0.04, 0.01, 0.0025])
+    P = np.zeros((6, 6))
+    P[3:, 3:] = Q
+    x_now = np.array([1.0, 2.0, np.pi / 2])
+    # 0.2 m along world x is 0.2 m to the robot's right (its −y): (0.2/0.1)² = 4
+    assert correction_chi2(np.zeros(3), x_now, P, np.array([0.2, 0.0, 0.0])) == pytest.approx(4.0)
+    assert correction_chi2(np.zeros(3), x_now, P, np.array([0.0, 0.0, 0.1])) == pytest.approx(4.0)
+    # a singular covariance: no correction is possible, none needed is
+    assert correction_chi2(np.zeros(3), x_now, np.zeros((6, 6)), np.array([0.1, 0, 0])) == np.inf
+    assert correction_chi2(np.zeros(3), x_now, np.zeros((6, 6)), np.zeros(3)) == 0.0

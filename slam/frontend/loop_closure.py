@@ -38,11 +38,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
+from slam.geometry import pose_between, pose_inverse
 
 __all__ = [
     "LoopClosure",
     "LoopLines",
     "LoopSearch",
+    "correction_chi2",
     "same_correction",
     "search_loop_closure",
 ]
@@ -321,6 +323,45 @@ def same_correction(a: FloatArray, b: FloatArray, config: LoopConfig) -> bool:
     if abs(float(wrap_angle(b[2] - a[2]))) > 2.0 * config.angle_tolerance_rad:
         return False
     return bool(np.hypot(b[0] - a[0], b[1] - a[1]) <= 2.0 * config.offset_tolerance_m)
+
+
+def correction_chi2(
+    pose_old: FloatArray, pose_now: FloatArray, P_joint: FloatArray, correction: FloatArray
+) -> float:
+    """Squared Mahalanobis distance of a correction under two poses' joint covariance.
+
+    The correction ``T = (t_x, t_y, dθ)`` (``p → R(dθ)(p − c) + c + t`` about the position
+    ``c`` of ``pose_now``) moves ``pose_now`` by ``(t, dθ)`` and leaves ``pose_old``: in
+    ``pose_now``'s frame a change ``δ = (R(θ)ᵀ t, dθ)`` of the relative pose
+    ``r = pose_old⁻¹ ∘ pose_now``.  With right perturbations of both poses
+    (``x ∘ Exp(ξ)``, GTSAM's convention) ``r`` moves by ``A [ξ_old; ξ_now]``,
+    ``A = [−Ad(r⁻¹), I]``, so ``δ`` is compared with ``S = A P_joint Aᵀ``.
+
+    Parameters
+    ----------
+    pose_old, pose_now : ndarray, shape (3,)
+        ``(x, y, θ)`` in the world.
+    P_joint : ndarray, shape (6, 6)
+        Joint covariance of ``(pose_old, pose_now)``.
+    correction : ndarray, shape (3,)
+
+    Returns
+    -------
+    float
+        ``δᵀ S⁻¹ δ``; ``inf`` when ``S`` is singular and ``δ`` is not zero.
+    """
+    r_inv = pose_inverse(pose_between(pose_old, pose_now))
+    c, s = np.cos(r_inv[2]), np.sin(r_inv[2])
+    ad = np.array([[c, -s, r_inv[1]], [s, c, -r_inv[0]], [0.0, 0.0, 1.0]])
+    A = np.hstack([-ad, np.eye(3)])
+    S = A @ np.asarray(P_joint, dtype=float) @ A.T
+    t = np.asarray(correction, dtype=float)
+    ct, st = np.cos(pose_now[2]), np.sin(pose_now[2])
+    delta = np.array([ct * t[0] + st * t[1], -st * t[0] + ct * t[1], t[2]])
+    try:
+        return float(delta @ np.linalg.solve(S, delta))
+    except np.linalg.LinAlgError:
+        return 0.0 if not np.any(delta) else float("inf")
 
 
 def _rotation_candidates(

@@ -61,6 +61,9 @@ class Backend(Protocol):
     ) -> FloatArray:
         """Joint covariance of one pose (3, if given) and landmarks (2 each), anchored chart."""
 
+    def joint_pose_covariance(self, graph: LineGraph, poses: IntArray) -> FloatArray:
+        """Joint covariance ``(3n, 3n)`` of distinct poses (right tangent spaces)."""
+
     def pose_covariances(self, graph: LineGraph, poses: IntArray) -> FloatArray:
         """Marginal covariances ``(n, 3, 3)`` of poses."""
 
@@ -118,6 +121,10 @@ class Isam2Backend:
         """From ``ISAM2.jointMarginalCovariance``."""
         poses = np.zeros(0, dtype=np.intp) if pose is None else np.array([pose])
         return self.solver.joint_covariance(poses, np.asarray(landmarks))
+
+    def joint_pose_covariance(self, graph: LineGraph, poses: IntArray) -> FloatArray:
+        """From ``ISAM2.jointMarginalCovariance``."""
+        return self.solver.joint_covariance(np.asarray(poses), np.zeros(0, dtype=np.intp))
 
     def pose_covariances(self, graph: LineGraph, poses: IntArray) -> FloatArray:
         """``ISAM2.marginalCovariance`` per pose."""
@@ -287,6 +294,34 @@ class BatchBackend:
                 sl = slice(pos[j], pos[j] + 2)
                 P[sl, sl] = self._new_landmark_cov(graph, j)
         return P
+
+    def joint_pose_covariance(self, graph: LineGraph, poses: IntArray) -> FloatArray:
+        """Joint covariance of poses from the marginals, newer ones compounded.
+
+        Exact for solved poses; a newer pose is compounded along the odometry from the newest
+        solved one (as :meth:`joint_covariance`).
+
+        Two poses that are both newer than the last solve share that chain; each is
+        compounded on its own, so their correlation through it is left out.
+        """
+        self._ensure_marginals(graph)
+        ps = [int(i) for i in np.asarray(poses)]
+        if len(set(ps)) != len(ps):
+            raise EstimationError("joint_pose_covariance needs distinct poses")
+        routes = [(p, []) if p < self._marg_poses else self._chain_to(graph, p) for p in ps]
+        bases = sorted({b for b, _ in routes})
+        P_bases = self._exact(bases, [])
+        at = {b: 3 * k for k, b in enumerate(bases)}
+        idx = np.concatenate([np.arange(at[b], at[b] + 3) for b, _ in routes])
+        P = P_bases[np.ix_(idx, idx)]
+        for k, (_, chain) in enumerate(routes):
+            sl = slice(3 * k, 3 * k + 3)
+            for e in chain:  # right perturbation, as in joint_covariance
+                F = adjoint_pose2(pose_inverse(graph.odometry_measured[e]))
+                P[sl, :] = F @ P[sl, :]
+                P[:, sl] = P[:, sl] @ F.T
+                P[sl, sl] += graph.odometry_cov[e]
+        return np.asarray(P)
 
     def pose_covariances(self, graph: LineGraph, poses: IntArray) -> FloatArray:
         """Marginals of each pose."""

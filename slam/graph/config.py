@@ -521,6 +521,14 @@ class LoopClosureConfig:
         larger of its two sides' median whitened χ²) is rejected whole, however many pairs
         are explained: at ~30σ the local map sits on other walls than the hypothesis says,
         which a few mismatched lines in a right closure do not do.  inf: off.
+    max_correction_chi2 : float
+        Gate before the judgement: the correction, as a change of the relative pose between
+        the keyframe where the paired old lines were last seen and the current one, must lie
+        within this squared Mahalanobis distance under the back-end's joint marginal
+        covariance of the two poses (``Backend.joint_pose_covariance``); a hypothesis beyond it
+        is rejected without being judged.  The covariances are over-confident on real logs
+        (right closures reach ~600, ``docs/real-logs.md``), so this is a wide gate, not a χ²
+        quantile.  inf: off.
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -568,6 +576,7 @@ class LoopClosureConfig:
     judge_relative_tolerance: float = 1e-4
     judge_loop_only: bool = True
     judge_max_pair_chi2: float = float("inf")
+    max_correction_chi2: float = float("inf")
     min_consistent_fraction: float = 0.6
     skip_repeated_rejections: bool = True
     judge_hopeless_after: int = 5
@@ -607,6 +616,7 @@ class LoopClosureConfig:
             0.0 < self.min_consistent_fraction <= 1.0, "min_consistent_fraction must be in (0, 1]"
         )
         _require(self.judge_max_pair_chi2 > 0.0, "judge_max_pair_chi2 must be > 0 (inf: off)")
+        _require(self.max_correction_chi2 > 0.0, "max_correction_chi2 must be > 0 (inf: off)")
 
 
 @dataclass(frozen=True)

@@ -227,6 +227,7 @@ class LineSlam:
         # per keyframe
         self._kf_path = GrowableArray(())
         self._kf_delta = GrowableArray((3,))
+        self._kf_scan = GrowableArray((), dtype=np.intp)
         # per scan
         self._timestamps: list[float] = []
         self._scan_kf: list[int] = []
@@ -269,6 +270,7 @@ class LineSlam:
             "loop_closures": 0,
             "loop_closures_undone": 0,
             "loop_closures_repeated": 0,
+            "loop_closures_gated": 0,
             "keyframes_without_lines": 0,
             "keyframes_parallel_lines": 0,
             "keyframes_lost_association": 0,
@@ -435,6 +437,7 @@ class LineSlam:
         self.counters["points"] += int(np.count_nonzero(scan.valid_mask()))
         self._kf_delta.append(delta)
         self._kf_path.append(self._path)
+        self._kf_scan.append(scan_no)
         self._progress = 0.0
         report = self._keyframe(scan_no, odom, delta, first, lines)
         self._last_kf_odom = odom
@@ -1088,8 +1091,27 @@ class LineSlam:
                 )
                 self.counters["loop_closures_repeated"] += 1
                 return 0
+            # the marginals' gate: a correction the back-end's uncertainty cannot explain is
+            # not worth a judgement (max_correction_chi2)
+            old_last = self._lm_last_kf.data[near[[j for _, j in found.pairs]]]
+            k_old = int(np.median(old_last))
+            chi2_t = self._correction_chi2(k_old, pose, self._effective_correction(found, near))
+            if chi2_t > lcc.max_correction_chi2:
+                self._closure_log.append(
+                    {
+                        "keyframe": int(pose),
+                        "pairs": len(found.pairs),
+                        "correction": [float(v) for v in found.correction],
+                        "correction_chi2": chi2_t,
+                        "accepted": False,
+                        "reason": "correction beyond the marginals' gate",
+                        **self._closure_where(pose, k_old),
+                    }
+                )
+                self.counters["loop_closures_gated"] += 1
+                return 0
             self.counters["loop_closure_candidates"] += 1
-            return self._apply_closure(local, near, found, pose)
+            return self._apply_closure(local, near, found, pose, chi2_t)
         finally:
             self.time_s["loop_closure"] += time.perf_counter() - t0
 
@@ -1118,7 +1140,34 @@ class LineSlam:
         c = g.anchors[lms]
         return LoopLines.from_anchored(v, c, self._extents[lms], self._lm_side.data[lms])
 
-    def _apply_closure(self, local: IntArray, old: IntArray, found: Any, pose: int) -> int:
+    def _effective_correction(self, found: Any, old: IntArray) -> FloatArray:
+        """The hypothesis' correction; along a corridor without its arbitrary along-component."""
+        corr = np.asarray(found.correction, dtype=float).copy()
+        if found.single_direction:
+            a = self._loop_lines(old[[found.pairs[0][1]]]).alpha[0]
+            n = np.array([np.cos(a), np.sin(a)])
+            corr[:2] = (corr[:2] @ n) * n
+        return corr
+
+    def _closure_where(self, pose: int, k_old: int) -> dict[str, Any]:
+        """Where a loop-closure candidate was: the two keyframes, their scans and poses."""
+        g = self.graph
+        return {
+            "scan": int(self._kf_scan.data[pose]),
+            "old_keyframe": k_old,
+            "old_scan": int(self._kf_scan.data[k_old]),
+            "pose_before": [float(v) for v in g.poses[pose]],
+            "old_pose_before": [float(v) for v in g.poses[k_old]],
+        }
+
+    def _apply_closure(
+        self,
+        local: IntArray,
+        old: IntArray,
+        found: Any,
+        pose: int,
+        chi2_t: float = float("nan"),
+    ) -> int:
         """Spread the correction, merge the verified pairs, judge; keep only if explained.
 
         The candidate is judged by a batch solve in our own loop
@@ -1133,18 +1182,15 @@ class LineSlam:
         lcc = self.config.loop_closure
         saved = (g.poses.copy(), g.landmarks.copy())
         old_last = self._lm_last_kf.data[old[[j for _, j in found.pairs]]]
-        corr = np.asarray(found.correction, dtype=float).copy()
-        if found.single_direction:
-            # along a corridor the correction's component along it is arbitrary: drop it
-            a = self._loop_lines(old[[found.pairs[0][1]]]).alpha[0]
-            n = np.array([np.cos(a), np.sin(a)])
-            corr[:2] = (corr[:2] @ n) * n
+        k_old = int(np.median(old_last))
+        where = self._closure_where(pose, k_old)
+        corr = self._effective_correction(found, old)
         big = bool(
             np.hypot(corr[0], corr[1]) > lcc.large_correction_m
             or abs(corr[2]) > lcc.large_correction_rad
         )
         if big:
-            self._spread_correction(corr, g.poses[pose, :2].copy(), int(np.median(old_last)), pose)
+            self._spread_correction(corr, g.poses[pose, :2].copy(), k_old, pose)
         n_log = len(g.merge_log)
         info_saved = (self._lm_info.data.copy(), self._lm_last_kf.data.copy())
         done: set[int] = set()
@@ -1190,6 +1236,8 @@ class LineSlam:
             "judge_iterations": judged.iterations,
             "judge_stop": judged.reason,
             "judge_free_from": free_from,
+            "correction_chi2": chi2_t,
+            **where,
         }
         if (
             good >= max(lcc.min_matches - 1, 2)
@@ -1218,6 +1266,18 @@ class LineSlam:
             (int(pose), np.asarray(found.correction, dtype=float), len(found.pairs))
         )
         return 0
+
+    def _correction_chi2(self, k_old: int, pose: int, correction: FloatArray) -> float:
+        """The correction's squared Mahalanobis distance under the back-end's marginals.
+
+        :func:`slam.frontend.loop_closure.correction_chi2` with the joint covariance of the
+        keyframe where the paired old lines were last seen and the current one.
+        """
+        from slam.frontend.loop_closure import correction_chi2
+
+        g = self.graph
+        P = self.backend.joint_pose_covariance(g, np.array([k_old, pose], dtype=np.intp))
+        return correction_chi2(g.poses[k_old], g.poses[pose], P, correction)
 
     def _converge(self, reset: bool) -> None:
         """Bring the back-end to the graph, converge, and refresh the extents.
