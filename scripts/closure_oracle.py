@@ -1,0 +1,98 @@
+"""Which loop-closure candidates of a run were right?  Each one against a reference trajectory.
+
+Every candidate that reached the gate or the judgement is in ``summary.json``'s
+``loop_closures_log`` with the keyframe where its paired old lines were last seen
+(``old_scan``), the current one (``scan``) and both poses before the closure.  The reference's
+relative pose between those two scans says where the current pose should be, the old one held;
+the candidate's correction says where it would be.  The distance between the two classifies
+the candidate: right (< ``--right`` m), wrong (> ``--wrong`` m), or in between (``?``).
+Corridor closures (all paired lines parallel) are not classified: their correction's
+component along the corridor is arbitrary.
+
+    .venv/bin/python scripts/closure_oracle.py results/fr079 --reference other/trajectory.tum
+
+The reference is another run of the same log (scans in the same order), e.g. one whose
+relations error is small; its own errors are part of the numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from slam.geometry import pose_between, pose_compose
+from slam.io.tum import read_tum
+
+
+def classify(entry: dict, reference: np.ndarray, right_m: float, wrong_m: float) -> tuple:
+    """``(class, needed correction (m), error of the candidate's correction (m))``."""
+    x_now = np.asarray(entry["pose_before"], dtype=float)
+    x_old = np.asarray(entry["old_pose_before"], dtype=float)
+    rel = pose_between(reference[entry["old_scan"]], reference[entry["scan"]])
+    target = pose_compose(x_old, rel)
+    t = np.asarray(entry["correction"], dtype=float)
+    need = float(np.hypot(*(target[:2] - x_now[:2])))
+    if entry.get("single_direction"):
+        return "corridor", need, float("nan")
+    err = float(np.hypot(*(x_now[:2] + t[:2] - target[:2])))
+    cls = "right" if err < right_m else ("wrong" if err > wrong_m else "?")
+    return cls, need, err
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run", type=Path, help="results folder of lineslam slam")
+    parser.add_argument("--reference", type=Path, required=True, help="TUM trajectory")
+    parser.add_argument("--right", type=float, default=0.3, help="m (default 0.3)")
+    parser.add_argument("--wrong", type=float, default=0.8, help="m (default 0.8)")
+    args = parser.parse_args()
+    summary = json.loads((args.run / "summary.json").read_text(encoding="utf-8"))
+    ours = read_tum(args.run / "trajectory.tum")
+    ref = read_tum(args.reference)
+    if ref.timestamps.shape != ours.timestamps.shape or not np.allclose(
+        ref.timestamps, ours.timestamps, atol=1e-6
+    ):
+        raise SystemExit(
+            f"{args.reference}: not the same scans as {args.run / 'trajectory.tum'} "
+            "(a reference must be a run of the same log)"
+        )
+    entries = [e for e in summary.get("loop_closures_log", []) if "scan" in e]
+    if not entries:
+        raise SystemExit(f"{args.run}: no candidate with its keyframes in the log (older run?)")
+    print(
+        f"{'keyframe':>8} {'old':>6} {'outcome':>8} {'class':>8} {'need (m)':>9} "
+        f"{'|T| (m)':>8} {'error (m)':>9} {'pairs':>6} {'worst χ²':>10} {'corr. χ²':>10}"
+    )
+    tally: Counter[tuple[str, str]] = Counter()
+    for e in entries:
+        cls, need, err = classify(e, ref.poses, args.right, args.wrong)
+        outcome = (
+            "accepted"
+            if e["accepted"]
+            else ("gated" if "gate" in str(e.get("reason", "")) else "rejected")
+        )
+        tally[(outcome, cls)] += 1
+        t = np.asarray(e["correction"], dtype=float)
+        print(
+            f"{e['keyframe']:8d} {e['old_keyframe']:6d} {outcome:>8} {cls:>8} {need:9.2f} "
+            f"{np.hypot(t[0], t[1]):8.2f} {err:9.2f} {e.get('pairs', 0):6d} "
+            f"{e.get('worst_pair_chi2', float('nan')):10.1f} "
+            f"{e.get('correction_chi2', float('nan')):10.1f}"
+        )
+    print()
+    for outcome in ("accepted", "rejected", "gated"):
+        row = ", ".join(
+            f"{cls} {tally[(outcome, cls)]}"
+            for cls in ("right", "?", "wrong", "corridor")
+            if tally[(outcome, cls)]
+        )
+        if row:
+            print(f"{outcome}: {row}")
+
+
+if __name__ == "__main__":
+    main()
