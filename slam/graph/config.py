@@ -67,17 +67,12 @@ class MotionNoiseConfig:
         See above.
     sigma_xy_min_m, sigma_theta_min_rad : float
         Floors, so that a standstill is not a perfect constraint.
-
-    The heading terms cover what ``scripts/calibrate_odometry.py`` measures on the three
-    public logs' relations (``sigma_theta_per_rad`` 0.054 / 0.087 / 0.080 and
-    ``sigma_theta_per_m`` 0.050 / 0 / 0.069 on Intel / ACES / fr079; until the seventh session
-    0.05 and 0.02, which made the marginals over-confident, ``docs/real-logs.md``).
     """
 
     sigma_xy_per_m: float = 0.05
     sigma_xy_per_rad: float = 0.02
-    sigma_theta_per_m: float = 0.05
-    sigma_theta_per_rad: float = 0.08
+    sigma_theta_per_m: float = 0.02
+    sigma_theta_per_rad: float = 0.05
     sigma_xy_min_m: float = 0.002
     sigma_theta_min_rad: float = 0.001
 
@@ -533,7 +528,7 @@ class LoopClosureConfig:
         covariance of the two poses (``Backend.joint_pose_covariance``); a hypothesis beyond it
         is rejected without being judged.  The covariances are over-confident on real logs
         (right closures reach ~600, ``docs/real-logs.md``), so this is a wide gate, not a χ²
-        quantile.  inf: off.  Default 1000 (seventh session, ``docs/real-logs.md``).
+        quantile.  inf: off.
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -581,7 +576,7 @@ class LoopClosureConfig:
     judge_relative_tolerance: float = 1e-4
     judge_loop_only: bool = True
     judge_max_pair_chi2: float = float("inf")
-    max_correction_chi2: float = 1000.0
+    max_correction_chi2: float = float("inf")
     min_consistent_fraction: float = 0.6
     skip_repeated_rejections: bool = True
     judge_hopeless_after: int = 5
