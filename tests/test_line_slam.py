@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -104,6 +105,11 @@ def test_loop_closures_lie_within_the_marginals_gate(loop_runs):
     assert slam.counters["loop_closures"] == 0
     assert slam.counters["loop_closures_gated"] >= 3
     assert all("gate" in e["reason"] for e in slam._closure_log if "correction_chi2" in e)
+    # the same hypothesis found again after being gated: with the override it is judged
+    config = replace(config, loop_closure=replace(config.loop_closure, gate_override_after=1))
+    slam, _, _ = run_slam(run, config)
+    assert slam.counters["loop_closure_gate_overrides"] >= 1
+    assert slam.counters["loop_closures"] >= 1
 
 
 def test_map_lines_match_the_true_walls(loop_runs):

@@ -170,6 +170,7 @@ def test_top_cells_are_the_largest_in_order_with_ties_by_index():
         {"judge_max_pair_chi2": float("nan")},
         {"max_correction_chi2": 0.0},
         {"max_correction_chi2": float("nan")},
+        {"gate_override_after": -1},
     ],
 )
 def test_invalid_loop_closure_settings_are_rejected(kwargs):

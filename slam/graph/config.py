@@ -529,6 +529,11 @@ class LoopClosureConfig:
         is rejected without being judged.  The covariances are over-confident on real logs
         (right closures reach ~600, ``docs/real-logs.md``), so this is a wide gate, not a χ²
         quantile.  inf: off.
+    gate_override_after : int
+        A hypothesis whose correction the gate has already turned away this many times within
+        the last ``local_keyframes`` keyframes (the same correction within twice the angle and
+        offset tolerances) is judged anyway: persistent evidence against the marginals, which
+        a wrong closure accepted earlier makes over-confident.  0: never.
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -577,6 +582,7 @@ class LoopClosureConfig:
     judge_loop_only: bool = True
     judge_max_pair_chi2: float = float("inf")
     max_correction_chi2: float = float("inf")
+    gate_override_after: int = 0
     min_consistent_fraction: float = 0.6
     skip_repeated_rejections: bool = True
     judge_hopeless_after: int = 5
@@ -617,6 +623,7 @@ class LoopClosureConfig:
         )
         _require(self.judge_max_pair_chi2 > 0.0, "judge_max_pair_chi2 must be > 0 (inf: off)")
         _require(self.max_correction_chi2 > 0.0, "max_correction_chi2 must be > 0 (inf: off)")
+        _require(self.gate_override_after >= 0, "gate_override_after must be >= 0")
 
 
 @dataclass(frozen=True)

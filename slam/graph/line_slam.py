@@ -245,6 +245,8 @@ class LineSlam:
         self._closure_log: list[dict[str, Any]] = []
         # judged and rejected loop-closure hypotheses: (keyframe, correction, paired lines)
         self._rejected: list[tuple[int, FloatArray, int]] = []
+        # hypotheses the marginals' gate turned away: (keyframe, correction)
+        self._gated: list[tuple[int, FloatArray]] = []
         self._to_audit: list[Any] = []
         # pairs of landmarks whose merge an audit undid: never merged again by fusion
         self._vetoed: set[tuple[int, int]] = set()
@@ -271,6 +273,7 @@ class LineSlam:
             "loop_closures_undone": 0,
             "loop_closures_repeated": 0,
             "loop_closures_gated": 0,
+            "loop_closure_gate_overrides": 0,
             "keyframes_without_lines": 0,
             "keyframes_parallel_lines": 0,
             "keyframes_lost_association": 0,
@@ -1095,8 +1098,9 @@ class LineSlam:
             # not worth a judgement (max_correction_chi2)
             old_last = self._lm_last_kf.data[near[[j for _, j in found.pairs]]]
             k_old = int(np.median(old_last))
-            chi2_t = self._correction_chi2(k_old, pose, self._effective_correction(found, near))
-            if chi2_t > lcc.max_correction_chi2:
+            corr_eff = self._effective_correction(found, near)
+            chi2_t = self._correction_chi2(k_old, pose, corr_eff)
+            if chi2_t > lcc.max_correction_chi2 and not self._gate_overridden(corr_eff, pose):
                 self._closure_log.append(
                     {
                         "keyframe": int(pose),
@@ -1114,6 +1118,24 @@ class LineSlam:
             return self._apply_closure(local, near, found, pose, chi2_t)
         finally:
             self.time_s["loop_closure"] += time.perf_counter() - t0
+
+    def _gate_overridden(self, correction: FloatArray, pose: int) -> bool:
+        """Whether the gate lets a correction through after turning it away repeatedly.
+
+        ``LoopClosureConfig.gate_override_after``; a correction not let through is recorded as
+        gated.
+        """
+        from slam.frontend.loop_closure import same_correction
+
+        lcc = self.config.loop_closure
+        self._gated = [g for g in self._gated if g[0] > pose - lcc.local_keyframes]
+        if lcc.gate_override_after > 0:
+            seen = sum(same_correction(correction, c, lcc) for _, c in self._gated)
+            if seen >= lcc.gate_override_after:
+                self.counters["loop_closure_gate_overrides"] += 1
+                return True
+        self._gated.append((int(pose), np.asarray(correction, dtype=float)))
+        return False
 
     def _repeated_rejection(self, found: Any, pose: int) -> int | None:
         """The keyframe of a recent rejected hypothesis that ``found`` repeats, if any.
