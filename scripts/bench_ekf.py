@@ -29,8 +29,8 @@ from slam.association import AssociationConfig  # noqa: E402
 from slam.ekf import EkfConfig, EkfSlam  # noqa: E402
 from slam.ekf.augment import augment_state  # noqa: E402
 from slam.ekf.update import filterpy_update, joseph_update, line_measurements  # noqa: E402
-from slam.frontend.lineset import LineSet  # noqa: E402
 from slam.geometry import predict_line_measurement  # noqa: E402
+from slam.lines.lineset import LineSet  # noqa: E402
 
 
 def make_state(M: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

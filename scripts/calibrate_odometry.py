@@ -4,7 +4,7 @@ For every relation ``(t1, t2)`` short enough to reflect the local noise (path le
 ``--max-distance`` and turning below ``--max-turn`` by the odometry), the odometry's relative
 pose is compared with the relation: ``ξ = Log(relation⁻¹ · odometry⁻¹(t1) · odometry(t2))``.
 Least squares on the squared errors then fits the model the estimators use
-(``slam.graph.config.MotionNoiseConfig``, used by the graph and the EKF; the
+(``slam.models.motion.MotionNoiseConfig``, used by the graph and the EKF; the
 ``sigma_xy_per_rad`` term is not fitted and printed as 0):
 
     E[ξ_x² + ξ_y²] / 2 = σ_t² · Δs,        E[ξ_θ²] = σ_rr² · |Δθ| + σ_rm² · Δs

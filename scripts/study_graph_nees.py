@@ -18,7 +18,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from slam.geometry import pose_between, pose_log
-from slam.graph import LineSlam, MotionNoiseConfig, SlamConfig, SlamWarning
+from slam.line_slam import LineSlam, SlamConfig, SlamWarning
+from slam.models import MotionNoiseConfig
 from slam.sim import OdometryNoiseConfig, SimConfig, get_world
 from slam.sim.simulate import simulate
 

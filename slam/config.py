@@ -14,7 +14,7 @@ from linefit.config import LineFitConfig
 from linefit.errors import ConfigError
 from linefit.tomlconfig import dump_toml, load_toml
 from slam.ekf.config import EkfConfig
-from slam.graph.config import SlamConfig
+from slam.line_slam.config import SlamConfig
 from slam.lines.config import MapConfig
 
 __all__ = ["RunConfig"]

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from linefit.line import wrap_angle
 
 __all__ = [
+    "adjoint_pose2",
     "line_residual",
     "line_to_child",
     "line_to_parent",
@@ -45,6 +46,7 @@ __all__ = [
     "pose_log",
     "pose_retract",
     "predict_line_measurement",
+    "right_jacobian_pose2",
     "wrap_angle",
 ]
 
@@ -151,6 +153,43 @@ def pose_log(pose: FloatArray) -> FloatArray:
 def pose_retract(pose: FloatArray, xi: FloatArray) -> FloatArray:
     """``pose ⊕ ξ = pose · Exp(ξ)`` (right perturbation, GTSAM's ``Pose2.retract``)."""
     return pose_compose(pose, pose_exp(xi))
+
+
+def adjoint_pose2(pose: FloatArray) -> FloatArray:
+    """SE(2) adjoint of poses ``(..., 3)``: ``(..., 3, 3)``."""
+    p = np.asarray(pose, dtype=float)
+    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+    Ad = np.zeros((*p.shape[:-1], 3, 3))
+    Ad[..., 0, 0] = c
+    Ad[..., 0, 1] = -s
+    Ad[..., 1, 0] = s
+    Ad[..., 1, 1] = c
+    Ad[..., 0, 2] = p[..., 1]
+    Ad[..., 1, 2] = -p[..., 0]
+    Ad[..., 2, 2] = 1.0
+    return Ad
+
+
+def right_jacobian_pose2(xi: FloatArray) -> FloatArray:
+    """Right Jacobian ``J_r(ξ)`` of SE(2)'s exponential (Solà et al. 2018, Eq. 163), vectorised."""
+    x = np.asarray(xi, dtype=float)
+    v1, v2, w = x[..., 0], x[..., 1], x[..., 2]
+    small = np.abs(w) < 1e-4
+    ws = np.where(small, 1.0, w)
+    s, c = np.sin(w), np.cos(w)
+    a = np.where(small, 1.0 - w**2 / 6.0, s / ws)
+    b = np.where(small, w / 2.0 - w**3 / 24.0, (1.0 - c) / ws)
+    j02 = np.where(small, -v2 / 2.0 + v1 * w / 6.0, (w * v1 - v2 + v2 * c - v1 * s) / ws**2)
+    j12 = np.where(small, v1 / 2.0 + v2 * w / 6.0, (v1 + w * v2 - v1 * c - v2 * s) / ws**2)
+    J = np.zeros((*x.shape[:-1], 3, 3))
+    J[..., 0, 0] = a
+    J[..., 0, 1] = b
+    J[..., 1, 0] = -b
+    J[..., 1, 1] = a
+    J[..., 0, 2] = j02
+    J[..., 1, 2] = j12
+    J[..., 2, 2] = 1.0
+    return J
 
 
 # ---------------------------------------------------------------------------------------------

@@ -21,7 +21,7 @@ from typing import Any, Protocol
 
 from slam.config import RunConfig
 from slam.errors import InputError
-from slam.graph.config import SlamConfig
+from slam.line_slam.config import SlamConfig
 from slam.types import Scan
 
 __all__ = ["ScanEstimator", "feed_scans", "run_estimator_on_log", "run_slam"]
@@ -64,7 +64,7 @@ def feed_scans(
 ) -> dict[str, float]:
     """Feed ``scans`` (at most ``max_scans``) to ``estimator``; return time per stage (s).
 
-    An estimator with ``add_scans`` (e.g. :class:`slam.graph.LineSlam`, which then extracts the
+    An estimator with ``add_scans`` (e.g. :class:`slam.line_slam.LineSlam`, which then extracts the
     keyframes' lines in one vectorised call) gets the scans in chunks of ``chunk``.
     """
     clock = {"read": 0.0, "estimate": 0.0}
@@ -182,7 +182,7 @@ def run_slam(
     plot: bool = False,
 ) -> dict[str, Any]:
     """``lineslam slam``: factor-graph line SLAM on a log (see the module docstring)."""
-    from slam.graph import LineSlam
+    from slam.line_slam import LineSlam
 
     slam = LineSlam(slam_config_for_log(config.slam, log), config.linefit)
     summary = run_estimator_on_log(

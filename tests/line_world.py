@@ -7,7 +7,7 @@ error is drawn from the covariance of a line fitted around the visible piece's m
 ``σ_c`` across the line at the mid-point and ``σ_α`` in angle, i.e.
 ``R = [[σ_c² + s̄² σ_α², −s̄ σ_α²], [−s̄ σ_α², σ_α²]]`` (``s̄`` the mid-point's tangent coordinate).
 Odometry is the true motion with right-perturbation noise of a
-:class:`~slam.graph.config.MotionNoiseConfig` covariance, so everything is consistent with the
+:class:`~slam.models.motion.MotionNoiseConfig` covariance, so everything is consistent with the
 models the estimator assumes.  Seeded and vectorised per scan.
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 
 from linefit.line import Line, normal_form
 from slam.geometry import pose_between, pose_compose, pose_exp, pose_inverse
-from slam.graph.config import MotionNoiseConfig
+from slam.models.motion import MotionNoiseConfig
 from slam.types import Scan
 
 

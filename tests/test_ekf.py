@@ -22,7 +22,6 @@ from slam.ekf.conventions import (
 from slam.ekf.motion import odometry_covariance, predict_pose
 from slam.ekf.update import filterpy_update, joseph_update, line_measurements
 from slam.errors import InputError
-from slam.frontend.lineset import LineSet
 from slam.geometry import (
     line_to_parent,
     pose_compose,
@@ -30,6 +29,7 @@ from slam.geometry import (
     predict_line_measurement,
     wrap_angle,
 )
+from slam.lines.lineset import LineSet
 from slam.types import Scan
 
 # the overlap test off (landmarks set without seen extents)

@@ -10,8 +10,8 @@ from linefit.line import wrap_angle
 from slam.errors import EstimationError
 from slam.geometry import line_to_parent, pose_between, pose_compose, pose_log
 from slam.graph import BatchSolver, LineGraph, SolverConfig, line_custom_factor, synthetic_problem
-from slam.graph.landmark import anchored_from_r_alpha
 from slam.graph.linear import keys_of, native_odometry_factors
+from slam.models.anchored import anchored_from_r_alpha
 
 GAUSSIAN = SolverConfig(robust_kernel="none")
 """The least-squares model itself (the default Cauchy kernel's IRLS changes the cost and its

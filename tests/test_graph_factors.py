@@ -16,7 +16,7 @@ from slam.graph.factors import (
     linearize_line_factors,
     sqrt_information_2x2,
 )
-from slam.graph.landmark import (
+from slam.models.anchored import (
     anchored_from_r_alpha,
     anchored_jacobian,
     landmarks_normal_form,

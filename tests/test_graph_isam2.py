@@ -17,8 +17,8 @@ from slam.graph import (
     SolverConfig,
     synthetic_problem,
 )
-from slam.graph.landmark import anchored_jacobian
 from slam.graph.linear import keys_of
+from slam.models.anchored import anchored_jacobian
 
 GAUSSIAN = SolverConfig(robust_kernel="none")
 """iSAM2 and batch reach the same optimum of the least-squares model; with a robust kernel the
@@ -257,23 +257,22 @@ def test_joint_pose_covariance_of_both_backends_matches_the_marginals(incrementa
     """Two poses' joint covariance: iSAM2's and the batch back-end's equal GTSAM's marginals;
     the batch back-end compounds poses added since its last solve along their odometry, which
     is exact when nothing else constrains them."""
-    from slam.graph import SlamConfig
     from slam.graph.backend import BatchBackend, Isam2Backend
+    from slam.graph.config import Isam2Config
 
     g, solver, batch = incremental
-    config = SlamConfig(backend="batch", solver=GAUSSIAN)
     pair = np.array([20, 140])
     keys = gtsam.KeyVector(keys_of("x", pair))
     P_exact = BatchSolver(GAUSSIAN).marginals(batch).jointMarginalCovariance(keys).fullMatrix()
-    backend_b = BatchBackend(config)
+    backend_b = BatchBackend(GAUSSIAN)
     close_covariances(backend_b.joint_pose_covariance(batch, pair), P_exact, 1e-6)
-    backend_i = Isam2Backend(SlamConfig(solver=GAUSSIAN))
+    backend_i = Isam2Backend(Isam2Config(), GAUSSIAN)
     backend_i.solver = solver  # the fixture's iSAM2, fed pose by pose
     close_covariances(backend_i.joint_pose_covariance(g, pair), P_exact, 0.01)
     # three poses more, on odometry only and not solved: compounded from pose 149
     longer = feed(synthetic_problem(150, seed=11).graph, None)
     BatchSolver(GAUSSIAN).solve(longer)
-    backend_b = BatchBackend(config)
+    backend_b = BatchBackend(GAUSSIAN)
     backend_b.joint_pose_covariance(longer, pair)  # marginals of the 150 solved poses
     step, Q = np.array([0.5, 0.1, 0.2]), np.diag([0.01, 0.004, 0.002])
     for i in range(150, 153):

@@ -7,15 +7,9 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import X
 
-from slam.geometry import pose_exp, pose_log, pose_retract
-from slam.graph.config import MotionNoiseConfig
-from slam.graph.odometry import (
-    between_costs,
-    linearize_between,
-    linearize_prior,
-    right_jacobian_pose2,
-    sqrt_information,
-)
+from slam.geometry import pose_exp, pose_log, pose_retract, right_jacobian_pose2
+from slam.graph.odometry import between_costs, linearize_between, linearize_prior, sqrt_information
+from slam.models.motion import MotionNoiseConfig
 
 
 def test_right_jacobian_matches_gtsam_and_numerical(rng):

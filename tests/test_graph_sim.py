@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from slam.geometry import pose_between, pose_log
-from slam.graph import LineSlam, MotionNoiseConfig, SlamConfig, SlamWarning
+from slam.line_slam import LineSlam, SlamConfig, SlamWarning
+from slam.models import MotionNoiseConfig
 from slam.sim import OdometryNoiseConfig, SimConfig, get_world
 from slam.sim.simulate import simulate
 

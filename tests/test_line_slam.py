@@ -18,19 +18,13 @@ from line_world import (
 
 from linefit.line import Line
 from slam.errors import InputError
+from slam.frontend.config import LoopClosureConfig
 from slam.geometry import pose_between, pose_log
-from slam.graph import (
-    FusionConfig,
-    KeyframeConfig,
-    LineSlam,
-    LoopClosureConfig,
-    MotionNoiseConfig,
-    SlamConfig,
-    SlamResult,
-    SlamWarning,
-    SolverConfig,
-)
-from slam.graph.line_slam import WARN_LOST, WARN_NO_LINES, WARN_PARALLEL
+from slam.graph import SolverConfig
+from slam.line_slam import FusionConfig, KeyframeConfig, LineSlam, SlamConfig, SlamWarning
+from slam.line_slam.pipeline import WARN_LOST, WARN_NO_LINES, WARN_PARALLEL
+from slam.models import MotionNoiseConfig
+from slam.result import SlamResult
 from slam.types import Scan
 
 MOTION = MotionNoiseConfig(sigma_xy_per_m=0.03, sigma_theta_per_m=0.03, sigma_theta_per_rad=0.03)

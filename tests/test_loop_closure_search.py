@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from slam.frontend.config import LoopClosureConfig, RelocalisationConfig
 from slam.frontend.loop_closure import (
     LoopLines,
     _refine,
@@ -13,7 +14,6 @@ from slam.frontend.loop_closure import (
     correction_chi2,
     search_loop_closure,
 )
-from slam.graph.config import LoopClosureConfig, RelocalisationConfig
 
 
 def room_lines(corners: list[tuple[float, float]]) -> LoopLines:

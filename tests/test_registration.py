@@ -7,8 +7,9 @@ import pytest
 from scipy.stats import chi2
 
 from slam.errors import ConfigError, InputError
-from slam.frontend import LineSet, RegistrationConfig, register_lines
+from slam.frontend import RegistrationConfig, register_lines
 from slam.geometry import line_to_child, pose_between, pose_log, pose_retract
+from slam.lines.lineset import LineSet
 
 # A room: (r, α) of world walls and their visible extent along the tangent.
 ROOM = [

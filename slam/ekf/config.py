@@ -8,7 +8,7 @@ from typing import Literal
 
 from slam.association import AssociationConfig
 from slam.errors import ConfigError
-from slam.graph.config import MotionNoiseConfig
+from slam.models.motion import MotionNoiseConfig
 
 __all__ = ["AssociationConfig", "EkfConfig", "MotionNoiseConfig"]
 
@@ -26,7 +26,7 @@ class EkfConfig:
     ----------
     odometry : MotionNoiseConfig
         Motion model of the prediction: the graph back-end's class
-        (:class:`slam.graph.config.MotionNoiseConfig`) with its defaults, so both estimators
+        (:class:`slam.models.motion.MotionNoiseConfig`) with its defaults, so both estimators
         assume the same odometry noise unless told otherwise.
     association : AssociationConfig
         Data association: the graph's class and code (:mod:`slam.association`: χ² gate on the
@@ -79,7 +79,7 @@ class EkfConfig:
     line_sigma_extra : tuple of float
         Model-error floor ``(σ_offset, σ_angle)`` (m, rad) added to every line's covariance,
         specified at the segment's mid-point
-        (:func:`slam.frontend.anchored.model_error_covariance`, the graph's function):
+        (:func:`slam.models.anchored.model_error_covariance`, the graph's function):
         real walls are not ideal lines and real range noise is not the fit's model.  The
         default (0.02 m, 0.01 rad) is the graph back-end's ``line_model_sigma_*``; zero trusts
         the fit's covariance as it is (right for simulated data whose fit covariances are

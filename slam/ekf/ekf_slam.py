@@ -69,10 +69,10 @@ from slam.ekf.update import (
     line_measurements,
 )
 from slam.errors import EstimationError, InputError
-from slam.frontend.anchored import model_error_covariance
-from slam.frontend.lineset import LineSet
 from slam.geometry import line_residual, pose_between
 from slam.lines import chi2_gate
+from slam.lines.lineset import LineSet
+from slam.models.anchored import model_error_covariance
 from slam.types import Scan
 
 if TYPE_CHECKING:

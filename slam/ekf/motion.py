@@ -5,7 +5,7 @@ The filter is driven by the odometry **increment** between consecutive scans,
 right: ``pose_k = pose_{k-1} · u_k · Exp(n_k)`` with ``n_k ~ N(0, Q_u)`` in the tangent space
 of the new pose, the same error model as a GTSAM ``BetweenFactorPose2(u_k, Q_u)``.
 
-Noise: the graph back-end's random-walk model, :class:`slam.graph.config.MotionNoiseConfig`
+Noise: the graph back-end's random-walk model, :class:`slam.models.motion.MotionNoiseConfig`
 (one class, one set of defaults for both estimators).  With ``d = ‖(u_x, u_y)‖``:
 
 ``σ_xy² = σ_xy,min² + σ_xy/m²·d + σ_xy/rad²·|u_θ|``,
@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from slam.ekf.conventions import tangent_to_state_jacobian
 from slam.geometry import pose_compose
-from slam.graph.config import MotionNoiseConfig
+from slam.models.motion import MotionNoiseConfig
 
 __all__ = ["MotionNoiseConfig", "odometry_covariance", "predict_pose"]
 

@@ -6,13 +6,13 @@ covariances (right-perturbation tangent space) and run times.  Names:
 
 * ``"ekf"`` — :class:`slam.ekf.EkfSlam` with ``RunConfig.ekf`` (association as configured);
 * ``"ekf-nn"``, ``"ekf-jcbb"`` — the same with the association forced;
-* ``"graph-isam2"``, ``"graph-batch"`` — :class:`slam.graph.LineSlam` with ``RunConfig.slam``
-  and that back-end, then :meth:`~slam.graph.LineSlam.optimize` (the graph's association is its
+* ``"graph-isam2"``, ``"graph-batch"`` — :class:`slam.line_slam.LineSlam` with ``RunConfig.slam``
+  and that back-end, then :meth:`~slam.line_slam.LineSlam.optimize` (the graph's association is its
   registration front end's nearest neighbour, with no JCBB option);
 * ``"odometry"`` — dead reckoning with the same motion model, covariance propagated (the EKF
   fed no lines), the reference every SLAM estimator must beat.
 
-Lines per scan are a :class:`~slam.frontend.lineset.LineSet` (line-level simulator; converted
+Lines per scan are a :class:`~slam.lines.lineset.LineSet` (line-level simulator; converted
 to :class:`linefit.Line` objects for the graph, :func:`slam.experiments.linesim.lineset_to_lines`)
 or a list of :class:`linefit.Line` (a log's fits); estimators apply their own length/support
 filters.  ``None`` lets each estimator extract the lines itself.
@@ -35,9 +35,8 @@ from slam.config import RunConfig
 from slam.ekf import EkfSlam
 from slam.ekf.threads import blas_threads
 from slam.errors import ConfigError, EstimationError
-from slam.frontend.lineset import LineSet
-from slam.geometry import pose_compose, pose_inverse
-from slam.graph.odometry import adjoint_pose2
+from slam.geometry import adjoint_pose2, pose_compose, pose_inverse
+from slam.lines.lineset import LineSet
 from slam.types import Scan
 
 __all__ = ["ESTIMATORS", "EstimateOutput", "run_estimator"]
@@ -106,7 +105,7 @@ def _ekf(
     res = ekf.result()
     if config.slam.output_frame == "base" and res.poses_world_laser.shape[0]:
         # pose_world_base = pose_world_laser ∘ pose_base_laser⁻¹, covariance by Ad(mount),
-        # as the graph reports base poses (slam.graph.LineSlam.result)
+        # as the graph reports base poses (slam.line_slam.LineSlam.result)
         poses = pose_compose(res.poses_world_laser, np.broadcast_to(pose_inverse(mount), (1, 3)))
         Ad = adjoint_pose2(mount)
         res = replace(
@@ -121,7 +120,7 @@ def _laser_odometry(scans: Sequence[Scan], config: RunConfig) -> Sequence[Scan]:
 
     With ``"base"`` (a log whose logged laser poses lack the mounting,
     :func:`slam.runner.slam_config_for_log`) the laser odometry is
-    ``pose_odom_base ∘ pose_base_laser``, as :class:`slam.graph.LineSlam` computes it, so that
+    ``pose_odom_base ∘ pose_base_laser``, as :class:`slam.line_slam.LineSlam` computes it, so that
     the EKF and odometry-only runs see the same motion as the graph.
     """
     cfg = config.slam
@@ -162,7 +161,7 @@ def _graph(
     import warnings
 
     from slam.experiments.linesim import lineset_to_lines
-    from slam.graph import LineSlam
+    from slam.line_slam import LineSlam
 
     cfg = replace(config.slam, backend=backend)
     if initial_pose is not None and scans:

@@ -27,9 +27,9 @@ from numpy.typing import NDArray
 from linefit.line import Line, normal_form
 from slam.ekf.motion import odometry_covariance
 from slam.errors import ConfigError
-from slam.frontend.lineset import LineSet
 from slam.geometry import pose_between, pose_compose, pose_exp, predict_line_measurement
-from slam.graph.config import MotionNoiseConfig
+from slam.lines.lineset import LineSet
+from slam.models.motion import MotionNoiseConfig
 from slam.types import Scan
 
 if TYPE_CHECKING:

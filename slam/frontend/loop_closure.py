@@ -25,7 +25,7 @@ window ``|t| ≤ W``, ``|dθ| ≤ Θ``:
    slides along itself); the winner must beat every distinct runner-up by the factor
    ``1 / max_ambiguity`` (repeated structure: rows of identical doors or offices).
 
-The caller (:class:`slam.graph.LineSlam`) merges the paired landmarks and keeps the closure only
+The caller (:class:`slam.line_slam.LineSlam`) merges the paired landmarks and keeps the closure only
 if the optimised graph explains it.
 """
 
@@ -54,7 +54,7 @@ IntArray = NDArray[np.intp]
 
 
 class LoopConfig(Protocol):
-    """The settings used here (:class:`slam.graph.config.LoopClosureConfig`, read only)."""
+    """The settings used here (:class:`slam.frontend.config.LoopClosureConfig`, read only)."""
 
     @property
     def cell_m(self) -> float: ...

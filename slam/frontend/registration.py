@@ -42,7 +42,6 @@ from slam.association import (
     segment_gaps,
 )
 from slam.errors import ConfigError, InputError
-from slam.frontend.lineset import LineSet
 from slam.geometry import (
     line_residual,
     pose_between,
@@ -50,6 +49,7 @@ from slam.geometry import (
     pose_retract,
     predict_line_measurement,
 )
+from slam.lines.lineset import LineSet
 
 __all__ = ["RegistrationConfig", "RegistrationResult", "register_lines"]
 

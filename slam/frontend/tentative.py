@@ -9,7 +9,7 @@ arrives late).  A tentative landmark not seen again for ``max_age_keyframes`` ke
 **expires** with its observations: people walking by, a chair seen once, lines fitted across a
 depth jump, reflections.  See ``docs/real-logs.md``.
 
-Values are kept in the anchored chart (:mod:`slam.frontend.anchored`): ``(ρ, φ)`` at the anchor
+Values are kept in the anchored chart (:mod:`slam.models.anchored`): ``(ρ, φ)`` at the anchor
 of the first observation (its segment's mid-point), with the information-weighted fusion of the
 observations (each moved into the world with the pose estimate of its keyframe at the time).
 """
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.frontend.anchored import align_representative, observe_anchored
 from slam.geometry import pose_compose
+from slam.models.anchored import align_representative, observe_anchored
 
 __all__ = ["Observation", "TentativePool"]
 

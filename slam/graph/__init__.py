@@ -1,59 +1,36 @@
-"""Factor-graph line SLAM on GTSAM: line landmarks, vectorised linearisation, GN/LM, iSAM2.
+"""The GTSAM back-end: line factors, vectorised linearisation, Gauss-Newton/LM, iSAM2.
 
-Main entry point::
+:class:`LineGraph` holds the problem as numpy arrays (poses, anchored line landmarks, line and
+odometry factors); :class:`BatchSolver` runs its own Gauss-Newton / Levenberg-Marquardt loop with
+GTSAM's elimination; :class:`Isam2Solver` updates incrementally;
+:func:`linearize_line_factors` is the vectorised fast path and :func:`line_custom_factor` the
+``gtsam.CustomFactor`` reference it is tested against.  See ``docs/graph.md``.
 
-    from slam.graph import LineSlam, SlamConfig
-
-    slam = LineSlam(SlamConfig(backend="isam2"))
-    for scan in scans:              # slam.types.Scan, with odometry
-        slam.add_scan(scan)         # or add_scan(scan, lines) with lines already extracted
-    slam.optimize()
-    result = slam.result()          # SlamResult: poses, covariances, line map; .write(out_dir)
-
-Lower layers for research use: :class:`LineGraph` (the problem as numpy arrays),
-:class:`BatchSolver` (own Gauss-Newton / Levenberg-Marquardt loop with GTSAM elimination),
-:class:`Isam2Solver` (incremental), :func:`linearize_line_factors` (the vectorised fast path)
-and :func:`line_custom_factor` (the ``gtsam.CustomFactor`` reference).  See ``docs/graph.md``.
+The SLAM pipeline that feeds this back-end is :class:`slam.line_slam.LineSlam`; the names it
+used to be imported under from here (``LineSlam``, ``SlamConfig``, ...) still resolve, with a
+:class:`DeprecationWarning`.
 """
 
 from __future__ import annotations
 
 import importlib
+import warnings
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from slam.graph.batch import BatchSolver, SolveStats
-    from slam.graph.config import (
-        FusionConfig,
-        Isam2Config,
-        KeyframeConfig,
-        LoopClosureConfig,
-        MotionNoiseConfig,
-        SlamConfig,
-        SolverConfig,
-    )
+    from slam.graph.config import Isam2Config, SolverConfig
     from slam.graph.custom_factor import line_custom_factor, values_from_arrays
     from slam.graph.factors import linearize_line_factors, sqrt_information_2x2
     from slam.graph.isam2 import Isam2Solver
-    from slam.graph.line_slam import LineSlam, ScanReport, SlamWarning
     from slam.graph.problem import LineGraph
-    from slam.graph.result import SlamResult
     from slam.graph.synthetic import SyntheticProblem, synthetic_problem
 
 __all__ = [
     "BatchSolver",
-    "FusionConfig",
     "Isam2Config",
     "Isam2Solver",
-    "KeyframeConfig",
     "LineGraph",
-    "LineSlam",
-    "LoopClosureConfig",
-    "MotionNoiseConfig",
-    "ScanReport",
-    "SlamConfig",
-    "SlamResult",
-    "SlamWarning",
     "SolveStats",
     "SolverConfig",
     "SyntheticProblem",
@@ -67,18 +44,9 @@ __all__ = [
 
 _LAZY = {
     "BatchSolver": "slam.graph.batch",
-    "FusionConfig": "slam.graph.config",
     "Isam2Config": "slam.graph.config",
     "Isam2Solver": "slam.graph.isam2",
-    "KeyframeConfig": "slam.graph.config",
-    "LoopClosureConfig": "slam.graph.config",
     "LineGraph": "slam.graph.problem",
-    "LineSlam": "slam.graph.line_slam",
-    "MotionNoiseConfig": "slam.graph.config",
-    "ScanReport": "slam.graph.line_slam",
-    "SlamConfig": "slam.graph.config",
-    "SlamResult": "slam.graph.result",
-    "SlamWarning": "slam.graph.line_slam",
     "SolveStats": "slam.graph.batch",
     "SolverConfig": "slam.graph.config",
     "SyntheticProblem": "slam.graph.synthetic",
@@ -89,9 +57,27 @@ _LAZY = {
     "values_from_arrays": "slam.graph.custom_factor",
 }
 
+# names that moved out of the back-end: where they live now
+_MOVED = {
+    "LineSlam": "slam.line_slam",
+    "ScanReport": "slam.line_slam",
+    "SlamWarning": "slam.line_slam",
+    "SlamConfig": "slam.line_slam",
+    "KeyframeConfig": "slam.line_slam",
+    "FusionConfig": "slam.line_slam",
+    "LoopClosureConfig": "slam.frontend.config",
+    "MotionNoiseConfig": "slam.models",
+    "SlamResult": "slam.result",
+}
+
 
 def __getattr__(name: str) -> Any:
-    """Import on first use: ``slam.graph.config`` must not pull in gtsam."""
+    """Import on first use (``slam.graph.config`` must not pull in gtsam)."""
     if name in _LAZY:
         return getattr(importlib.import_module(_LAZY[name]), name)
+    if name in _MOVED:
+        warnings.warn(
+            f"slam.graph.{name} moved to {_MOVED[name]}.{name}", DeprecationWarning, stacklevel=2
+        )
+        return getattr(importlib.import_module(_MOVED[name]), name)
     raise AttributeError(f"module 'slam.graph' has no attribute {name!r}")

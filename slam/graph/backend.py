@@ -1,4 +1,4 @@
-"""The two online estimators behind :class:`slam.graph.LineSlam`, one interface.
+"""The two online estimators behind :class:`slam.line_slam.LineSlam`, one interface.
 
 Both keep :class:`~slam.graph.problem.LineGraph`'s estimate current and answer covariance
 queries (pose blocks in the right tangent space, landmark blocks in the anchored chart
@@ -26,14 +26,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import EstimationError
-from slam.geometry import line_to_parent, pose_inverse
+from slam.geometry import adjoint_pose2, line_to_parent, pose_inverse
 from slam.graph.batch import BatchSolver
-from slam.graph.config import SlamConfig
+from slam.graph.config import Isam2Config, SolverConfig
 from slam.graph.isam2 import Isam2Solver
-from slam.graph.landmark import anchored_jacobian
 from slam.graph.linear import keys_of
-from slam.graph.odometry import adjoint_pose2
 from slam.graph.problem import LineGraph
+from slam.models.anchored import anchored_jacobian
 
 __all__ = ["Backend", "BatchBackend", "Isam2Backend", "make_backend"]
 
@@ -79,8 +78,8 @@ class Isam2Backend:
 
     name = "isam2"
 
-    def __init__(self, config: SlamConfig) -> None:
-        self.solver = Isam2Solver(config.isam2, config.solver)
+    def __init__(self, isam2: Isam2Config, solver: SolverConfig) -> None:
+        self.solver = Isam2Solver(isam2, solver)
         self.estimate_moved = False
         self._last_full = 0
         self.optimize_updates = 0
@@ -159,9 +158,9 @@ class BatchBackend:
 
     name = "batch"
 
-    def __init__(self, config: SlamConfig) -> None:
-        self.config = config
-        self.solver = BatchSolver(config.solver)
+    def __init__(self, solver: SolverConfig) -> None:
+        self.config = solver
+        self.solver = BatchSolver(solver)
         self.estimate_moved = False
         self._since_solve = 0
         self._marginals: gtsam.Marginals | None = None
@@ -180,8 +179,8 @@ class BatchBackend:
         """Solve every ``batch_interval`` keyframes."""
         self._since_solve += 1
         self.estimate_moved = False
-        if self._since_solve >= self.config.solver.batch_interval:
-            self._solve(graph, self.config.solver.online_iterations)
+        if self._since_solve >= self.config.batch_interval:
+            self._solve(graph, self.config.online_iterations)
 
     def _solve(self, graph: LineGraph, iterations: int) -> None:
         t0 = time.perf_counter()
@@ -350,8 +349,10 @@ class BatchBackend:
         }
 
 
-def make_backend(config: SlamConfig) -> BatchBackend | Isam2Backend:
-    """The backend named by ``config.backend``."""
-    if config.backend == "batch":
-        return BatchBackend(config)
-    return Isam2Backend(config)
+def make_backend(
+    kind: str, solver: SolverConfig, isam2: Isam2Config
+) -> BatchBackend | Isam2Backend:
+    """The back-end named ``kind`` (``"batch"`` or ``"isam2"``)."""
+    if kind == "batch":
+        return BatchBackend(solver)
+    return Isam2Backend(isam2, solver)

@@ -38,7 +38,6 @@ from slam.errors import EstimationError
 from slam.geometry import pose_retract
 from slam.graph.config import SolverConfig
 from slam.graph.factors import LineLinearization, line_factor_costs, linearize_line_factors
-from slam.graph.landmark import retract_landmarks
 from slam.graph.linear import (
     UNIT2,
     UNIT3,
@@ -51,6 +50,7 @@ from slam.graph.linear import (
 )
 from slam.graph.odometry import between_costs, linearize_between, linearize_prior
 from slam.graph.problem import LineGraph
+from slam.models.anchored import retract_landmarks
 
 __all__ = ["BatchSolver", "SolveStats"]
 
@@ -452,7 +452,7 @@ class BatchSolver:
         """``gtsam.Marginals`` of the system linearised at the graph's current estimate.
 
         Landmark covariances from it are in the anchored chart ``(ρ, φ)``
-        (:func:`slam.graph.landmark.anchored_jacobian` maps them to ``(r, α)``).
+        (:func:`slam.models.anchored.anchored_jacobian` maps them to ``(r, α)``).
         """
         gfg = self.linearize(graph)
         try:

@@ -7,7 +7,7 @@ so that it can be read against the maths and checked against the vectorised fast
 solutions of whole problems.
 
 The pose is a ``gtsam.Pose2`` (laser in the world), the landmark a ``gtsam.Point2`` holding the
-anchored ``(ρ, φ)`` (:mod:`slam.graph.landmark`; the anchor is a constant of the factor); the
+anchored ``(ρ, φ)`` (:mod:`slam.models.anchored`; the anchor is a constant of the factor); the
 noise model is ``noiseModel.Gaussian.Covariance(R)``.
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.geometry import line_residual, predict_line_measurement
-from slam.graph.landmark import anchored_jacobian, r_alpha_from_anchored
+from slam.models.anchored import anchored_jacobian, r_alpha_from_anchored
 
 __all__ = ["line_custom_factor", "values_from_arrays"]
 

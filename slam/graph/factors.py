@@ -1,7 +1,7 @@
 """The line factor, linearised for all factors at once in numpy.
 
 A line factor links a laser pose ``x = pose_world_laser`` and a world line landmark
-``v = (ρ, φ)`` with anchor ``c`` (:mod:`slam.graph.landmark`; world line
+``v = (ρ, φ)`` with anchor ``c`` (:mod:`slam.models.anchored`; world line
 ``(r_w, α_w) = (c·n(φ) + ρ, φ)``) to a measured line ``z = (r, α)`` in the laser frame with
 covariance ``R`` (the ``(r, α)`` block of :attr:`linefit.Line.cov`).  Its residual is
 
@@ -35,8 +35,8 @@ from numpy.typing import NDArray
 
 from slam.errors import DegenerateGeometryError, InputError
 from slam.geometry import line_residual, predict_line_measurement
-from slam.graph.landmark import anchored_jacobian, r_alpha_from_anchored
 from slam.graph.robust import RobustKernel, robust_cost, robust_weights
+from slam.models.anchored import anchored_jacobian, r_alpha_from_anchored
 
 __all__ = [
     "LineLinearization",

@@ -1,7 +1,7 @@
 """The line-SLAM factor graph as numpy arrays: the single source of truth for both solvers.
 
 :class:`LineGraph` holds the variables (laser poses ``x_i``, line landmarks ``v_j = (ρ, φ)``
-with their anchors ``c_j``, :mod:`slam.graph.landmark`), their current estimate, and the
+with their anchors ``c_j``, :mod:`slam.models.anchored`), their current estimate, and the
 factors:
 
 * a prior on the first pose (fixes the gauge: the world frame),
@@ -29,8 +29,8 @@ from numpy.typing import NDArray
 from slam.errors import EstimationError, InputError
 from slam.geometry import pose_compose
 from slam.graph.factors import sqrt_information_2x2
-from slam.graph.landmark import anchored_from_r_alpha, r_alpha_from_anchored
 from slam.graph.odometry import sqrt_information
+from slam.models.anchored import anchored_from_r_alpha, r_alpha_from_anchored
 
 __all__ = ["GrowableArray", "LineGraph", "MergeRecord", "landmark_key", "pose_key"]
 

@@ -3,7 +3,7 @@
 A robot drives a smooth random path; landmark ``j`` is a line placed near the pose that first
 sees it; every pose measures ``lines_per_pose`` landmarks from a sliding window, with Gaussian
 noise of a known (correlated) covariance; odometry is the true relative pose perturbed on the
-right by noise of the :class:`~slam.graph.config.MotionNoiseConfig` covariance.  The initial
+right by noise of the :class:`~slam.models.motion.MotionNoiseConfig` covariance.  The initial
 estimate is dead reckoning, with each landmark initialised from its first measurement.
 
 All randomness comes from one seeded generator and is vectorised.
@@ -24,8 +24,8 @@ from slam.geometry import (
     pose_exp,
     predict_line_measurement,
 )
-from slam.graph.config import MotionNoiseConfig
 from slam.graph.problem import LineGraph
+from slam.models.motion import MotionNoiseConfig
 
 __all__ = ["SYNTHETIC_MOTION", "SyntheticProblem", "synthetic_problem"]
 

@@ -1,4 +1,4 @@
-"""The result of a :class:`~slam.graph.LineSlam` run and its files.
+"""The result of a :class:`~slam.line_slam.LineSlam` run and its files.
 
 Files (``../shared/INTERFACES.md``): ``trajectory.tum`` (one laser pose per scan, time stamps as
 in the log; :func:`slam.io.write_results`, with ``trajectory_covariance.txt`` holding the pose

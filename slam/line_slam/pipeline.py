@@ -34,7 +34,7 @@ odometry.  The odometry chain and the prior on the first pose keep the graph wel
 case.
 
 :meth:`LineSlam.optimize` runs a last fusion round and converges the back-end;
-:meth:`LineSlam.result` returns a :class:`~slam.graph.result.SlamResult`.
+:meth:`LineSlam.result` returns a :class:`~slam.result.SlamResult`.
 """
 
 from __future__ import annotations
@@ -52,23 +52,31 @@ from linefit.config import LineFitConfig
 from linefit.line import Line, wrap_angle
 from slam.association import candidate_landmarks, landmarks_compatible
 from slam.errors import InputError
-from slam.frontend.anchored import (
-    drift_covariance,
-    model_error_covariance,
-    observe_anchored,
-)
-from slam.frontend.lineset import LineSet
 from slam.frontend.registration import register_lines
 from slam.frontend.tentative import Observation, TentativePool
-from slam.geometry import pose_between, pose_compose, pose_exp, pose_inverse, pose_log
+from slam.geometry import (
+    adjoint_pose2,
+    pose_between,
+    pose_compose,
+    pose_exp,
+    pose_inverse,
+    pose_log,
+)
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
 from slam.graph.batch import BatchSolver
-from slam.graph.config import SlamConfig
 from slam.graph.factors import line_factor_residuals
-from slam.graph.landmark import anchored_jacobian, landmarks_normal_form, r_alpha_from_anchored
-from slam.graph.odometry import adjoint_pose2
 from slam.graph.problem import GrowableArray, LineGraph
-from slam.graph.result import SlamResult
+from slam.line_slam.config import SlamConfig
+from slam.lines.lineset import LineSet
+from slam.models.anchored import (
+    anchored_jacobian,
+    drift_covariance,
+    landmarks_normal_form,
+    model_error_covariance,
+    observe_anchored,
+    r_alpha_from_anchored,
+)
+from slam.result import SlamResult
 from slam.types import Scan
 
 __all__ = ["LineSlam", "ScanReport", "SlamWarning"]
@@ -210,7 +218,9 @@ class LineSlam:
         self.config = config or SlamConfig()
         self.linefit_config = linefit_config or LineFitConfig()
         self.graph = LineGraph()
-        self.backend: BatchBackend | Isam2Backend = make_backend(self.config)
+        self.backend: BatchBackend | Isam2Backend = make_backend(
+            self.config.backend, self.config.solver, self.config.isam2
+        )
         self.tentative = TentativePool()
         # loop-closure candidates are judged by batch solves outside the back-end
         self._judge = BatchSolver(
@@ -928,12 +938,12 @@ class LineSlam:
 
         Candidates: landmarks seen since the last round against alive landmarks within
         ``association.max_range_m`` of the robot (all alive ones with ``everywhere``), geometric
-        pre-filter of :func:`slam.graph.fusion.fusion_candidates`, then the Eq. 34-35 test with
+        pre-filter of :func:`slam.line_slam.fusion.fusion_candidates`, then the Eq. 34-35 test with
         the landmarks' covariances relative to the poses that saw them plus the drift between
         their last sightings (no joint marginal needed: both are measured relative to nearby
         poses).
         """
-        from slam.graph.fusion import fusion_candidates
+        from slam.line_slam.fusion import fusion_candidates
 
         t0 = time.perf_counter()
         cfg = self.config

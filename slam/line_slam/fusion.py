@@ -28,9 +28,9 @@ from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
 from slam.association import landmarks_compatible
-from slam.graph.config import FusionConfig
-from slam.graph.landmark import anchored_jacobian
 from slam.graph.problem import LineGraph
+from slam.line_slam.config import FusionConfig
+from slam.models.anchored import anchored_jacobian
 
 __all__ = ["fuse_landmarks", "fusion_candidates"]
 

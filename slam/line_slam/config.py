@@ -1,0 +1,233 @@
+"""Configuration of :class:`slam.line_slam.LineSlam`.
+
+The ``[slam]`` table of :class:`slam.config.RunConfig` and its own steps' tables
+(``[slam.keyframes]``, ``[slam.fusion]``); the front end's and the back-end's tables are
+defined beside their code (:mod:`slam.frontend.config`, :mod:`slam.graph.config`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.association import AssociationConfig
+from slam.frontend.config import (
+    FrontendConfig,
+    LoopClosureConfig,
+    RelocalisationConfig,
+    TentativeConfig,
+)
+from slam.graph.config import Isam2Config, SolverConfig
+from slam.models.motion import MotionNoiseConfig
+from slam.validate import nonneg, positive, require
+
+__all__ = [
+    "FrontendConfig",
+    "FusionConfig",
+    "Isam2Config",
+    "KeyframeConfig",
+    "LoopClosureConfig",
+    "MotionNoiseConfig",
+    "RelocalisationConfig",
+    "SlamConfig",
+    "SolverConfig",
+    "TentativeConfig",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class KeyframeConfig:
+    """When a scan becomes a pose variable.
+
+    A scan is a keyframe when the odometry since the last keyframe exceeds ``min_distance_m``
+    or ``min_angle_rad`` (the first scan always is).  Other scans get a pose from the last
+    keyframe's estimate composed with their odometry, and their lines are not used.  Zero for
+    both makes every scan a keyframe.
+    """
+
+    min_distance_m: float = 0.2
+    min_angle_rad: float = 0.15
+
+    def __post_init__(self) -> None:
+        nonneg("min_distance_m", self.min_distance_m)
+        nonneg("min_angle_rad", self.min_angle_rad)
+
+
+@dataclass(frozen=True)
+class FusionConfig:
+    """Landmark fusion: merging two landmarks that turn out to be the same wall.
+
+    Attributes
+    ----------
+    enabled : bool
+        Test and merge at all.
+    interval_keyframes : int
+        Test every this many keyframes (and at :meth:`LineSlam.optimize`).
+    gate_probability : float
+        χ² gate (2 dof) of the Eq. 34-35 test on the joint marginal of the two landmarks;
+        default the paper's "3σ" (11.83).
+    max_gap_m : float
+        Largest gap (m) between the two landmarks' extents along the line.
+    max_angle_rad : float
+        Pre-filter: pairs whose normals differ by more (mod π) are not tested.
+    max_distance_m : float
+        Pre-filter: largest distance between one landmark's extent mid-point and the other line.
+    retest_growth : float
+        A pair that failed the test is tested again once its landmarks have this many times the
+        measurements (together) they had then.
+    audit_max_median_chi2 : float
+        A merge (fusion or loop closure) is undone when, some keyframes later, the median
+        whitened squared residual of either side's line factors exceeds this (χ²₂ 99 %: 9.21);
+        fusion never merges an undone pair again.
+    max_path_gap_m : float
+        During the run, two landmarks last seen more than this much driven path apart are
+        not fused but left to loop closing, which verifies a whole submap and rejects
+        ambiguous matches: after metres of drift a wall can land on its neighbour (rooms along
+        a corridor repeat), and a wrong fusion binds the drifted estimate to the wrong place.
+        Default: the front end's drift limit (``max_drift_xy_m / drift_xy_per_m`` = 20 m).
+        The final round over the whole map (:meth:`LineSlam.optimize`) has no such limit.
+    """
+
+    enabled: bool = True
+    interval_keyframes: int = 10
+    gate_probability: float = 0.9973
+    max_gap_m: float = 0.3
+    max_angle_rad: float = 0.2
+    max_distance_m: float = 0.5
+    retest_growth: float = 2.0
+    audit_max_median_chi2: float = 9.21
+    max_path_gap_m: float = 20.0
+
+    def __post_init__(self) -> None:
+        require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
+        require(self.retest_growth >= 1.0, "retest_growth must be >= 1")
+        require(0.0 < self.gate_probability < 1.0, "gate_probability must be in (0, 1)")
+        nonneg("max_gap_m", self.max_gap_m)
+        positive("max_angle_rad", self.max_angle_rad)
+        positive("max_distance_m", self.max_distance_m)
+        positive("audit_max_median_chi2", self.audit_max_median_chi2)
+        positive("max_path_gap_m", self.max_path_gap_m)
+
+
+@dataclass(frozen=True)
+class SlamConfig:
+    """Everything :class:`slam.line_slam.LineSlam` needs.
+
+    Attributes
+    ----------
+    backend : {"batch", "isam2"}
+        Online estimator: periodic batch LM over the whole graph, or incremental iSAM2.
+    motion, keyframes, association, fusion, solver, isam2
+        Sub-configurations.
+    prior_sigma_xy_m, prior_sigma_theta_rad : float
+        Prior on the first pose (defines the world frame: the first laser pose).
+    frontend, tentative, loop_closure
+        Registration front end, tentative landmarks, loop closing.
+    pose_base_laser : tuple of 3 floats
+        Laser pose on the robot base (the mounting): used with the base odometry
+        (``laser_odometry = "base"``, or when a scan has no logged laser pose) and to report
+        base poses (``output_frame = "base"``).
+    mount_source : {"catalog", "config"}
+        ``"catalog"``: for a catalogued log whose laser poses lack the recorded mounting, the
+        runner (:func:`slam.runner.slam_config_for_log`) sets ``pose_base_laser`` from the
+        catalogue, ``laser_odometry = "base"`` and ``output_frame = "base"``; ``"config"``:
+        these three are taken as configured.
+    laser_odometry : {"logged", "base"}
+        ``"logged"``: the laser's odometry is ``Scan.pose_odom_laser`` as logged (else the base
+        odometry composed with the mounting); ``"base"``: always
+        ``Scan.pose_odom_base ∘ pose_base_laser`` (logs whose laser pose lacks the mounting).
+    output_frame : {"laser", "base"}
+        Frame of the trajectory in the result (``summary.json`` says which).
+    odometry_sign : {"velocity", "logged"}
+        ``"velocity"``: when a CARMEN log is read for an estimator (the graph, and the EKF
+        and the comparisons, which read this setting too), pose increments that moved forwards
+        while the ``ODOM`` speed ``tv`` was negative are negated
+        (:func:`slam.io.carmen.velocity_signed_scans`; fr079 logs reversing as forward
+        motion); logs whose ``tv`` is never negative are unchanged.  ``"logged"``: the
+        odometry poses as logged.
+    line_model_sigma_r_m, line_model_sigma_alpha_rad : float
+        Model error added to every measured line's covariance, at the segment's mid-point
+        (:func:`slam.models.anchored.model_error_covariance`); 0 for simulated data whose
+        fit covariances are exact.
+    min_line_points : int
+        Lines with fewer supporting points are ignored (neither matched nor new landmarks).
+    min_line_length_m : float
+        Shorter lines are ignored (default 0.3 m: shorter stubs have so uncertain an angle that
+        their gates admit unrelated stubs; see ``docs/graph.md``).
+    pose_covariances : {"keyframes", "none"}
+        Compute the marginal covariance of every keyframe pose for the result (non-keyframe
+        scans get their keyframe's covariance compounded with the odometry noise).
+    map_segment_gap_m : float
+        In the output map, observed pieces of a line closer than this are one segment.
+    map_min_observations : int
+        Landmarks with fewer line measurements stay in the graph but are left out of the
+        output map (one-off lines: clutter, lines fitted across depth jumps).
+    """
+
+    backend: Literal["batch", "isam2"] = "isam2"
+    motion: MotionNoiseConfig = field(default_factory=MotionNoiseConfig)
+    keyframes: KeyframeConfig = field(default_factory=KeyframeConfig)
+    association: AssociationConfig = field(default_factory=AssociationConfig)
+    fusion: FusionConfig = field(default_factory=FusionConfig)
+    solver: SolverConfig = field(default_factory=SolverConfig)
+    isam2: Isam2Config = field(default_factory=Isam2Config)
+    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    tentative: TentativeConfig = field(default_factory=TentativeConfig)
+    loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
+    prior_sigma_xy_m: float = 1e-4
+    prior_sigma_theta_rad: float = 1e-5
+    pose_base_laser: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mount_source: Literal["catalog", "config"] = "catalog"
+    laser_odometry: Literal["logged", "base"] = "logged"
+    output_frame: Literal["laser", "base"] = "laser"
+    odometry_sign: Literal["velocity", "logged"] = "velocity"
+    line_model_sigma_r_m: float = 0.02
+    line_model_sigma_alpha_rad: float = 0.01
+    min_line_points: int = 5
+    min_line_length_m: float = 0.3
+    pose_covariances: Literal["keyframes", "none"] = "keyframes"
+    map_segment_gap_m: float = 0.3
+    map_min_observations: int = 3
+
+    def __post_init__(self) -> None:
+        require(
+            self.backend in ("batch", "isam2"), f"backend must be batch or isam2: {self.backend!r}"
+        )
+        positive("prior_sigma_xy_m", self.prior_sigma_xy_m)
+        positive("prior_sigma_theta_rad", self.prior_sigma_theta_rad)
+        require(
+            len(self.pose_base_laser) == 3 and all(math.isfinite(v) for v in self.pose_base_laser),
+            "pose_base_laser must be three finite numbers (x, y, theta)",
+        )
+        require(self.laser_odometry in ("logged", "base"), "laser_odometry must be logged or base")
+        require(
+            self.mount_source in ("catalog", "config"), "mount_source must be catalog or config"
+        )
+        require(self.output_frame in ("laser", "base"), "output_frame must be laser or base")
+        require(
+            self.odometry_sign in ("velocity", "logged"),
+            "odometry_sign must be velocity or logged",
+        )
+        nonneg("line_model_sigma_r_m", self.line_model_sigma_r_m)
+        nonneg("line_model_sigma_alpha_rad", self.line_model_sigma_alpha_rad)
+        require(self.min_line_points >= 2, "min_line_points must be >= 2")
+        nonneg("min_line_length_m", self.min_line_length_m)
+        require(
+            self.pose_covariances in ("keyframes", "none"),
+            "pose_covariances must be keyframes or none",
+        )
+        nonneg("map_segment_gap_m", self.map_segment_gap_m)
+        require(self.map_min_observations >= 1, "map_min_observations must be >= 1")
+
+    @property
+    def prior_cov(self) -> FloatArray:
+        """Covariance of the first-pose prior."""
+        return np.diag(
+            [self.prior_sigma_xy_m**2, self.prior_sigma_xy_m**2, self.prior_sigma_theta_rad**2]
+        )

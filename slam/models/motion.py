@@ -1,0 +1,74 @@
+"""Odometry noise model shared by both estimators.
+
+A random walk in distance travelled and angle turned: the graph's odometry factors and the
+EKF's prediction use the same :class:`MotionNoiseConfig`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.validate import nonneg, positive
+
+__all__ = ["MotionNoiseConfig"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class MotionNoiseConfig:
+    """Odometry noise: a random walk in distance travelled and angle turned.
+
+    The covariance of a relative motion ``(dx, dy, dθ)`` (right tangent space, body frame) is
+    ``diag(σ_xy², σ_xy², σ_θ²)`` with
+
+    ``σ_xy² = sigma_xy_min_m² + sigma_xy_per_m²·d + sigma_xy_per_rad²·|dθ|``,
+    ``σ_θ²  = sigma_theta_min_rad² + sigma_theta_per_m²·d + sigma_theta_per_rad²·|dθ|``,
+
+    ``d = √(dx² + dy²)``.  Variances grow linearly, so chaining steps gives (to first order) the
+    same uncertainty as one step over the same path: ``sigma_xy_per_m`` is the standard
+    deviation after 1 m (m/√m), ``sigma_theta_per_rad`` after turning 1 rad (rad/√rad), etc.
+
+    Attributes
+    ----------
+    sigma_xy_per_m, sigma_xy_per_rad, sigma_theta_per_m, sigma_theta_per_rad : float
+        See above.
+    sigma_xy_min_m, sigma_theta_min_rad : float
+        Floors, so that a standstill is not a perfect constraint.
+    """
+
+    sigma_xy_per_m: float = 0.05
+    sigma_xy_per_rad: float = 0.02
+    sigma_theta_per_m: float = 0.02
+    sigma_theta_per_rad: float = 0.05
+    sigma_xy_min_m: float = 0.002
+    sigma_theta_min_rad: float = 0.001
+
+    def __post_init__(self) -> None:
+        for name in (
+            "sigma_xy_per_m",
+            "sigma_xy_per_rad",
+            "sigma_theta_per_m",
+            "sigma_theta_per_rad",
+        ):
+            nonneg(name, getattr(self, name))
+        positive("sigma_xy_min_m", self.sigma_xy_min_m)
+        positive("sigma_theta_min_rad", self.sigma_theta_min_rad)
+
+    def covariance(self, delta: FloatArray) -> FloatArray:
+        """Covariance ``(..., 3, 3)`` of relative motions ``delta`` ``(..., 3)``."""
+        d = np.asarray(delta, dtype=float)
+        dist = np.hypot(d[..., 0], d[..., 1])
+        turn = np.abs(d[..., 2])
+        var_xy = self.sigma_xy_min_m**2 + self.sigma_xy_per_m**2 * dist
+        var_xy = var_xy + self.sigma_xy_per_rad**2 * turn
+        var_th = self.sigma_theta_min_rad**2 + self.sigma_theta_per_m**2 * dist
+        var_th = var_th + self.sigma_theta_per_rad**2 * turn
+        out = np.zeros((*d.shape[:-1], 3, 3))
+        out[..., 0, 0] = var_xy
+        out[..., 1, 1] = var_xy
+        out[..., 2, 2] = var_th
+        return out
