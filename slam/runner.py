@@ -15,13 +15,12 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Protocol
 
 from slam.config import RunConfig
 from slam.errors import InputError
-from slam.line_slam.config import SlamConfig
+from slam.inputs import InputPolicy, policy_for_log
 from slam.types import Scan
 
 __all__ = ["ScanEstimator", "feed_scans", "run_estimator_on_log", "run_slam"]
@@ -147,31 +146,6 @@ def run_estimator_on_log(
     return summary
 
 
-def slam_config_for_log(config: SlamConfig, log: str | Path) -> SlamConfig:
-    """The SLAM configuration with the laser mounting of a catalogued log applied.
-
-    With ``config.mount_source == "catalog"`` and a log whose catalogue entry records a
-    mounting that the log's laser poses do not contain (``mount_applied_in_log = false``), the
-    laser odometry becomes ``base odometry ∘ mounting`` and the trajectory is reported for the
-    base (the frame of the poses as logged, which the relations refer to; see
-    ``docs/real-logs.md``).  Otherwise ``config`` is returned unchanged.
-    """
-    import math
-
-    from slam.io.catalog import resolve_log
-
-    if config.mount_source != "catalog":
-        return config
-    manifest = resolve_log(log).manifest
-    if manifest is None or manifest.laser is None:
-        return config
-    laser = manifest.laser
-    mount = (laser.mount_x_m, laser.mount_y_m, math.radians(laser.mount_theta_deg))
-    if laser.mount_applied_in_log or not any(mount):
-        return config
-    return replace(config, pose_base_laser=mount, laser_odometry="base", output_frame="base")
-
-
 def run_slam(
     log: str | Path,
     out: Path,
@@ -184,7 +158,8 @@ def run_slam(
     """``lineslam slam``: factor-graph line SLAM on a log (see the module docstring)."""
     from slam.line_slam import LineSlam
 
-    slam = LineSlam(slam_config_for_log(config.slam, log), config.linefit)
+    policy = policy_for_log(InputPolicy.of(config.slam), log, config.slam.mount_source)
+    slam = LineSlam(config.slam, config.linefit, policy)
     summary = run_estimator_on_log(
         log,
         out,
@@ -192,6 +167,6 @@ def run_slam(
         max_scans=max_scans,
         progress=progress,
         plot=plot,
-        odometry_sign=slam.config.odometry_sign,
+        odometry_sign=policy.odometry_sign,
     )
     return summary

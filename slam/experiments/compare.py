@@ -262,8 +262,8 @@ def _linefit_for(task: CompareTask) -> Any:
 def _run_on_log(task: CompareTask) -> VariantOutcome:
     from slam.evaluation import ate, pose_nees, relations_metric
     from slam.experiments.logdata import cached_log_data
+    from slam.inputs import InputPolicy, policy_for_log
     from slam.io import Trajectory, read_relations, read_tum
-    from slam.runner import slam_config_for_log
 
     cache = Path(task.cache_dir) if task.cache_dir else None
     data = cached_log_data(
@@ -275,7 +275,14 @@ def _run_on_log(task: CompareTask) -> VariantOutcome:
     )
     # the laser mounting of a catalogued log, for every estimator alike (the graph applies it
     # itself; the EKF and odometry follow the same slam.* frame settings)
-    slam_cfg = slam_config_for_log(task.run_config.slam, task.data.name)
+    slam_cfg = task.run_config.slam
+    pol = policy_for_log(InputPolicy.of(slam_cfg), task.data.name, slam_cfg.mount_source)
+    slam_cfg = replace(
+        slam_cfg,
+        pose_base_laser=pol.pose_base_laser,
+        laser_odometry=pol.laser_odometry,
+        output_frame=pol.output_frame,
+    )
     rc = replace(task.run_config, linefit=_linefit_for(task), slam=slam_cfg)
     t0 = time.perf_counter()
     est = run_estimator(

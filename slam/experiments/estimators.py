@@ -119,7 +119,7 @@ def _laser_odometry(scans: Sequence[Scan], config: RunConfig) -> Sequence[Scan]:
     """Scans whose laser odometry follows the graph's setting (``slam.laser_odometry``).
 
     With ``"base"`` (a log whose logged laser poses lack the mounting,
-    :func:`slam.runner.slam_config_for_log`) the laser odometry is
+    :func:`slam.inputs.policy_for_log`) the laser odometry is
     ``pose_odom_base ∘ pose_base_laser``, as :class:`slam.line_slam.LineSlam` computes it, so that
     the EKF and odometry-only runs see the same motion as the graph.
     """

@@ -135,7 +135,7 @@ class SlamConfig:
         base poses (``output_frame = "base"``).
     mount_source : {"catalog", "config"}
         ``"catalog"``: for a catalogued log whose laser poses lack the recorded mounting, the
-        runner (:func:`slam.runner.slam_config_for_log`) sets ``pose_base_laser`` from the
+        runner (:func:`slam.inputs.policy_for_log`) sets ``pose_base_laser`` from the
         catalogue, ``laser_odometry = "base"`` and ``output_frame = "base"``; ``"config"``:
         these three are taken as configured.
     laser_odometry : {"logged", "base"}

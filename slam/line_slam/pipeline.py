@@ -51,7 +51,6 @@ from numpy.typing import NDArray
 from linefit.config import LineFitConfig
 from linefit.line import Line, wrap_angle
 from slam.association import candidate_landmarks, landmarks_compatible
-from slam.errors import InputError
 from slam.frontend.registration import register_lines
 from slam.frontend.tentative import Observation, TentativePool
 from slam.geometry import (
@@ -66,6 +65,7 @@ from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
 from slam.graph.batch import BatchSolver
 from slam.graph.factors import line_factor_residuals
 from slam.graph.problem import GrowableArray, LineGraph
+from slam.inputs import InputPolicy
 from slam.line_slam.config import SlamConfig
 from slam.lines.lineset import LineSet
 from slam.models.anchored import (
@@ -202,6 +202,9 @@ class LineSlam:
     config : SlamConfig, optional
     linefit_config : LineFitConfig, optional
         Used when :meth:`add_scan` extracts the lines itself.
+    policy : InputPolicy, optional
+        How the scans' odometry is read and which frame is reported (:mod:`slam.inputs`);
+        default: the settings in ``config``.
 
     Examples
     --------
@@ -213,9 +216,13 @@ class LineSlam:
     """
 
     def __init__(
-        self, config: SlamConfig | None = None, linefit_config: LineFitConfig | None = None
+        self,
+        config: SlamConfig | None = None,
+        linefit_config: LineFitConfig | None = None,
+        policy: InputPolicy | None = None,
     ) -> None:
         self.config = config or SlamConfig()
+        self.policy = policy if policy is not None else InputPolicy.of(self.config)
         self.linefit_config = linefit_config or LineFitConfig()
         self.graph = LineGraph()
         self.backend: BatchBackend | Isam2Backend = make_backend(
@@ -260,7 +267,6 @@ class LineSlam:
         self._to_audit: list[Any] = []
         # pairs of landmarks whose merge an audit undid: never merged again by fusion
         self._vetoed: set[tuple[int, int]] = set()
-        self._base_laser = np.asarray(self.config.pose_base_laser, dtype=float)
         self.counters: dict[str, int] = {
             "points": 0,
             "lines_fit": 0,
@@ -302,19 +308,7 @@ class LineSlam:
 
     # -- inputs ------------------------------------------------------------------------------
     def _odometry(self, scan: Scan) -> FloatArray:
-        use_base = self.config.laser_odometry == "base" or scan.pose_odom_laser is None
-        if not use_base:
-            pose = np.asarray(scan.pose_odom_laser, dtype=float).reshape(3)
-        elif scan.pose_odom_base is not None:
-            pose = pose_compose(np.asarray(scan.pose_odom_base, dtype=float), self._base_laser)
-        else:
-            raise InputError(
-                f"scan {scan.index} has no odometry (pose_odom_laser / pose_odom_base)",
-                scan.source or None,
-            )
-        if not np.isfinite(pose).all():
-            raise InputError(f"scan {scan.index}: odometry is not finite", scan.source or None)
-        return pose
+        return self.policy.pose_odom_laser(scan)
 
     def _is_keyframe(self, delta: FloatArray) -> bool:
         k = self.config.keyframes
@@ -1453,13 +1447,10 @@ class LineSlam:
                 0.0,
                 self.config.motion.covariance(offsets),
             )
-        frame = self.config.output_frame
-        if frame == "base" and n:
-            # pose_world_base = pose_world_laser ∘ pose_base_laser⁻¹; covariance moved along
-            inv = pose_inverse(self._base_laser)
-            poses = pose_compose(poses, np.broadcast_to(inv, poses.shape))
-            F = adjoint_pose2(self._base_laser)
-            cov = F @ cov @ F.T
+        frame = self.policy.output_frame
+        poses, cov_out = self.policy.report(poses, cov)
+        assert cov_out is not None
+        cov = cov_out
         counts = g.observation_counts()
         ids = np.flatnonzero(g.landmark_alive & (counts >= self.config.map_min_observations))
         la = g.landmarks_r_alpha[ids]
