@@ -8,14 +8,14 @@ scan (about 6× faster on the Intel log, see ``docs/linefit.md``).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
 from linefit import Line, LineFitConfig, extract_lines_batch
 from slam.types import Scan
 
-__all__ = ["extract_scan_lines", "iter_scan_lines"]
+__all__ = ["extract_lines_of_scans", "extract_scan_lines", "iter_scan_lines"]
 
 
 def _flush(batch: list[Scan], config: LineFitConfig) -> list[list[Line]]:
@@ -23,6 +23,29 @@ def _flush(batch: list[Scan], config: LineFitConfig) -> list[list[Line]]:
     bearings = np.stack([s.bearings for s in batch])
     max_range = np.array([s.max_range_m for s in batch], dtype=float)
     return extract_lines_batch(ranges, bearings, config, max_range_m=max_range)
+
+
+def extract_lines_of_scans(
+    scans: Sequence[Scan], config: LineFitConfig | None = None
+) -> list[list[Line]]:
+    """Lines of ``scans``, one :func:`linefit.extract_lines_batch` call per beam layout.
+
+    Scans with the same beam count, first and last bearing and maximum range share a call
+    (the order of the scans within a layout is kept); the result is in the order of ``scans``.
+    """
+    cfg = config if config is not None else LineFitConfig()
+    groups: dict[tuple[int, float, float, float], list[int]] = {}
+    for n, s in enumerate(scans):
+        key = (s.n_beams, float(s.bearings[0]), float(s.bearings[-1]), float(s.max_range_m))
+        groups.setdefault(key, []).append(n)
+    out: list[list[Line]] = [[] for _ in scans]
+    for members in groups.values():
+        first = scans[members[0]]
+        ranges = np.stack([scans[n].ranges for n in members])
+        lines = extract_lines_batch(ranges, first.bearings, cfg, max_range_m=first.max_range_m)
+        for n, ls in zip(members, lines, strict=True):
+            out[n] = list(ls)
+    return out
 
 
 def iter_scan_lines(

@@ -22,7 +22,7 @@ from slam.frontend.config import LoopClosureConfig
 from slam.geometry import pose_between, pose_log
 from slam.graph import SolverConfig
 from slam.line_slam import FusionConfig, KeyframeConfig, LineSlam, SlamConfig, SlamWarning
-from slam.line_slam.pipeline import WARN_LOST, WARN_NO_LINES, WARN_PARALLEL
+from slam.line_slam.report import WARN_LOST, WARN_NO_LINES, WARN_PARALLEL
 from slam.models import MotionNoiseConfig
 from slam.result import SlamResult
 from slam.types import Scan
@@ -86,10 +86,10 @@ def test_loop_closures_lie_within_the_marginals_gate(loop_runs):
     _, _, run, out = loop_runs
     for backend in ("isam2", "batch"):
         slam = out[backend][0]
-        accepted = [e for e in slam._closure_log if e["accepted"]]
+        accepted = [e for e in slam.loop_closer.attempts if e.accepted]
         assert accepted
-        assert all(0.0 <= e["correction_chi2"] < 16.27 for e in accepted)
-    tight = min(e["correction_chi2"] for e in out["isam2"][0]._closure_log if e["accepted"])
+        assert all(0.0 <= e.correction_chi2 < 16.27 for e in accepted)
+    tight = min(e.correction_chi2 for e in out["isam2"][0].loop_closer.attempts if e.accepted)
     config = SlamConfig(
         motion=MOTION,
         **EXACT_LINES,
@@ -98,7 +98,9 @@ def test_loop_closures_lie_within_the_marginals_gate(loop_runs):
     slam, _, _ = run_slam(run, config)
     assert slam.counters["loop_closures"] == 0
     assert slam.counters["loop_closures_gated"] >= 3
-    assert all("gate" in e["reason"] for e in slam._closure_log if "correction_chi2" in e)
+    assert all(
+        e.kind == "gated" for e in slam.loop_closer.attempts if e.correction_chi2 is not None
+    )
     # the same hypothesis found again after being gated: with the override it is judged
     config = replace(config, loop_closure=replace(config.loop_closure, gate_override_after=1))
     slam, _, _ = run_slam(run, config)
@@ -328,9 +330,9 @@ def test_rejected_loop_closure_leaves_graph_and_backend_untouched(loop_runs):
     state = (g.poses.copy(), g.landmarks.copy(), g.factor_landmark.copy(), len(g.merge_log))
     updates = slam.backend.solver.stats.updates
     undone = slam.counters["loop_closures_undone"]
-    assert slam._apply_closure(a, b, found, pose) == 0
+    assert slam.loop_closer.apply(a, b, found, pose) == 0
     assert slam.counters["loop_closures_undone"] == undone + 1
-    assert slam._closure_log[-1]["accepted"] is False
+    assert slam.loop_closer.attempts[-1].accepted is False
     np.testing.assert_array_equal(g.poses, state[0])
     np.testing.assert_array_equal(g.landmarks, state[1])
     np.testing.assert_array_equal(g.factor_landmark, state[2])
@@ -339,14 +341,14 @@ def test_rejected_loop_closure_leaves_graph_and_backend_untouched(loop_runs):
     # the same hypothesis found again shortly after, with no more pairs, is not judged again;
     # with more pairs, another correction, or once the local submap has moved on, it is
     lcc = slam.config.loop_closure
-    assert slam._repeated_rejection(found, pose + 1) == pose
+    assert slam.loop_closer.repeated_rejection(found, pose + 1) == pose
     nearby = LoopClosure(found.correction + [0.1, 0.0, 0.01], found.pairs, 10.0, 1.0)
-    assert slam._repeated_rejection(nearby, pose + 1) == pose
+    assert slam.loop_closer.repeated_rejection(nearby, pose + 1) == pose
     more = LoopClosure(found.correction, [(k, k) for k in range(5)], 12.0, 1.0)
-    assert slam._repeated_rejection(more, pose + 1) is None
+    assert slam.loop_closer.repeated_rejection(more, pose + 1) is None
     other = LoopClosure(found.correction + [0.5, 0.0, 0.0], found.pairs, 10.0, 1.0)
-    assert slam._repeated_rejection(other, pose + 1) is None
-    assert slam._repeated_rejection(found, pose + lcc.local_keyframes) is None
+    assert slam.loop_closer.repeated_rejection(other, pose + 1) is None
+    assert slam.loop_closer.repeated_rejection(found, pose + lcc.local_keyframes) is None
 
 
 @pytest.mark.parametrize("max_pair_chi2", [np.inf, 1000.0])
@@ -373,10 +375,10 @@ def test_closure_with_a_pair_left_metres_apart_is_rejected_whole(max_pair_chi2):
     assert len(right) == 3
     for rec in right:
         g.unmerge(rec)
-    slam._recompute_info(np.array([i for r in right for i in (r.keep, r.drop)]))
+    slam.book.recompute_info(np.array([i for r in right for i in (r.keep, r.drop)]))
     slam.backend.update(g)
     slam.backend.optimize(g)
-    slam._extents = g.landmark_extents()
+    slam.book.refresh_extents()
     # the wrong pair: a well-observed landmark and one about 90° from it
     counts = g.observation_counts()
     used = {i for r in right for i in (r.keep, r.drop)}
@@ -387,9 +389,9 @@ def test_closure_with_a_pair_left_metres_apart_is_rejected_whole(max_pair_chi2):
     local = np.array([r.drop for r in right] + [a])
     old = np.array([r.keep for r in right] + [b])
     lcc = replace(slam.config.loop_closure, judge_max_pair_chi2=max_pair_chi2)
-    slam.config = replace(slam.config, loop_closure=lcc)
+    slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
     found = LoopClosure(np.zeros(3), [(k, k) for k in range(4)], 10.0, 1.0)
-    accepted = slam._apply_closure(local, old, found, g.n_poses - 1)
-    entry = slam._closure_log[-1]
+    accepted = slam.loop_closer.apply(local, old, found, g.n_poses - 1)
+    entry = slam.loop_closer.attempts[-1].as_log()
     assert entry["consistent_pairs"] == 3 and entry["worst_pair_chi2"] > 1000.0
     assert accepted == (1 if max_pair_chi2 == np.inf else 0)

@@ -1,38 +1,41 @@
-"""Landmark fusion: find landmarks that are one wall and merge them in the graph.
+"""Landmark fusion: merging graph landmarks that turn out to be one wall.
 
-Two landmarks become candidates when (vectorised pre-filter over pairs) their normals differ by
-less than ``max_angle_rad`` modulo π, the mid-point of one's extent lies within
-``max_distance_m`` of the other line, and their extents along the line overlap or leave a gap of
-at most ``max_gap_m``.  A candidate pair is then tested with the paper's merge test
-(Eqs. 34-35) on the two landmarks' **joint** marginal
-(:func:`slam.association.landmarks_compatible`): landmarks observed from the same poses are
-strongly correlated, and ignoring that would make the test far too strict.  A compatible pair is
-merged (:meth:`LineGraph.merge_landmarks`): the landmark with more observations is kept, its
-estimate set to the maximum-likelihood fusion of the two (:func:`slam.lines.fuse`, Eqs. 36-37,
-as a starting point: the next solve does the exact fusion, since all measurements now constrain
-one variable), and the other's factors are rewired to it.  Pairs are taken best first (smallest
-``D²``); a landmark may absorb several others in one round but is never absorbed after
-absorbing.  A pair that failed the test
-is tested again only once its two landmarks together have ``retest_growth`` times the
-measurements they had (the joint marginal is the expensive part: one
-``jointMarginalCovariance`` per pair; two walls seen together every keyframe would otherwise be
-tested every round).
+Every ``fusion.interval_keyframes`` keyframes (and over the whole map at
+:meth:`LineSlam.optimize`) the landmarks seen since the last round are tested against the alive
+landmarks near the robot.
+
+1. **Candidates** (:func:`fusion_candidates`, a vectorised pre-filter over pairs): normals that
+   differ by less than ``max_angle_rad`` modulo π, the mid-point of one's extent within
+   ``max_distance_m`` of the other line, extents along the line that overlap or leave a gap of
+   at most ``max_gap_m``.  During the run, pairs last seen more than ``max_path_gap_m`` of path
+   apart are left to loop closing.
+2. **Test**: the paper's merge test (Eqs. 34-35, :func:`slam.association.landmarks_compatible`)
+   on the two landmarks' covariances relative to the poses that saw them, the second one
+   widened by the drift between their last sightings (no joint marginal is needed: both are
+   measured relative to nearby poses).
+3. **Merge**, best first (smallest ``D²``): the landmark with more observations is kept and the
+   other's factors are rewired to it (:meth:`LandmarkBook.merge`); a landmark may absorb several
+   others in one round but is never absorbed after absorbing.  Pairs whose merge an audit undid
+   (:mod:`slam.line_slam.audit`) are never merged again.  The round's merges are audited at the
+   next round, once the estimate has absorbed them.
 """
 
 from __future__ import annotations
-
-from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
-from slam.association import landmarks_compatible
-from slam.graph.problem import LineGraph
-from slam.line_slam.config import FusionConfig
-from slam.models.anchored import anchored_jacobian
+from slam.association import candidate_landmarks, landmarks_compatible
+from slam.graph.problem import LineGraph, MergeRecord
+from slam.line_slam.audit import MergeAudit
+from slam.line_slam.clock import StageClock
+from slam.line_slam.config import FusionConfig, SlamConfig
+from slam.line_slam.keyframes import KeyframeTrack
+from slam.line_slam.landmarks import LandmarkBook
+from slam.models.anchored import anchored_jacobian, drift_covariance
 
-__all__ = ["fuse_landmarks", "fusion_candidates"]
+__all__ = ["LandmarkFusion", "fusion_candidates"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -87,74 +90,141 @@ def fusion_candidates(
     return sorted(pairs)
 
 
-def fuse_landmarks(
-    graph: LineGraph,
-    pairs: list[tuple[int, int]],
-    joint_covariance: Callable[[IntArray], FloatArray],
-    config: FusionConfig,
-    rejected: dict[tuple[int, int], int] | None = None,
-) -> list[tuple[int, int, float]]:
-    """Test ``pairs`` on their joint marginal and merge the compatible ones (best first).
+class LandmarkFusion:
+    """Fusion rounds over the landmark book (module docstring).
 
     Parameters
     ----------
-    graph : LineGraph
-    pairs : list of (int, int)
-    joint_covariance : callable
-        ``landmarks (2,) -> (4, 4)`` joint marginal covariance in the anchored chart.
-    config : FusionConfig
-    rejected : dict, optional
-        Memo of failed pairs → their total observation count when tested (updated in place).
-
-    Returns
-    -------
-    list of (kept, dropped, D²)
+    book, track, audit
+        The run's landmark book, keyframe track and merge audit.
+    config : SlamConfig
+        ``fusion``, ``association.max_range_m`` and the front end's drift model.
+    counters : dict
+        The run's counters (``landmarks_merged``).
+    clock : StageClock
+        Times the rounds (``fusion``).
     """
-    from slam.lines import fuse
 
-    if not pairs:
-        return []
-    la = graph.landmarks_r_alpha
-    counts = graph.observation_counts()
-    tested = []
-    for a, b in pairs:
-        n_obs = int(counts[a] + counts[b])
-        retest_at = config.retest_growth * rejected.get((a, b), 0) if rejected is not None else 0
-        if n_obs < retest_at:
-            continue
-        idx = np.array([a, b])
-        P = joint_covariance(idx)
-        T = np.zeros((4, 4))
-        T[:2, :2] = anchored_jacobian(graph.landmarks[a], graph.anchors[a])
-        T[2:, 2:] = anchored_jacobian(graph.landmarks[b], graph.anchors[b])
-        P_ra = T @ P @ T.T
-        ok, d2 = landmarks_compatible(la[a], la[b], P_ra, config.gate_probability)
-        if ok:
-            tested.append((d2, a, b, P_ra))
-        elif rejected is not None:
-            rejected[(a, b)] = n_obs
-    tested.sort(key=lambda item: item[0])
-    kept: set[int] = set()
-    dropped: set[int] = set()
-    merged = []
-    for d2, a, b, P_ra in tested:
-        keep, drop = (a, b) if counts[a] >= counts[b] else (b, a)
-        # each tested pair was tested against the kept landmark's estimate before this round's
-        # merges: a landmark may absorb several others, but is never absorbed after absorbing
-        if a in dropped or b in dropped or drop in kept:
-            continue
-        ik, id_ = (0, 2) if keep == a else (2, 0)
-        fused, _ = fuse(
-            la[keep],
-            P_ra[ik : ik + 2, ik : ik + 2],
-            la[drop],
-            P_ra[id_ : id_ + 2, id_ : id_ + 2],
-            normal_form=False,
+    def __init__(
+        self,
+        book: LandmarkBook,
+        track: KeyframeTrack,
+        audit: MergeAudit,
+        config: SlamConfig,
+        counters: dict[str, int],
+        clock: StageClock,
+    ) -> None:
+        self.book = book
+        self.track = track
+        self.audit = audit
+        self.config = config
+        self.counters = counters
+        self.clock = clock
+        self.pending_audit: list[MergeRecord] = []
+        """The last round's merges, audited at the next round (or at the end)."""
+        self._since = 0
+
+    def due(self) -> bool:
+        """Count a keyframe; whether a round is due (every ``fusion.interval_keyframes``)."""
+        self._since += 1
+        if self.config.fusion.enabled and self._since >= self.config.fusion.interval_keyframes:
+            self._since = 0
+            return True
+        return False
+
+    def round(self, x_now: FloatArray, everywhere: bool = False) -> int:
+        """One fusion round near ``x_now`` (over all alive landmarks with ``everywhere``).
+
+        Returns the number of merges.
+        """
+        with self.clock("fusion"):
+            return self._round(x_now, everywhere)
+
+    def _round(self, x_now: FloatArray, everywhere: bool) -> int:
+        cfg = self.config
+        book = self.book
+        g = book.graph
+        if self.pending_audit:
+            self.audit.audit(self.pending_audit)
+            self.pending_audit = []
+        n_log = len(g.merge_log)
+        alive = book.alive_with_extent()
+        if everywhere:
+            subset = np.flatnonzero(alive)
+            others = subset
+        else:
+            recent_from = g.n_poses - cfg.fusion.interval_keyframes
+            subset = np.flatnonzero(alive & (book.last_keyframe >= recent_from))
+            others = candidate_landmarks(
+                x_now,
+                g.landmarks_r_alpha,
+                book.extents,
+                cfg.association.max_range_m,
+                alive=alive,
+                anchors=g.anchors,
+            )
+        pairs = fusion_candidates(g, book.extents, subset, cfg.fusion, others=others)
+        merged = 0
+        if pairs:
+            merged = self._test_and_merge(pairs, everywhere)
+        if merged:
+            self.counters["landmarks_merged"] += merged
+            book.refresh_extents()
+            self.pending_audit = list(g.merge_log[n_log:])
+        return merged
+
+    def _test_and_merge(self, pairs: list[tuple[int, int]], everywhere: bool) -> int:
+        cfg = self.config
+        book = self.book
+        g = book.graph
+        a = np.array([p[0] for p in pairs])
+        b = np.array([p[1] for p in pairs])
+        la = g.landmarks_r_alpha
+        # drift between their last sightings
+        last = book.last_keyframe
+        kf_path = self.track.keyframe_path_m
+        gap = np.abs(kf_path[last[a]] - kf_path[last[b]])
+        if not everywhere:
+            # far apart in path: loop closing's job (submap verification), not fusion's
+            near = gap <= cfg.fusion.max_path_gap_m
+            a, b, gap = a[near], b[near], gap[near]
+        Pa = book.covariance(a)
+        Pb = book.covariance(b)
+        fc = cfg.frontend
+        # the drift rotates b about the robot where it last saw b
+        seen_from = g.poses[last[b], :2]
+        Pb = Pb + drift_covariance(
+            g.landmarks[b],
+            g.anchors[b],
+            seen_from,
+            fc.drift_xy_per_m * gap,
+            fc.drift_theta_per_m * gap,
         )
-        # the kept estimate moves only for its first merge in the round (the others were tested
-        # against the estimate before any merge); the next solve does the exact fusion
-        graph.merge_landmarks(keep, drop, fused if keep not in kept else None)
-        kept.add(keep)
-        dropped.add(drop)
-        merged.append((keep, drop, float(d2)))
-    return merged
+        Ja = anchored_jacobian(g.landmarks[a], g.anchors[a])
+        Jb = anchored_jacobian(g.landmarks[b], g.anchors[b])
+        Pa = Ja @ Pa @ np.swapaxes(Ja, -1, -2)
+        Pb = Jb @ Pb @ np.swapaxes(Jb, -1, -2)
+        tested = []
+        for k in range(a.size):
+            if (int(a[k]), int(b[k])) in self.audit.vetoed:
+                continue
+            P = np.zeros((4, 4))
+            P[:2, :2] = Pa[k]
+            P[2:, 2:] = Pb[k]
+            ok, d2 = landmarks_compatible(la[a[k]], la[b[k]], P, cfg.fusion.gate_probability)
+            if ok:
+                tested.append((d2, int(a[k]), int(b[k])))
+        tested.sort()
+        counts = g.observation_counts()
+        kept: set[int] = set()
+        dropped: set[int] = set()
+        merged = 0
+        for _, ia, ib in tested:
+            keep, drop = (ia, ib) if counts[ia] >= counts[ib] else (ib, ia)
+            if ia in dropped or ib in dropped or drop in kept:
+                continue
+            book.merge(keep, drop)
+            kept.add(keep)
+            dropped.add(drop)
+            merged += 1
+        return merged

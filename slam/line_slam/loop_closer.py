@@ -1,0 +1,496 @@
+"""Loop closing: search the old map for the local submap, gate, judge, apply or roll back.
+
+Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`):
+
+1. **Search.**  The local submap (landmarks seen in the last ``local_keyframes`` keyframes) is
+   searched for among the old landmarks (drifted beyond the front end's reach, near the robot)
+   within a window that grows with the path driven since the old landmarks were seen
+   (``window_*_per_m``, clipped to ``[min_window_*, max_window_*]``;
+   :func:`slam.frontend.loop_closure.search_loop_closure`).
+2. **Repeats.**  A hypothesis that repeats one rejected recently (same correction, no more pairs)
+   is not judged again (``skip_repeated_rejections``).
+3. **Gate.**  The correction's squared Mahalanobis distance under the back-end's joint marginal
+   covariance of the two keyframes it links (:func:`slam.frontend.loop_closure.correction_chi2`)
+   must not exceed ``max_correction_chi2``; ``gate_override_after`` lets a correction through
+   that the gate turned away that many times recently.
+4. **Judge.**  A large correction is first spread over the loop (:func:`spread_correction`); the
+   paired landmarks are merged and a batch solve of the loop
+   (:class:`slam.graph.batch.BatchSolver`, at most ``judge_iterations``) outside the back-end
+   decides: the closure is kept when enough merged pairs are explained
+   (:class:`slam.line_slam.audit.MergeAudit`), else the landmark book is restored to its
+   snapshot and the back-end never sees it.  An accepted closure with a large correction
+   restarts the back-end from the judged estimate; a small one reaches it incrementally.
+
+Every attempt is recorded as a :class:`ClosureAttempt` (``summary.json``:
+``loop_closures_log``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from linefit.line import wrap_angle
+from slam.association import candidate_landmarks
+from slam.frontend.loop_closure import (
+    LoopClosure,
+    correction_chi2,
+    same_correction,
+    search_loop_closure,
+)
+from slam.graph.backend import BatchBackend, Isam2Backend
+from slam.graph.batch import BatchSolver
+from slam.line_slam.audit import MergeAudit
+from slam.line_slam.clock import StageClock
+from slam.line_slam.config import SlamConfig
+from slam.line_slam.keyframes import KeyframeTrack
+from slam.line_slam.landmarks import LandmarkBook
+from slam.line_slam.local_map import drift_sigmas
+
+__all__ = ["ClosureAttempt", "LoopCloser", "spread_correction"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+_WHERE = ("scan", "old_keyframe", "old_scan", "pose_before", "old_pose_before")
+_ORDER = {
+    "not_found": ("keyframe", "local", "old", "window", "accepted", "reason"),
+    "repeated": ("keyframe", "pairs", "correction", "accepted", "reason"),
+    "gated": ("keyframe", "pairs", "correction", "correction_chi2", "accepted", "reason", *_WHERE),
+    "judged": (
+        "keyframe",
+        "pairs",
+        "consistent_pairs",
+        "worst_pair_chi2",
+        "correction",
+        "single_direction",
+        "score",
+        "runner_up",
+        "judge_iterations",
+        "judge_stop",
+        "judge_free_from",
+        "correction_chi2",
+        *_WHERE,
+        "accepted",
+        "backend_restarted",
+    ),
+}
+
+
+@dataclass
+class ClosureAttempt:
+    """One loop-closure attempt that found a hypothesis or searched in vain.
+
+    ``kind`` is ``"not_found"`` (the search found nothing: ``local``, ``old`` landmarks and the
+    ``window`` (m, rad) searched), ``"repeated"`` (repeats a rejected hypothesis: ``reason``),
+    ``"gated"`` (turned away by the marginals' gate) or ``"judged"``.  Keyframes and scans are
+    0-based; ``correction`` is ``(t_x, t_y, dθ)`` (m, m, rad) about the current pose;
+    ``correction_chi2`` its squared Mahalanobis distance under the joint marginal;
+    ``pose_before``/``old_pose_before`` the two keyframes' estimates before the attempt;
+    ``consistent_pairs`` of ``pairs`` were explained by the judge, whose worst pair left
+    ``worst_pair_chi2``.
+    """
+
+    kind: str
+    keyframe: int
+    accepted: bool = False
+    reason: str | None = None
+    local: int | None = None
+    old: int | None = None
+    window: list[float] | None = None
+    pairs: int | None = None
+    correction: list[float] | None = None
+    correction_chi2: float | None = None
+    consistent_pairs: int | None = None
+    worst_pair_chi2: float | None = None
+    single_direction: bool | None = None
+    score: float | None = None
+    runner_up: float | None = None
+    judge_iterations: int | None = None
+    judge_stop: str | None = None
+    judge_free_from: int | None = None
+    backend_restarted: bool | None = None
+    where: dict[str, Any] = field(default_factory=dict)
+
+    def as_log(self) -> dict[str, Any]:
+        """The attempt as a ``loop_closures_log`` entry (JSON-ready; unset fields left out)."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        values.update(self.where)
+        return {k: values[k] for k in _ORDER[self.kind] if values.get(k) is not None}
+
+
+def spread_correction(
+    book: LandmarkBook,
+    track: KeyframeTrack,
+    correction: FloatArray,
+    center: FloatArray,
+    k_old: int,
+    pose: int,
+    local_keyframes: int,
+) -> None:
+    """Move the estimate towards a loop closure before optimising (a good starting point).
+
+    The local submap (the last ``local_keyframes`` keyframes) moves by the whole correction
+    ``T`` (``p → R(dθ)(p − c) + c + t``), poses since ``k_old`` (when the old landmarks were
+    last seen) by the fraction ``f`` of the path driven since then, ``T_f = (f t, f dθ)``;
+    landmarks move with the fraction of their last sighting.
+    """
+    g = book.graph
+    path = track.keyframe_path_m
+    start = max(pose - local_keyframes, 0)
+    span = max(path[start] - path[k_old], 1e-9)
+
+    def fraction(kf: IntArray) -> FloatArray:
+        return np.clip((path[kf] - path[k_old]) / span, 0.0, 1.0)
+
+    tx, ty, dth = (float(v) for v in correction)
+    f = fraction(np.arange(g.n_poses))
+    ang = f * dth
+    cs, sn = np.cos(ang), np.sin(ang)
+    d = g.poses[:, :2] - center
+    g.poses[:, 0] = cs * d[:, 0] - sn * d[:, 1] + center[0] + f * tx
+    g.poses[:, 1] = sn * d[:, 0] + cs * d[:, 1] + center[1] + f * ty
+    g.poses[:, 2] = np.asarray(wrap_angle(g.poses[:, 2] + ang))
+    alive = np.flatnonzero(g.landmark_alive)
+    fl = fraction(book.last_keyframe[alive])
+    la = g.landmarks_r_alpha[alive]
+    a_new = la[:, 1] + fl * dth
+    n_old = np.stack([np.cos(la[:, 1]), np.sin(la[:, 1])], -1)
+    n_new = np.stack([np.cos(a_new), np.sin(a_new)], -1)
+    r_new = la[:, 0] - n_old @ center + n_new @ center + n_new @ np.array([tx, ty]) * fl
+    g.set_landmarks_r_alpha(alive, np.column_stack([r_new, a_new]))
+
+
+class LoopCloser:
+    """Loop closing over the landmark book (module docstring).
+
+    Parameters
+    ----------
+    book, track, audit
+        The run's landmark book, keyframe track and merge audit.
+    backend : BatchBackend or Isam2Backend
+        The online back-end (joint marginals for the gate; converged after a closure).
+    config : SlamConfig
+        ``loop_closure``, ``association.max_range_m``, the front end's drift model, the
+        solver settings of the judge, ``fusion.audit_max_median_chi2``.
+    counters : dict
+        The run's counters (``loop_closure_*``, ``loop_closures*``).
+    clock : StageClock
+        Times ``loop_closure``, and within it ``judge`` and ``backend``.
+    """
+
+    def __init__(
+        self,
+        book: LandmarkBook,
+        track: KeyframeTrack,
+        audit: MergeAudit,
+        backend: BatchBackend | Isam2Backend,
+        config: SlamConfig,
+        counters: dict[str, int],
+        clock: StageClock,
+    ) -> None:
+        self.book = book
+        self.track = track
+        self.audit = audit
+        self.backend = backend
+        self.config = config
+        self.counters = counters
+        self.clock = clock
+        self.attempts: list[ClosureAttempt] = []
+        # judged and rejected hypotheses: (keyframe, correction, paired lines)
+        self._rejected: list[tuple[int, FloatArray, int]] = []
+        # hypotheses the marginals' gate turned away: (keyframe, correction)
+        self._gated: list[tuple[int, FloatArray]] = []
+        self._since = 0
+        self._judge = BatchSolver(
+            replace(config.solver, relative_tolerance=config.loop_closure.judge_relative_tolerance)
+        )
+
+    def due(self) -> bool:
+        """Count a keyframe; whether an attempt is due (every ``interval_keyframes``)."""
+        self._since += 1
+        lcc = self.config.loop_closure
+        if lcc.enabled and self._since >= lcc.interval_keyframes:
+            self._since = 0
+            return True
+        return False
+
+    # -- one attempt -------------------------------------------------------------------------
+    def attempt(self, pose: int) -> int:
+        """Search, gate, judge; returns 1 when a closure was accepted, else 0."""
+        with self.clock("loop_closure"):
+            return self._attempt(pose)
+
+    def _attempt(self, pose: int) -> int:
+        cfg = self.config
+        lcc = cfg.loop_closure
+        book = self.book
+        g = book.graph
+        alive = book.alive_with_extent()
+        last = book.last_keyframe
+        local = np.flatnonzero(alive & (last > pose - lcc.local_keyframes))
+        if local.size < lcc.min_matches:
+            return 0
+        x = g.poses[pose]
+        since = self.track.path_since(last)
+        sxy, _ = drift_sigmas(since, cfg.frontend)
+        old_mask = (
+            alive & (sxy > cfg.frontend.max_drift_xy_m) & (last <= pose - lcc.local_keyframes)
+        )
+        win_xy = np.clip(lcc.window_xy_per_m * since, lcc.min_window_xy_m, lcc.max_window_xy_m)
+        win_th = np.clip(
+            lcc.window_theta_per_m * since, lcc.min_window_theta_rad, lcc.max_window_theta_rad
+        )
+        reach = cfg.association.max_range_m + win_xy
+        near = candidate_landmarks(
+            x,
+            g.landmarks_r_alpha,
+            book.extents,
+            float(reach.max(initial=0.0)),
+            alive=old_mask,
+            anchors=g.anchors,
+        )
+        if near.size < lcc.min_matches:
+            return 0
+        # the window: what the oldest candidate allows (capped); a hypothesis must also lie
+        # within what the old lines it pairs allow (window_of_pairs)
+        wxy = float(np.max(win_xy[near]))
+        wth = float(np.max(win_th[near]))
+        self.counters["loop_closure_attempts"] += 1
+        search = search_loop_closure(
+            book.loop_lines(local),
+            book.loop_lines(near),
+            x[:2],
+            wxy,
+            wth,
+            lcc,
+            old_windows=(win_xy[near], win_th[near]) if lcc.window_of_pairs else None,
+        )
+        found = search.closure
+        if found is None:
+            self.attempts.append(
+                ClosureAttempt(
+                    "not_found",
+                    int(pose),
+                    reason=search.reason,
+                    local=int(local.size),
+                    old=int(near.size),
+                    window=[wxy, wth],
+                )
+            )
+            return 0
+        repeated = self.repeated_rejection(found, pose)
+        if repeated is not None:
+            self.attempts.append(
+                ClosureAttempt(
+                    "repeated",
+                    int(pose),
+                    reason=f"repeats the hypothesis rejected at keyframe {repeated}",
+                    pairs=len(found.pairs),
+                    correction=[float(v) for v in found.correction],
+                )
+            )
+            self.counters["loop_closures_repeated"] += 1
+            return 0
+        # the marginals' gate: a correction the back-end's uncertainty cannot explain is
+        # not worth a judgement (max_correction_chi2)
+        k_old = int(np.median(last[near[[j for _, j in found.pairs]]]))
+        corr_eff = self.effective_correction(found, near)
+        chi2_t = self.correction_chi2(k_old, pose, corr_eff)
+        if chi2_t > lcc.max_correction_chi2 and not self.gate_overridden(corr_eff, pose):
+            self.attempts.append(
+                ClosureAttempt(
+                    "gated",
+                    int(pose),
+                    reason="correction beyond the marginals' gate",
+                    pairs=len(found.pairs),
+                    correction=[float(v) for v in found.correction],
+                    correction_chi2=chi2_t,
+                    where=self.where(pose, k_old),
+                )
+            )
+            self.counters["loop_closures_gated"] += 1
+            return 0
+        self.counters["loop_closure_candidates"] += 1
+        return self.apply(local, near, found, pose, chi2_t)
+
+    # -- the rules ---------------------------------------------------------------------------
+    def gate_overridden(self, correction: FloatArray, pose: int) -> bool:
+        """Whether the gate lets a correction through after turning it away repeatedly.
+
+        ``LoopClosureConfig.gate_override_after``; a correction not let through is recorded as
+        gated.
+        """
+        lcc = self.config.loop_closure
+        self._gated = [g for g in self._gated if g[0] > pose - lcc.local_keyframes]
+        if lcc.gate_override_after > 0:
+            seen = sum(same_correction(correction, c, lcc) for _, c in self._gated)
+            if seen >= lcc.gate_override_after:
+                self.counters["loop_closure_gate_overrides"] += 1
+                return True
+        self._gated.append((int(pose), np.asarray(correction, dtype=float)))
+        return False
+
+    def repeated_rejection(self, found: LoopClosure, pose: int) -> int | None:
+        """The keyframe of a recent rejected hypothesis that ``found`` repeats, if any.
+
+        See ``LoopClosureConfig.skip_repeated_rejections``.
+        """
+        lcc = self.config.loop_closure
+        self._rejected = [r for r in self._rejected if r[0] > pose - lcc.local_keyframes]
+        if not lcc.skip_repeated_rejections:
+            return None
+        corr = np.asarray(found.correction, dtype=float)
+        for kf, rejected, n_pairs in self._rejected:
+            if same_correction(corr, rejected, lcc) and len(found.pairs) <= n_pairs:
+                return kf
+        return None
+
+    def effective_correction(self, found: LoopClosure, old: IntArray) -> FloatArray:
+        """The hypothesis' correction; along a corridor without its arbitrary along-component."""
+        corr = np.asarray(found.correction, dtype=float).copy()
+        if found.single_direction:
+            a = self.book.loop_lines(old[[found.pairs[0][1]]]).alpha[0]
+            n = np.array([np.cos(a), np.sin(a)])
+            corr[:2] = (corr[:2] @ n) * n
+        return corr
+
+    def correction_chi2(self, k_old: int, pose: int, correction: FloatArray) -> float:
+        """The correction's squared Mahalanobis distance under the back-end's marginals.
+
+        :func:`slam.frontend.loop_closure.correction_chi2` with the joint covariance of the
+        keyframe where the paired old lines were last seen and the current one.
+        """
+        g = self.book.graph
+        P = self.backend.joint_pose_covariance(g, np.array([k_old, pose], dtype=np.intp))
+        return correction_chi2(g.poses[k_old], g.poses[pose], P, correction)
+
+    def where(self, pose: int, k_old: int) -> dict[str, Any]:
+        """Where a candidate was: the two keyframes, their scans and poses."""
+        g = self.book.graph
+        scans = self.track.keyframe_scan
+        return {
+            "scan": int(scans[pose]),
+            "old_keyframe": k_old,
+            "old_scan": int(scans[k_old]),
+            "pose_before": [float(v) for v in g.poses[pose]],
+            "old_pose_before": [float(v) for v in g.poses[k_old]],
+        }
+
+    # -- judge and apply ---------------------------------------------------------------------
+    def apply(
+        self,
+        local: IntArray,
+        old: IntArray,
+        found: LoopClosure,
+        pose: int,
+        chi2_t: float = float("nan"),
+    ) -> int:
+        """Spread the correction, merge the verified pairs, judge; keep only if explained.
+
+        The candidate is judged by a batch solve in our own loop (``judge_iterations`` at most)
+        of the loop (the poses since ``local_keyframes`` before the old landmarks were last
+        seen, the earlier ones held; the whole graph with ``judge_loop_only = False``) without
+        touching the back-end: a rejected closure is rolled back (the book's snapshot) and the
+        back-end never sees it; an accepted one with a large correction restarts the back-end
+        from the judged estimate, a small one reaches it incrementally
+        (``large_correction_*``).  Returns 1 when accepted, else 0.
+        """
+        book = self.book
+        g = book.graph
+        lcc = self.config.loop_closure
+        before = book.snapshot()
+        old_last = book.last_keyframe[old[[j for _, j in found.pairs]]]
+        k_old = int(np.median(old_last))
+        where = self.where(pose, k_old)
+        corr = self.effective_correction(found, old)
+        big = bool(
+            np.hypot(corr[0], corr[1]) > lcc.large_correction_m
+            or abs(corr[2]) > lcc.large_correction_rad
+        )
+        if big:
+            spread_correction(
+                book, self.track, corr, g.poses[pose, :2].copy(), k_old, pose, lcc.local_keyframes
+            )
+        n_log = len(g.merge_log)
+        done: set[int] = set()
+        for i, j in found.pairs:
+            keep, drop = int(old[j]), int(local[i])
+            if drop in done or not (g.landmark_alive[keep] and g.landmark_alive[drop]):
+                continue
+            book.merge(keep, drop)
+            done.add(drop)
+        if not done:
+            book.restore(before)
+            return 0
+        # the map before the loop is the reference: held, only the loop is solved
+        free_from = max(int(old_last.min()) - lcc.local_keyframes, 0) if lcc.judge_loop_only else 0
+        records = list(g.merge_log[n_log:])
+
+        def hopeless(iterations: int, poses: FloatArray, landmarks: FloatArray) -> bool:
+            """At most one pair explained after ``judge_hopeless_after`` linearisations."""
+            if iterations != lcc.judge_hopeless_after:
+                return False
+            with book.estimate_at(poses, landmarks):
+                good = sum(self.audit.consistent(r) is True for r in records)
+            return good <= 1
+
+        with self.clock("judge"):
+            judged = self._judge.solve(g, lcc.judge_iterations, free_from=free_from, stop=hopeless)
+        chi2 = [c for c in (self.audit.chi2(r) for r in records) if c is not None]
+        good = sum(c <= self.config.fusion.audit_max_median_chi2 for c in chi2)
+        worst = max(chi2, default=0.0)
+        attempt = ClosureAttempt(
+            "judged",
+            int(pose),
+            pairs=len(done),
+            consistent_pairs=good,
+            worst_pair_chi2=worst,
+            correction=[float(v) for v in found.correction],
+            single_direction=bool(found.single_direction),
+            score=float(found.score),
+            runner_up=float(found.runner_up),
+            judge_iterations=judged.iterations,
+            judge_stop=judged.reason,
+            judge_free_from=free_from,
+            correction_chi2=chi2_t,
+            where=where,
+        )
+        self.attempts.append(attempt)
+        if (
+            good >= max(lcc.min_matches - 1, 2)
+            and good >= lcc.min_consistent_fraction * len(records)
+            and worst <= lcc.judge_max_pair_chi2
+        ):
+            # explained (up to a few wrong pairs, which are undone)
+            self.audit.audit(records)
+            self.converge(reset=big)
+            attempt.accepted = True
+            attempt.backend_restarted = big
+            self.counters["loop_closures"] += 1
+            return 1
+        # not explained: the back-end never saw it; the book goes back to its snapshot
+        book.restore(before)
+        book.refresh_extents()
+        self.counters["loop_closures_undone"] += 1
+        self._rejected.append(
+            (int(pose), np.asarray(found.correction, dtype=float), len(found.pairs))
+        )
+        return 0
+
+    def converge(self, reset: bool) -> None:
+        """Bring the back-end to the graph, converge, and refresh the extents.
+
+        With ``reset`` iSAM2 is rebuilt from the graph's estimate (after a large change of it).
+        """
+        g = self.book.graph
+        with self.clock("backend"):
+            if reset:
+                self.backend.reset(g)
+            else:
+                self.backend.update(g)
+            self.backend.optimize(g, self.config.loop_closure.max_updates)
+            self.book.refresh_extents()
