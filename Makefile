@@ -27,8 +27,8 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -n $(JOBS) -q
 
 lint: $(STAMP)
-	$(BIN)/ruff check linefit slam tests scripts
-	$(BIN)/ruff format --check linefit slam tests scripts
+	$(BIN)/ruff check linefit slam tests scripts examples
+	$(BIN)/ruff format --check linefit slam tests scripts examples
 	$(BIN)/mypy
 
 bench: $(STAMP)

@@ -9,9 +9,9 @@ from scipy import stats
 
 from linefit import LineFitConfig
 from linefit.covariance import LineCovariances, line_covariances
-from linefit.extract import scan_points
 from linefit.fit import GroupFit, fit_groups
 from linefit.noise import point_covariance_entries
+from linefit.readings import scan_points
 from linefit.rsframe import rs_variances
 
 

@@ -7,8 +7,8 @@ import pytest
 from _synthetic import wall_scan
 
 from linefit import LineFitConfig
-from linefit.extract import scan_points
 from linefit.fit import PointSet, fit_alpha_numerical, fit_groups, tls_groups
+from linefit.readings import scan_points
 from linefit.rsframe import rs_coordinates, rs_variances
 
 GEOMETRIES = {
