@@ -6,15 +6,13 @@ GTSAM's elimination; :class:`Isam2Solver` updates incrementally;
 :func:`linearize_line_factors` is the vectorised fast path and :func:`line_custom_factor` the
 ``gtsam.CustomFactor`` reference it is tested against.  See ``docs/graph.md``.
 
-The SLAM pipeline that feeds this back-end is :class:`slam.line_slam.LineSlam`; the names it
-used to be imported under from here (``LineSlam``, ``SlamConfig``, ...) still resolve, with a
-:class:`DeprecationWarning`.
+The SLAM pipeline that feeds this back-end is :class:`slam.line_slam.LineSlam` (a higher
+layer: nothing here imports it).
 """
 
 from __future__ import annotations
 
 import importlib
-import warnings
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -57,27 +55,8 @@ _LAZY = {
     "values_from_arrays": "slam.graph.custom_factor",
 }
 
-# names that moved out of the back-end: where they live now
-_MOVED = {
-    "LineSlam": "slam.line_slam",
-    "ScanReport": "slam.line_slam",
-    "SlamWarning": "slam.line_slam",
-    "SlamConfig": "slam.line_slam",
-    "KeyframeConfig": "slam.line_slam",
-    "FusionConfig": "slam.line_slam",
-    "LoopClosureConfig": "slam.frontend.config",
-    "MotionNoiseConfig": "slam.models",
-    "SlamResult": "slam.result",
-}
-
-
 def __getattr__(name: str) -> Any:
     """Import on first use (``slam.graph.config`` must not pull in gtsam)."""
     if name in _LAZY:
         return getattr(importlib.import_module(_LAZY[name]), name)
-    if name in _MOVED:
-        warnings.warn(
-            f"slam.graph.{name} moved to {_MOVED[name]}.{name}", DeprecationWarning, stacklevel=2
-        )
-        return getattr(importlib.import_module(_MOVED[name]), name)
     raise AttributeError(f"module 'slam.graph' has no attribute {name!r}")
