@@ -528,7 +528,7 @@ def _filter_notes(report: CompareReport) -> list[str]:
 
 
 def _figures(report: CompareReport, out: Path) -> list[str]:
-    from slam.plotting_compare import (
+    from slam.plotting.compare import (
         plot_errors_over_time,
         plot_nees_over_time,
         plot_runtime_per_scan,
