@@ -33,7 +33,7 @@ from scipy.stats import chi2
 
 from slam.config import RunConfig
 from slam.errors import ConfigError, LineslamError
-from slam.evaluation import align_se2
+from slam.evaluation import align_se2, pose_nees_values
 from slam.experiments.estimators import ESTIMATORS, EstimateOutput, run_estimator
 from slam.experiments.linesim import (
     LineSimConfig,
@@ -41,7 +41,6 @@ from slam.experiments.linesim import (
     simulate_line_run,
     world_and_trajectory,
 )
-from slam.experiments.nees import pose_nees
 from slam.experiments.parallel import map_tasks
 from slam.geometry import pose_between, pose_compose
 
@@ -240,7 +239,7 @@ def run_variant(task: CompareTask) -> VariantOutcome:
     ate, err = ate_rmse(est.poses_world_laser, truth[:n])
     nees = None
     if est.pose_covariances is not None:
-        nees = pose_nees(est.poses_world_laser, est.pose_covariances, truth[:n])
+        nees = pose_nees_values(est.poses_world_laser, est.pose_covariances, truth[:n])
     rel = pose_between(truth[:n], est.poses_world_laser)
     metrics: dict[str, Any] = {
         "ate_rmse_m": ate,
