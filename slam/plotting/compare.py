@@ -13,7 +13,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.plotting.figure import plt, save_figure
-from slam.plotting.shapes import add_segments
 
 __all__ = [
     "plot_errors_over_time",
@@ -70,7 +69,9 @@ def plot_trajectories(
     fig, ax = plt.subplots(figsize=(7, 7))
     if segments:
         segs = np.concatenate([np.asarray(s).reshape(-1, 2, 2) for s in segments], axis=0)
-        add_segments(ax, segs, colors="0.2", linewidths=1.0, zorder=2)
+        # one line artist per wall (not a collection): the legend's "best" place avoids them
+        for (x1, y1), (x2, y2) in segs:
+            ax.plot([x1, x2], [y1, y2], color="0.2", lw=1.0)
     if truth is not None:
         ax.plot(truth[:, 0], truth[:, 1], color="k", lw=1.5, ls="--", label="ground truth")
     for name, traj in trajectories.items():
