@@ -27,7 +27,9 @@ from typing import Any
 
 from slam.config import RunConfig
 from slam.errors import LineslamError
-from slam.experiments.compare import Variant, parse_source, run_compare, write_report
+from slam.experiments.compare import run_compare
+from slam.experiments.report import write_report
+from slam.experiments.variants import Variant, parse_source
 from slam.io.catalog import load_catalog
 
 REPO = Path(__file__).resolve().parents[1]

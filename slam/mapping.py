@@ -229,7 +229,7 @@ def write_map_results(
 
 
 def _draw(folder: Path, run: MapRun, title: str) -> dict[str, Path]:
-    from slam import plotting_map
+    from slam.plotting import map as plotting_map
 
     fig = run.figures
     assert fig is not None

@@ -126,7 +126,7 @@ def run_estimator_on_log(
     t0 = time.perf_counter()
     result.write(out)
     if plot:
-        from slam.plotting_slam import plot_slam_result, raw_points_world
+        from slam.plotting.trajectory_map import plot_slam_result, raw_points_world
 
         points = None
         if hasattr(result, "poses_world_laser") and hasattr(result, "is_keyframe"):

@@ -106,32 +106,33 @@ def test_ekf_command_on_the_demo_log_beats_odometry(tmp_path):
     assert RunConfig.from_toml(out / "config.toml") == RunConfig()
 
 
-def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_path):
+def compare_demo(tmp_path, config_toml, *options):
+    """``lineslam compare`` on the demo log with a configuration; report rows and markdown."""
     out = tmp_path / "cmp"
-    # the simulated fits' covariances are exact: no model-error floor, so NEES means something
-    (tmp_path / "exact.toml").write_text("[ekf]\nline_sigma_extra = [0.0, 0.0]\n")
+    (tmp_path / "run.toml").write_text(config_toml)
     main(
-        [
-            "compare",
-            str(DEMO / "log.clf"),
-            "--out",
-            str(out),
-            "--quiet",
-            "--config",
-            str(tmp_path / "exact.toml"),
-            "--max-scans",
-            "200",
-            "--variants",
-            "ekf=ekf-nn,unweighted=ekf-nn/unweighted,odometry",
-        ]
+        ["compare", str(DEMO / "log.clf"), "--out", str(out), "--quiet"]
+        + ["--config", str(tmp_path / "run.toml"), *options]
     )
     rows = {r["variant"]: r for r in json.loads((out / "report.json").read_text())["variants"]}
+    return out, rows, (out / "report.md").read_text()
+
+
+def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_path):
+    # the simulated fits' covariances are exact: no model-error floor, so NEES means something
+    out, rows, md = compare_demo(
+        tmp_path,
+        "[ekf]\nline_sigma_extra = [0.0, 0.0]\n",
+        "--max-scans",
+        "200",
+        "--variants",
+        "ekf=ekf-nn,unweighted=ekf-nn/unweighted,odometry",
+    )
     for name in ("ekf", "unweighted"):
         assert rows[name]["rel_trans_mean_m"] < 0.2 * rows["odometry"]["rel_trans_mean_m"]
         assert rows[name]["ate_rmse_m"] < 0.2 * rows["odometry"]["ate_rmse_m"]
         assert rows[name]["scans_processed"] == 200
         assert 0.5 < rows[name]["nees_mean"] < 10.0
-    md = (out / "report.md").read_text()
     assert "relations trans. (m)" in md and "ATE RMSE (m)" in md
     assert "* ekf: ran to the end (200 scans)" in md and "stopped at" not in md
     assert list((out / ".cache").glob("lines-*.pkl"))  # weighted and unweighted fits cached
@@ -139,28 +140,17 @@ def test_compare_on_the_demo_log_evaluates_relations_ground_truth_and_nees(tmp_p
 
 
 def test_compare_report_says_where_the_ekf_stopped(tmp_path):
-    out = tmp_path / "cmp"
-    (tmp_path / "small.toml").write_text("[ekf]\nmax_landmarks = 5\n")
-    main(
-        [
-            "compare",
-            str(DEMO / "log.clf"),
-            "--out",
-            str(out),
-            "--quiet",
-            "--no-figures",
-            "--config",
-            str(tmp_path / "small.toml"),
-            "--max-scans",
-            "150",
-            "--time-budget",
-            "0.05",  # far below what the graph needs for 150 scans on any machine (~0.5 s here)
-            "--variants",
-            "ekf=ekf-nn,graph=graph-isam2",
-        ]
+    _, rows, md = compare_demo(
+        tmp_path,
+        "[ekf]\nmax_landmarks = 5\n",
+        "--no-figures",
+        "--max-scans",
+        "150",
+        "--time-budget",
+        "0.05",  # far below what the graph needs for 150 scans on any machine (~0.5 s here)
+        "--variants",
+        "ekf=ekf-nn,graph=graph-isam2",
     )
-    rows = {r["variant"]: r for r in json.loads((out / "report.json").read_text())["variants"]}
-    md = (out / "report.md").read_text()
     ekf = rows["ekf"]
     assert ekf["stopped_at_scan"] is not None and ekf["scans_processed"] < 150
     assert f"* ekf: **stopped at scan {ekf['stopped_at_scan']} of 150**" in md

@@ -100,7 +100,7 @@ def test_slam_plot_and_bad_input(tmp_path, capsys):
 
 
 def test_raw_points_are_placed_by_the_estimated_poses():
-    from slam.plotting_slam import raw_points_world
+    from slam.plotting.trajectory_map import raw_points_world
     from slam.types import Scan
 
     bearings = np.array([0.0, np.pi / 2, 1.0])

@@ -257,19 +257,19 @@ def test_linear_gaussian_case_nees_matches_state_dimension():
             keep = np.r_[0, 1, 2, 3 + 2 * np.arange(M)]
             ek, Pk = e[keep], ekf.P[np.ix_(keep, keep)]
             nees_full[run, k] = ek @ np.linalg.solve(Pk, ek)
-            from slam.experiments.nees import pose_nees
+            from slam.evaluation import pose_nees_values
 
-            nees_pose[run, k] = pose_nees(ekf.x[:3], ekf.pose_covariance, truth[:3])
+            nees_pose[run, k] = pose_nees_values(ekf.x[:3], ekf.pose_covariance, truth[:3])
         # landmark angles stayed exactly known
         np.testing.assert_allclose(ekf.x[4::2], alphas, atol=1e-12)
-    from slam.experiments.nees import anees_bounds
+    from slam.evaluation import nees_bounds
 
     for nees, d in ((nees_pose, 3), (nees_full, dim)):
         anees = nees.mean(axis=0)
-        lo, hi = anees_bounds(d, n_runs, 0.95)
+        lo, hi = nees_bounds(d, n_runs, 0.95)
         inside = np.mean((anees > lo) & (anees < hi))
         assert inside >= 0.8, (d, anees)
-        lo99, hi99 = anees_bounds(d, n_runs * n_steps, 0.99)
+        lo99, hi99 = nees_bounds(d, n_runs * n_steps, 0.99)
         assert lo99 * 0.97 < nees.mean() < hi99 * 1.03, (d, nees.mean())
 
 

@@ -9,8 +9,8 @@ from scipy.stats import chi2
 from linefit import extract_lines
 from slam.config import RunConfig
 from slam.ekf import EkfConfig, EkfSlam, MotionNoiseConfig
+from slam.evaluation import pose_nees_values
 from slam.experiments.linesim import LineWorld
-from slam.experiments.nees import pose_nees
 from slam.geometry import line_residual
 from slam.sim import SimConfig, get_world
 from slam.sim.simulate import simulate
@@ -46,7 +46,7 @@ def test_ekf_on_the_simulated_loop_is_far_better_than_odometry(loop_run):
     err_odo = np.linalg.norm(log.poses_odom_laser[:, :2] - truth[:, :2], axis=1)
     rmse, rmse_odo = np.sqrt(np.mean(err**2)), np.sqrt(np.mean(err_odo**2))
     assert rmse < 0.02 and rmse < 0.05 * rmse_odo, (rmse, rmse_odo)
-    nees = pose_nees(res.poses_world_laser, res.pose_covariances, truth)
+    nees = pose_nees_values(res.poses_world_laser, res.pose_covariances, truth)
     assert 1.0 < np.nanmean(nees) < 6.0, np.nanmean(nees)
     # landmarks seen a few times lie on walls of the world (within 5 cm and 1°, or within
     # their own 99.9 % covariance ellipse: short recess sides are poorly determined).  The

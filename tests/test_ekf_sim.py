@@ -8,13 +8,13 @@ from scipy.stats import chi2
 
 from slam.ekf import EkfConfig, EkfSlam
 from slam.ekf.conventions import cov_tangent_to_state
+from slam.evaluation import nees_bounds, pose_nees_values
 from slam.experiments.linesim import (
     SIM_ODOMETRY,
     corridor_loop_world,
     loop_trajectory,
     simulate_line_run,
 )
-from slam.experiments.nees import anees_bounds, pose_nees
 from slam.geometry import wrap_angle
 
 
@@ -56,7 +56,7 @@ def test_ekf_on_a_simulated_loop_beats_odometry_and_is_consistent():
         close[:, stub] |= (np.abs(e[:, stub, 0]) < 0.25) & (np.abs(e[:, stub, 1]) < 0.03)
         assert np.all(close.any(axis=0)) and np.all(close.any(axis=1))
         assert 16 <= lm.shape[0] <= 17
-        nees.append(pose_nees(res.poses_world_laser, res.pose_covariances, truth))
+        nees.append(pose_nees_values(res.poses_world_laser, res.pose_covariances, truth))
         # the tangent-space NEES equals filterpy's NEES of the additive error to first order
         e_add = truth - res.poses_world_laser
         e_add[:, 2] = wrap_angle(e_add[:, 2])
@@ -65,6 +65,6 @@ def test_ekf_on_a_simulated_loop_beats_odometry_and_is_consistent():
         ref = np.asarray(NEES(est + e_add[1:], est, P_add))  # angle error already wrapped
         np.testing.assert_allclose(nees[-1][1:], ref, rtol=0.02)
     anees = np.mean(np.array(nees)[:, 1:], axis=0)  # the first pose is anchored (P = 0)
-    lo, hi = anees_bounds(3, n_runs, 0.95)
+    lo, hi = nees_bounds(3, n_runs, 0.95)
     inside = np.mean((anees > lo) & (anees < hi))
     assert inside > 0.8, (inside, anees.mean())

@@ -11,11 +11,13 @@ from slam.evaluation import (
     ate,
     distance_pairs,
     evaluate_results,
+    nees_bounds,
     pose_nees,
+    pose_nees_values,
     rpe,
     rpe_errors,
 )
-from slam.geometry import pose_compose, pose_exp, pose_inverse
+from slam.geometry import pose_between, pose_compose, pose_exp, pose_inverse, pose_log
 from slam.io import Trajectory
 
 
@@ -52,6 +54,26 @@ def test_ate_with_noise_equals_noise_rms(rng):
     assert result.translation_m.rmse == pytest.approx(
         np.sqrt(np.mean(np.sum(noise**2, 1))), rel=0.01
     )
+
+
+def test_ate_keeps_the_matched_poses_and_their_errors(rng):
+    truth = random_walk(rng, 50)
+    estimate = truth + rng.normal(0.0, 0.02, (50, 3))
+    # the estimate skips ground-truth pose 7 and has one pose (the last) without ground truth
+    est_stamps = np.r_[np.delete(np.arange(50.0), 7), 99.0]
+    est = Trajectory(est_stamps, np.r_[np.delete(estimate, 7, axis=0), estimate[:1]])
+    result = ate(est, Trajectory(np.arange(50.0), truth), max_unmatched_fraction=0.1)
+    assert result.n_unmatched == 1
+    np.testing.assert_array_equal(result.index_estimate, np.arange(49))
+    np.testing.assert_array_equal(result.index_reference, np.delete(np.arange(50), 7))
+    errors = result.translation_errors_m
+    assert errors.shape == (49,) and result.translation_m.n == 49
+    assert result.translation_m.rmse == pytest.approx(np.sqrt(np.mean(errors**2)), rel=1e-12)
+    unaligned = ate(
+        est, Trajectory(np.arange(50.0), truth), align=False, max_unmatched_fraction=0.1
+    )
+    moved = est.poses[:49, :2] - truth[np.delete(np.arange(50), 7), :2]
+    np.testing.assert_allclose(unaligned.translation_errors_m, np.hypot(*moved.T), rtol=1e-12)
 
 
 def test_alignment_of_collapsed_positions_is_an_error():
@@ -129,6 +151,46 @@ def test_nees_rejects_a_singular_covariance(rng):
     cov[2] = np.diag([1.0, 0.0, 1.0])
     with pytest.raises(EvaluationError, match="covariance 2 is not positive definite"):
         pose_nees(Trajectory(np.arange(5.0), truth), cov, Trajectory(np.arange(5.0), truth))
+
+
+def test_pose_nees_values_pair_by_index_and_leave_unusable_covariances_undefined(rng):
+    truth = random_walk(rng, 40)
+    cov = random_covariances(rng, 40)
+    xi = np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.normal(size=(40, 3)))
+    estimate = pose_compose(truth, pose_inverse(pose_exp(xi)))
+    cov[0] = 0.0  # an anchored first pose
+    cov[5] = np.diag([1.0, -1.0, -1.0])  # indefinite, with a positive determinant
+    cov[9, 1, 1] = np.nan  # no covariance
+    values = pose_nees_values(estimate, cov, truth)
+    assert values.shape == (40,)
+    np.testing.assert_array_equal(np.flatnonzero(np.isnan(values)), [0, 5, 9])
+    # ξᵀ P⁻¹ ξ with ξ = Log(estimate⁻¹ · truth), computed here independently
+    e = pose_log(pose_between(estimate, truth))
+    ok = np.isfinite(values)
+    expected = np.einsum("ni,nij,nj->n", e[ok], np.linalg.inv(cov[ok]), e[ok])
+    np.testing.assert_allclose(values[ok], expected, rtol=1e-10)
+    # the trajectory version gives the same numbers where every covariance is usable
+    stamps = np.arange(40.0)
+    keep = np.flatnonzero(ok)
+    result = pose_nees(
+        Trajectory(stamps[keep], estimate[keep]), cov[keep], Trajectory(stamps, truth)
+    )
+    np.testing.assert_array_equal(result.values, values[keep])
+    # one pose on its own (no leading dimension)
+    assert pose_nees_values(estimate[3], cov[3], truth[3]).shape == ()
+    assert float(pose_nees_values(estimate[3], cov[3], truth[3])) == values[3]
+    with pytest.raises(EvaluationError, match="do not match"):
+        pose_nees_values(estimate, cov[:-1], truth)
+
+
+def test_nees_bounds_are_the_chi2_interval_of_the_mean(rng):
+    lo, hi = nees_bounds(3, 1, 0.95)
+    assert (lo, hi) == pytest.approx((0.2158, 9.3484), abs=1e-4)  # χ²₃ quantiles 2.5 %, 97.5 %
+    lo50, hi50 = nees_bounds(3, 50, 0.95)
+    assert lo < lo50 < 3.0 < hi50 < hi  # the mean of many concentrates around the dof
+    # coverage: the mean of 50 χ²₃ samples falls inside in 95 % of trials
+    means = rng.chisquare(3, (20000, 50)).mean(axis=1)
+    assert np.mean((means >= lo50) & (means <= hi50)) == pytest.approx(0.95, abs=0.006)
 
 
 def test_report_of_a_perfect_trajectory(rng):

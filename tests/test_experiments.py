@@ -7,10 +7,10 @@ import pytest
 
 from linefit.errors import ConfigError
 from slam.config import RunConfig
+from slam.evaluation import nees_bounds, pose_nees_values
 from slam.experiments.consistency import ConsistencyConfig, run_consistency
 from slam.experiments.estimators import run_estimator
 from slam.experiments.linesim import matched_run_config, simulate_line_run, world_and_trajectory
-from slam.experiments.nees import anees_bounds, pose_nees
 from slam.experiments.parallel import map_tasks, task_seed
 
 
@@ -36,7 +36,7 @@ def test_odometry_only_is_consistent_and_the_ekf_beats_it():
     """Dead reckoning with the exact motion model must give NEES ≈ 3 (checks the machinery)."""
     cfg = ConsistencyConfig(n_runs=20, world="corridor_loop", loops=0.5, estimators=("odometry",))
     res = run_consistency(cfg).estimators["odometry"]
-    lo, hi = anees_bounds(3, 20, 0.95)
+    lo, hi = nees_bounds(3, 20, 0.95)
     assert res.bounds == pytest.approx((lo, hi))
     assert res.fraction_inside >= 0.85, res.fraction_inside
     assert 2.4 < res.mean_anees < 3.6
@@ -73,7 +73,7 @@ def test_batch_graph_nees_is_that_of_its_smoothed_trajectory_and_lands_in_the_re
     rc = matched_run_config(RunConfig(), cfg.linesim)
     est = run_estimator("graph-batch", run.scans, run.lines, rc, truth[0])
     assert est.pose_covariances is not None
-    expected = pose_nees(est.poses_world_laser, est.pose_covariances, truth)
+    expected = pose_nees_values(est.poses_world_laser, est.pose_covariances, truth)
     np.testing.assert_array_equal(batch.nees[0], expected)
     assert np.all(np.isfinite(batch.nees[0]))  # the first pose's prior is tight, not exact
     assert 0.3 < batch.mean_anees < 15.0  # the order of 3 dof, not a unit mix-up

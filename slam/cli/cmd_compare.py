@@ -72,13 +72,9 @@ def compare(
     from dataclasses import replace
 
     from slam.errors import ConfigError
-    from slam.experiments.compare import (
-        Variant,
-        default_variants,
-        parse_source,
-        run_compare,
-        write_report,
-    )
+    from slam.experiments.compare import run_compare
+    from slam.experiments.report import write_report
+    from slam.experiments.variants import default_variants, parse_source, parse_variants
 
     run_config = build_config(config, sigma_d, sigma_phi, seed)
     data = parse_source(log, seed=run_config.seed)
@@ -87,13 +83,7 @@ def compare(
 
         workers = os.cpu_count() or 1
     if variants:
-        chosen = []
-        for item in (v.strip() for v in variants.split(",") if v.strip()):
-            name, _, spec = item.partition("=")
-            spec = spec or name
-            estimator, _, flag = spec.partition("/")
-            chosen.append(Variant(name, estimator, weighted=flag != "unweighted"))
-        selected = tuple(chosen)
+        selected = parse_variants(variants)
     else:
         selected = default_variants(simulated=data.kind == "sim")
     if time_budget is not None:

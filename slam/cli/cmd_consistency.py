@@ -67,7 +67,7 @@ def consistency(
     with task_progress(runs, "runs", "run", quiet) as progress:
         result = run_consistency(study, run_config, workers, dask, progress)
     (out / "consistency.json").write_text(json.dumps(result.to_dict(), indent=1))
-    from slam.plotting_compare import plot_errors_over_time, plot_nees_over_time
+    from slam.plotting.compare import plot_errors_over_time, plot_nees_over_time
 
     plot_nees_over_time(
         {k: v.anees for k, v in result.estimators.items()},

@@ -140,7 +140,7 @@ def extract(
                 handle.write(json.dumps(scan_record(scan, lines)) + "\n")
                 n_lines += len(lines)
                 if plot is not None and scan.index % every == 0:
-                    from slam.plotting_scan import save_scan_figure
+                    from slam.plotting.scan import save_scan_figure
 
                     save_scan_figure(
                         plot / f"scan_{scan.index:06d}.png",

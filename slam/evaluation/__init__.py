@@ -11,7 +11,7 @@ Every result has ``to_dict()`` for ``metrics.json``.
 """
 
 from slam.evaluation.ate import AteResult, align_se2, ate
-from slam.evaluation.nees import NeesResult, nees_values, pose_nees
+from slam.evaluation.nees import NeesResult, nees_bounds, nees_values, pose_nees, pose_nees_values
 from slam.evaluation.relations_metric import (
     MeanStd,
     RelationsMetric,
@@ -38,8 +38,10 @@ __all__ = [
     "distance_pairs",
     "evaluate_results",
     "match_timestamps",
+    "nees_bounds",
     "nees_values",
     "pose_nees",
+    "pose_nees_values",
     "relation_errors",
     "relations_metric",
     "relations_within",

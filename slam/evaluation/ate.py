@@ -10,7 +10,7 @@ with ``--align``); the heading error ``θ_est + φ − θ_gt`` is reported along
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -66,6 +66,11 @@ class AteResult:
     aligned : bool
     n_unmatched : int
         Estimated poses without a ground-truth pose of the same stamp.
+    index_estimate, index_reference : ndarray of int, shape (m,)
+        The matched poses: estimated pose ``index_estimate[i]`` and ground-truth pose
+        ``index_reference[i]`` share a time stamp.
+    translation_errors_m : ndarray, shape (m,)
+        ``|R p_est + t − p_gt|`` (m) of each matched pose, the samples of ``translation_m``.
     """
 
     translation_m: ErrorStats
@@ -73,9 +78,12 @@ class AteResult:
     alignment: tuple[float, float, float]
     aligned: bool
     n_unmatched: int
+    index_estimate: NDArray[np.int64] = field(repr=False, compare=False)
+    index_reference: NDArray[np.int64] = field(repr=False, compare=False)
+    translation_errors_m: FloatArray = field(repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready copy."""
+        """JSON-ready copy (per-pose errors left out)."""
         return {
             "rmse_m": self.translation_m.rmse,
             "translation_m": self.translation_m.to_dict(),
@@ -113,4 +121,7 @@ def ate(
         alignment=(float(transform[0]), float(transform[1]), float(transform[2])),
         aligned=align,
         n_unmatched=n_unmatched,
+        index_estimate=i_est,
+        index_reference=i_ref,
+        translation_errors_m=trans,
     )

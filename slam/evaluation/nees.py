@@ -5,9 +5,14 @@ For each pose with covariance ``P`` (3×3, in the right-perturbation tangent spa
 moves the estimate onto the truth, ``ξ = Log(P̂⁻¹ · Q)`` (so ``Q = P̂ ⊕ ξ``), and
 ``NEES = ξᵀ P⁻¹ ξ``.  A consistent estimator has ``E[NEES] = 3``; the mean over ``N`` poses
 is tested against the two-sided χ² interval ``[χ²_{3N}(α/2), χ²_{3N}(1 − α/2)] / N``
-(Bar-Shalom, Li & Kirubarajan 2001, §5.4), and the fraction of single poses inside the
-``χ²_3`` interval is reported too.  (Successive poses of one trajectory are correlated, so
-the interval of the mean is indicative for a single run, exact for independent trials.)
+(:func:`nees_bounds`; Bar-Shalom, Li & Kirubarajan 2001, §5.4), and the fraction of single
+poses inside the ``χ²_3`` interval is reported too.  (Successive poses of one trajectory are
+correlated, so the interval of the mean is indicative for a single run, exact for the
+average over independent Monte-Carlo runs at one time step, the ANEES.)
+
+:func:`pose_nees` pairs two trajectories by time stamp and requires every covariance to be
+positive definite; :func:`pose_nees_values` pairs arrays by index and marks poses without a
+usable covariance undefined (``nan``), as experiments need for per-time-step curves.
 
 No alignment is applied: the estimate and the truth must share the world frame (the
 simulator and the SLAM runner both anchor the first pose).
@@ -26,13 +31,19 @@ from slam.evaluation.timestamps import associate
 from slam.geometry import pose_between, pose_log
 from slam.io.trajectory import Trajectory
 
-__all__ = ["NeesResult", "nees_values", "pose_nees"]
+__all__ = ["NeesResult", "nees_bounds", "nees_values", "pose_nees", "pose_nees_values"]
 
 FloatArray = NDArray[np.float64]
 
 
 def nees_values(errors: ArrayLike, covariances: ArrayLike) -> FloatArray:
-    """``ξᵀ P⁻¹ ξ`` for errors ``(n, d)`` and covariances ``(n, d, d)`` (Cholesky, checked)."""
+    """``ξᵀ P⁻¹ ξ`` for errors ``(n, d)`` and covariances ``(n, d, d)`` (Cholesky, checked).
+
+    Raises
+    ------
+    EvaluationError
+        When a covariance is not positive definite (its index and eigenvalues are named).
+    """
     e = np.asarray(errors, dtype=np.float64)
     c = np.asarray(covariances, dtype=np.float64)
     if c.shape != e.shape + e.shape[-1:]:
@@ -47,6 +58,82 @@ def nees_values(errors: ArrayLike, covariances: ArrayLike) -> FloatArray:
         ) from None
     z = np.linalg.solve(L, e[..., None])[..., 0]
     return np.sum(z**2, axis=-1)
+
+
+def nees_bounds(dof: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Two-sided interval of the mean of ``n`` independent NEES values of ``dof`` each.
+
+    A consistent estimator's NEES values are ``χ²_dof``; their sum over ``n`` independent
+    samples (poses, or Monte-Carlo runs at one time step) is ``χ²_{n·dof}``, so the mean lies in
+    ``[χ²_{n·dof}((1 − c)/2), χ²_{n·dof}((1 + c)/2)] / n`` with probability ``c``.  With
+    ``n = 1`` this is the interval of a single pose's NEES.
+
+    Parameters
+    ----------
+    dof : int
+        Dimension of each error (3 for a planar pose).
+    n : int
+        Number of NEES values averaged.
+    confidence : float
+        Probability ``c`` of the interval, in (0, 1).
+
+    Returns
+    -------
+    tuple of float
+        ``(lower, upper)`` bounds of the mean NEES (dimensionless).
+    """
+    from scipy.stats import chi2  # here: importing scipy.stats costs ~1 s at start-up
+
+    alpha = 1.0 - confidence
+    lower = float(chi2.ppf(alpha / 2.0, dof * n) / n)
+    upper = float(chi2.ppf(1.0 - alpha / 2.0, dof * n) / n)
+    return lower, upper
+
+
+def _pose_errors(poses_est: FloatArray, poses_true: FloatArray) -> FloatArray:
+    """Tangent vectors ``ξ = Log(P̂⁻¹ · Q)`` that move each estimate onto its truth."""
+    return pose_log(pose_between(poses_est, poses_true))
+
+
+def pose_nees_values(
+    poses_est: ArrayLike, covariances: ArrayLike, poses_true: ArrayLike
+) -> FloatArray:
+    """NEES of each estimated pose against the true pose at the same index.
+
+    The poses are paired by position in the arrays (for trajectories paired by time stamp,
+    :func:`pose_nees`).  A pose whose covariance is not finite or not positive definite (an
+    anchored first pose has zero covariance) gets ``nan``: its NEES is undefined.
+
+    Parameters
+    ----------
+    poses_est, poses_true : array_like, shape (..., 3)
+        Estimated and true poses ``(x, y, θ)`` (m, m, rad) in one world frame.
+    covariances : array_like, shape (..., 3, 3)
+        Covariances of the estimates in the right-perturbation tangent space.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        ``ξᵀ P⁻¹ ξ`` per pose (dimensionless); ``nan`` where the covariance is unusable.
+    """
+    est = np.asarray(poses_est, dtype=np.float64)
+    cov = np.asarray(covariances, dtype=np.float64)
+    truth = np.asarray(poses_true, dtype=np.float64)
+    if est.shape != truth.shape or est.shape[-1:] != (3,) or cov.shape != (*est.shape, 3):
+        raise EvaluationError(
+            f"pose_nees_values: shapes {est.shape}, {cov.shape}, {truth.shape} do not match"
+        )
+    xi = _pose_errors(est, truth).reshape(-1, 3)
+    cov = cov.reshape(-1, 3, 3)
+    usable = np.all(np.isfinite(cov), axis=(1, 2))
+    smallest = np.full(cov.shape[0], -np.inf)
+    if np.any(usable):
+        sym = 0.5 * (cov[usable] + np.swapaxes(cov[usable], 1, 2))
+        smallest[usable] = np.linalg.eigvalsh(sym)[:, 0]
+    usable &= smallest > 0.0
+    out = np.full(cov.shape[0], np.nan)
+    out[usable] = nees_values(xi[usable], cov[usable])
+    return out.reshape(est.shape[:-1])
 
 
 @dataclass(frozen=True)
@@ -89,7 +176,13 @@ def pose_nees(
     tolerance_s: float = 1e-5,
     max_unmatched_fraction: float = 0.02,
 ) -> NeesResult:
-    """NEES of every estimated pose that has a ground-truth pose of the same stamp."""
+    """NEES of every estimated pose that has a ground-truth pose of the same stamp.
+
+    Every matched pose must have a positive-definite covariance (else
+    :class:`~slam.errors.EvaluationError`); :func:`pose_nees_values` instead marks such poses
+    undefined.  The mean is tested against :func:`nees_bounds` of the matched poses, each pose
+    against the single-pose interval.
+    """
     cov = np.asarray(covariances, dtype=np.float64)
     if cov.shape != (len(estimate), 3, 3):
         raise EvaluationError(f"need one 3x3 covariance per pose, got shape {cov.shape}")
@@ -99,15 +192,11 @@ def pose_nees(
         tolerance_s=tolerance_s,
         max_unmatched_fraction=max_unmatched_fraction,
     )
-    xi = pose_log(pose_between(estimate.poses[i_est], ground_truth.poses[i_ref]))
-    values = nees_values(xi, cov[i_est])
+    values = nees_values(_pose_errors(estimate.poses[i_est], ground_truth.poses[i_ref]), cov[i_est])
     n, dof = values.size, 3
-    alpha = 1.0 - confidence
-    from scipy.stats import chi2  # here: importing scipy.stats costs ~1 s at start-up
-
-    lower = float(chi2.ppf(alpha / 2.0, dof * n) / n)
-    upper = float(chi2.ppf(1.0 - alpha / 2.0, dof * n) / n)
-    single = (values >= chi2.ppf(alpha / 2.0, dof)) & (values <= chi2.ppf(1 - alpha / 2.0, dof))
+    lower, upper = nees_bounds(dof, n, confidence)
+    single_lower, single_upper = nees_bounds(dof, 1, confidence)
+    single = (values >= single_lower) & (values <= single_upper)
     return NeesResult(
         n=int(n),
         dof=dof,

@@ -2,10 +2,11 @@
 
 Each run ``i`` simulates the world with seed ``task_seed(seed, i)`` (the same data for every
 estimator: a paired comparison), runs each estimator on it, and records per pose the NEES
-(:func:`slam.experiments.nees.pose_nees`, tangent space), the position and heading errors and
+(:func:`slam.evaluation.pose_nees_values`, tangent space), the position and heading errors and
 the run time.  The summary per estimator is the average NEES over runs at each time step
 (ANEES) with its two-sided χ² bounds (``n_runs · ANEES ~ χ²_{3 n_runs}`` for a consistent
-estimator), the fraction of time steps inside them, and the mean over time.
+estimator, :func:`slam.evaluation.nees_bounds`), the fraction of time steps inside them, and
+the mean over time.
 
 Filtering estimators (EKF) are evaluated on their filtered pose at each time; smoothing ones
 (the batch graph) on their final trajectory; both are what the estimator reports for that pose.
@@ -23,6 +24,7 @@ from numpy.typing import NDArray
 
 from slam.config import RunConfig
 from slam.errors import ConfigError
+from slam.evaluation import nees_bounds, pose_nees_values
 from slam.experiments.estimators import ESTIMATORS, run_estimator
 from slam.experiments.linesim import (
     LineSimConfig,
@@ -30,7 +32,6 @@ from slam.experiments.linesim import (
     simulate_line_run,
     world_and_trajectory,
 )
-from slam.experiments.nees import anees_bounds, pose_nees
 from slam.experiments.parallel import map_tasks, task_seed
 from slam.geometry import pose_between
 
@@ -125,7 +126,7 @@ def consistency_task(task: ConsistencyTask) -> dict[str, dict[str, Any]]:
         n = est.poses_world_laser.shape[0]
         nees = np.full(truth.shape[0], np.nan)
         if est.pose_covariances is not None:
-            nees[:n] = pose_nees(est.poses_world_laser, est.pose_covariances, truth[:n])
+            nees[:n] = pose_nees_values(est.poses_world_laser, est.pose_covariances, truth[:n])
         err = pose_between(truth[:n], est.poses_world_laser)
         pos = np.full(truth.shape[0], np.nan)
         rot = np.full(truth.shape[0], np.nan)
@@ -294,7 +295,7 @@ def run_consistency(
     t0 = time.perf_counter()
     outputs = map_tasks(consistency_task, tasks, workers, dask_address, progress)
     wall = time.perf_counter() - t0
-    lo, hi = anees_bounds(3, config.n_runs, config.probability)
+    lo, hi = nees_bounds(3, config.n_runs, config.probability)
     summary: dict[str, EstimatorConsistency] = {}
     for name in config.estimators:
         nees = np.array([o[name]["nees"] for o in outputs])

@@ -12,12 +12,10 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.collections import LineCollection
+
+from slam.plotting.figure import plt, save_figure
+from slam.plotting.shapes import add_segments
 
 __all__ = ["plot_slam_result", "raw_points_world"]
 
@@ -53,7 +51,7 @@ def raw_points_world(
 def plot_slam_result(
     result: Any, out_dir: Path, title: str = "", points_world: np.ndarray | None = None
 ) -> Path:
-    """Trajectory and line map of a :class:`slam.graph.SlamResult`; returns the PNG's path.
+    """Trajectory and line map of a :class:`slam.result.SlamResult`; returns the PNG's path.
 
     Parameters
     ----------
@@ -73,7 +71,7 @@ def plot_slam_result(
         ax.plot(points_world[:, 0], points_world[:, 1], ",", color="0.6", alpha=0.5)
     segs = [s for pieces in result.landmark_segments for s in pieces]
     if segs:
-        ax.add_collection(LineCollection(list(segs), colors="k", linewidths=1.2, label="map"))
+        add_segments(ax, segs, colors="k", linewidths=1.2, label="map")
     p = np.asarray(result.poses_world_laser)
     ax.plot(p[:, 0], p[:, 1], "-", color="tab:blue", lw=0.8, label="trajectory (laser)")
     kf = np.asarray(result.is_keyframe, dtype=bool)
@@ -89,7 +87,6 @@ def plot_slam_result(
     n_lines = len(result.landmark_segments)
     ax.set_title(f"{title}  ({len(p)} scans, {int(kf.sum())} keyframes, {n_lines} map lines)")
     ax.legend(loc="best")
-    path = out_dir / "trajectory_map.png"
-    fig.savefig(path, dpi=150, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return save_figure(
+        fig, out_dir / "trajectory_map.png", dpi=150, tight_layout=False, bbox_inches="tight"
+    )

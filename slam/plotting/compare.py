@@ -7,13 +7,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import NDArray
+
+from slam.plotting.figure import plt, save_figure
 
 __all__ = [
     "plot_errors_over_time",
@@ -23,6 +22,19 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+
+def _finish_log_scale(
+    fig: Any, ax: Any, path: str | Path, xlabel: str, ylabel: str, title: str, legend_loc: str
+) -> Path:
+    """Log-scale ordinate, labels, legend and grid of a curves-over-scans figure; save it."""
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(loc=legend_loc, fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    return save_figure(fig, path, dpi=120)
 
 
 def plot_nees_over_time(
@@ -41,18 +53,9 @@ def plot_nees_over_time(
     n = max(v.shape[0] for v in anees.values())
     ax.fill_between([0, n - 1], lo, hi, color="0.85", label=f"95% bounds ({dof} dof)")
     ax.axhline(dof, color="0.4", lw=0.8, ls="--")
-    ax.set_yscale("log")
-    ax.set_xlabel("scan")
-    ax.set_ylabel("average pose NEES")
     runs = f", {n_runs} runs" if n_runs else ""
-    ax.set_title(title or f"Pose NEES over time{runs}")
-    ax.legend(loc="upper left", fontsize=8)
-    ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    title = title or f"Pose NEES over time{runs}"
+    return _finish_log_scale(fig, ax, path, "scan", "average pose NEES", title, "upper left")
 
 
 def plot_trajectories(
@@ -66,6 +69,7 @@ def plot_trajectories(
     fig, ax = plt.subplots(figsize=(7, 7))
     if segments:
         segs = np.concatenate([np.asarray(s).reshape(-1, 2, 2) for s in segments], axis=0)
+        # one line artist per wall (not a collection): the legend's "best" place avoids them
         for (x1, y1), (x2, y2) in segs:
             ax.plot([x1, x2], [y1, y2], color="0.2", lw=1.0)
     if truth is not None:
@@ -78,11 +82,7 @@ def plot_trajectories(
     ax.set_title(title)
     ax.legend(fontsize=8)
     ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return save_figure(fig, path, dpi=120)
 
 
 def plot_errors_over_time(
@@ -98,17 +98,7 @@ def plot_errors_over_time(
     for name, err in errors.items():
         xs = x[name] if x is not None and name in x else np.arange(err.shape[0])
         ax.plot(xs, err, lw=1.0, label=name)
-    ax.set_yscale("log")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return _finish_log_scale(fig, ax, path, xlabel, ylabel, title, "best")
 
 
 def plot_runtime_per_scan(
@@ -121,20 +111,10 @@ def plot_runtime_per_scan(
     fig, ax = plt.subplots(figsize=(8, 4.2))
     for name, t in runtimes.items():
         ax.plot(np.arange(t.shape[0]), 1e3 * np.maximum(t, 1e-6), lw=0.6, label=name)
-    ax.set_yscale("log")
-    ax.set_xlabel("scan")
-    ax.set_ylabel("time per scan (ms)")
-    ax.grid(True, which="both", alpha=0.3)
     if map_sizes:
         ax2 = ax.twinx()
         for name, m in map_sizes.items():
             ax2.plot(np.arange(m.shape[0]), m, lw=1.2, ls=":", label=f"{name} landmarks")
         ax2.set_ylabel("landmarks")
         ax2.legend(loc="lower right", fontsize=8)
-    ax.legend(loc="upper left", fontsize=8)
-    ax.set_title(title)
-    fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return _finish_log_scale(fig, ax, path, "scan", "time per scan (ms)", title, "upper left")

@@ -4,13 +4,7 @@ Left: the raw points with the 3σ ellipses of their Eq. 8 covariances; right: th
 segments with their 3σ uncertainty band across the line.  As in the paper, uncertainties are
 drawn magnified (``scale``, default 50) so they are visible at room scale.
 
-The band at tangent position ``s`` has half-width ``3·scale·σ(s)`` with
-``σ(s)² = P_RR − 2 s P_Rα + s² P_αα``: the standard deviation of the fitted line's distance from
-a fixed point at ``s`` (the R-uncertainty of the paper's figure, with the joint ``(R, α)``
-covariance, so it widens away from the foot of the normal where α's uncertainty dominates).
-
-matplotlib is imported here only; nothing in ``linefit`` or the algorithmic parts of ``slam``
-imports this module.
+The band and the ellipses are those of :mod:`slam.plotting.shapes`.
 """
 
 from __future__ import annotations
@@ -18,32 +12,19 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.collections import LineCollection, PolyCollection
 from numpy.typing import NDArray
 
 from linefit import Line, LineFitConfig
 from linefit.extract import valid_readings
 from linefit.noise import point_covariances
+from slam.plotting.figure import plt, save_figure
+from slam.plotting.shapes import add_polygons, add_segments, band_polygon, ellipse_polygons
 
 __all__ = ["draw_lines", "draw_points", "save_scan_figure"]
 
 FloatArray = NDArray[np.float64]
-
-
-def _ellipse_polygons(centres: FloatArray, covs: FloatArray, k: float, n: int = 24) -> FloatArray:
-    """``(m, n, 2)`` polygons of the ``k``-σ ellipses of 2×2 covariances (vectorised)."""
-    vals, vecs = np.linalg.eigh(covs)
-    t = np.linspace(0.0, 2.0 * np.pi, n)
-    circle = np.stack([np.cos(t), np.sin(t)], axis=1)  # (n, 2)
-    radii = k * np.sqrt(np.maximum(vals, 0.0))  # (m, 2)
-    pts = np.einsum("mij,nj->mni", vecs * radii[:, None, :], circle)
-    return pts + centres[:, None, :]
 
 
 def draw_points(
@@ -65,15 +46,13 @@ def draw_points(
     if xy.shape[0] and every > 0:
         sel = np.arange(0, xy.shape[0], every)
         Q = point_covariances(d[sel], phi[sel], config.noise)
-        polys = _ellipse_polygons(xy[sel], Q * scale**2, 3.0)
-        ax.add_collection(
-            PolyCollection(
-                list(polys),
-                facecolors="tab:orange",
-                edgecolors="tab:red",
-                alpha=0.5,
-                label=f"3σ ellipses ×{scale:g}",
-            )
+        add_polygons(
+            ax,
+            ellipse_polygons(xy[sel], Q, 3.0 * scale, n=23),
+            facecolors="tab:orange",
+            edgecolors="tab:red",
+            alpha=0.5,
+            label=f"3σ ellipses ×{scale:g}",
         )
     ax.plot([0.0], [0.0], "^", color="tab:blue", ms=8, label="sensor")
 
@@ -83,21 +62,12 @@ def draw_lines(ax: Axes, lines: Sequence[Line], *, scale: float = 50.0) -> None:
     bands = []
     segs = []
     for line in lines:
-        n = line.normal
         for s0, s1 in line.segments_s:
-            s = np.linspace(s0, s1, 16)
-            var = line.cov[0, 0] - 2.0 * s * line.cov[0, 1] + s * s * line.cov[1, 1]
-            half = 3.0 * scale * np.sqrt(np.maximum(var, 0.0))
-            centre = line.point_at(s)
-            upper = centre + half[:, None] * n
-            lower = centre - half[:, None] * n
-            bands.append(np.concatenate([upper, lower[::-1]]))
+            bands.append(band_polygon(line.r, line.alpha, line.cov, s0, s1, 3.0 * scale, n=16))
             segs.append(line.point_at(np.array([s0, s1])))
     if bands:
-        ax.add_collection(
-            PolyCollection(bands, facecolors="tab:cyan", edgecolors="none", alpha=0.5)
-        )
-        ax.add_collection(LineCollection(segs, colors="tab:blue", linewidths=1.5))
+        add_polygons(ax, bands, facecolors="tab:cyan", edgecolors="none", alpha=0.5)
+        add_segments(ax, segs, colors="tab:blue", linewidths=1.5)
     ax.plot([], [], color="tab:blue", label=f"{len(lines)} fitted lines (3σ band ×{scale:g})")
 
 
@@ -113,7 +83,6 @@ def save_scan_figure(
     title: str = "",
 ) -> Path:
     """Write the two-panel figure (points + ellipses | lines + bands) to ``path`` (PNG/PDF)."""
-    path = Path(path)
     fig, axes = plt.subplots(1, 2, figsize=(12, 6), sharex=True, sharey=True)
     draw_points(axes[0], ranges, bearings, config, max_range_m=max_range_m, scale=scale)
     axes[0].set_title("raw points and 3σ covariances")
@@ -128,8 +97,4 @@ def save_scan_figure(
     axes[0].set_ylabel("y (m)")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)

@@ -1,10 +1,9 @@
-"""Figures in the style of the paper's Figs. 3-8 (matplotlib; import only where a picture is drawn).
+"""Map-building figures in the style of the paper's Figs. 4-8: points, fitted and merged lines.
 
 * :func:`plot_points` - raw scan points with the 3σ ellipses of selected points (Eq. 8),
   uncertainty scaled for visibility (the paper scales by 50).
 * :func:`plot_lines` - lines (fitted per scan, or merged) with their 3σ uncertainty band across
-  the line: at tangent coordinate ``s`` (from the foot of the normal) the lateral standard
-  deviation of the line is ``sqrt(P_rr − 2 s P_rα + s² P_αα)``.
+  the line (:mod:`slam.plotting.shapes`).
 * :func:`figure_panels` - the paper's A/B/C layout (points, fitted lines, merged lines).
 """
 
@@ -14,61 +13,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.collections import LineCollection, PolyCollection
 from numpy.typing import NDArray
 
-__all__ = [
-    "band_polygons",
-    "figure_panels",
-    "nice_scale",
-    "plot_lines",
-    "plot_points",
-    "point_ellipses",
-]
+from slam.plotting.figure import plt, save_figure
+from slam.plotting.shapes import add_polygons, add_segments, band_polygons, ellipse_polygons
+
+__all__ = ["figure_panels", "nice_scale", "plot_lines", "plot_points"]
 
 FloatArray = NDArray[np.float64]
-
-
-def point_ellipses(
-    centers: FloatArray, covs: FloatArray, n_sigma: float = 3.0, scale: float = 50.0, n: int = 24
-) -> FloatArray:
-    """Polygons ``(K, n, 2)`` of the ``n_sigma`` ellipses of 2×2 covariances, scaled."""
-    vals, vecs = np.linalg.eigh(covs)
-    vals = np.clip(vals, 0.0, None)
-    th = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    circle = np.stack([np.cos(th), np.sin(th)], -1)  # (n, 2)
-    axes = vecs * (n_sigma * scale * np.sqrt(vals))[:, None, :]  # (K, 2, 2)
-    return np.asarray(centers[:, None, :] + circle @ np.swapaxes(axes, -1, -2))
-
-
-def band_polygons(
-    r_alpha: FloatArray,
-    cov_r_alpha: FloatArray,
-    segments: Sequence[FloatArray],
-    n_sigma: float = 3.0,
-    scale: float = 50.0,
-    n: int = 12,
-) -> list[FloatArray]:
-    """Uncertainty bands (one polygon per segment) around lines with ``(r, α)`` covariance."""
-    polys: list[FloatArray] = []
-    for (r, a), P, segs in zip(r_alpha, cov_r_alpha, segments, strict=True):
-        nrm = np.array([np.cos(a), np.sin(a)])
-        tan = np.array([-np.sin(a), np.cos(a)])
-        for seg in np.asarray(segs).reshape(-1, 2, 2):
-            s0, s1 = seg @ tan
-            s = np.linspace(s0, s1, n)
-            sd = np.sqrt(np.clip(P[0, 0] - 2 * s * P[0, 1] + s**2 * P[1, 1], 0.0, None))
-            half = n_sigma * scale * sd
-            centre = r * nrm + s[:, None] * tan
-            upper = centre + half[:, None] * nrm
-            lower = centre - half[:, None] * nrm
-            polys.append(np.concatenate([upper, lower[::-1]]))
-    return polys
 
 
 def plot_points(
@@ -85,10 +38,8 @@ def plot_points(
         pts = pts[:: int(np.ceil(pts.shape[0] / max_points))]
     ax.plot(pts[:, 0], pts[:, 1], ",", color="k", alpha=0.6, rasterized=True)
     if ellipse_centers is not None and ellipse_covs is not None and len(ellipse_centers):
-        polys = point_ellipses(np.asarray(ellipse_centers), np.asarray(ellipse_covs), scale=scale)
-        ax.add_collection(
-            PolyCollection(list(polys), facecolor="none", edgecolor="tab:red", linewidth=0.5)
-        )
+        polys = ellipse_polygons(ellipse_centers, ellipse_covs, 3.0 * scale)
+        add_polygons(ax, polys, facecolor="none", edgecolor="tab:red", linewidth=0.5)
     ax.set_aspect("equal")
 
 
@@ -105,11 +56,9 @@ def plot_lines(
     segs = [np.asarray(s).reshape(-1, 2, 2) for s in segments]
     flat = np.concatenate(segs) if segs else np.zeros((0, 2, 2))
     if bands and len(segs):
-        polys = band_polygons(np.asarray(r_alpha), np.asarray(cov_r_alpha), segs, scale=scale)
-        ax.add_collection(
-            PolyCollection(polys, facecolor=color, alpha=0.25, edgecolor="none", rasterized=True)
-        )
-    ax.add_collection(LineCollection(list(flat), colors=color, linewidths=0.8))
+        polys = band_polygons(r_alpha, cov_r_alpha, segs, 3.0 * scale)
+        add_polygons(ax, polys, facecolor=color, alpha=0.25, edgecolor="none", rasterized=True)
+    add_segments(ax, flat, colors=color, linewidths=0.8)
     if flat.shape[0]:
         lo, hi = flat.reshape(-1, 2).min(axis=0), flat.reshape(-1, 2).max(axis=0)
         pad = 0.03 * max(float(np.max(hi - lo)), 1.0)
@@ -183,8 +132,4 @@ def figure_panels(
         ax.set_ylabel("y (m)")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=130)
