@@ -23,6 +23,7 @@ from linefit.line import Line
 from slam.config import RunConfig
 from slam.errors import InputError
 from slam.geometry import pose_compose
+from slam.inputs import InputPolicy
 from slam.lines.mapbuilder import LineMap, MapBuilder
 from slam.lines.mapio import write_map_json
 from slam.lines.transform import line_to_world
@@ -63,10 +64,24 @@ def fit_scan(scan: Scan, config: RunConfig) -> tuple[list[Line], int]:
     return list(lines), n_points
 
 
-def scan_pose(scan: Scan) -> FloatArray | None:
-    """The log's pose of the laser (``pose_odom_laser``, else ``pose_odom_base``)."""
-    pose = scan.pose_odom_laser if scan.pose_odom_laser is not None else scan.pose_odom_base
-    return None if pose is None else np.asarray(pose, dtype=float)
+_LOG_POSES = InputPolicy()
+"""The log's own poses: the logged laser pose, else the base's (no mounting)."""
+
+
+def scan_pose(scan: Scan, policy: InputPolicy | None = None) -> FloatArray | None:
+    """The laser pose of ``scan`` in the log's odometry frame, or None if it has no pose.
+
+    Read by the input policy (:meth:`slam.inputs.InputPolicy.pose_odom_laser`); the default
+    takes the log's own poses (``pose_odom_laser``, else ``pose_odom_base``).
+
+    Raises
+    ------
+    InputError
+        The pose is not finite.
+    """
+    if scan.pose_odom_laser is None and scan.pose_odom_base is None:
+        return None
+    return (policy or _LOG_POSES).pose_odom_laser(scan)
 
 
 @dataclass
