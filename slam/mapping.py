@@ -9,7 +9,6 @@ the paper's Figs. 3-8 under ``figures/``.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -229,17 +228,24 @@ def build_map(
     return MapRun(line_map, summary, figures)
 
 
-def write_map_results(
-    out: Path, run: MapRun, title: str = "", plot: bool = True
-) -> dict[str, Path]:
-    """Write ``map.json``, ``summary.json`` and the figures into ``out`` (which must exist)."""
+def _write_map_files(out: Path, run: MapRun, title: str, plot: bool) -> dict[str, Path]:
+    """Write ``map.json`` and the figures (their time goes to ``runtime_s["plot"]``)."""
     paths = {"map": write_map_json(out / "map.json", run.line_map)}
     if plot and run.figures is not None:
         t0 = time.perf_counter()
         paths.update(_draw(out / "figures", run, title))
         run.summary["runtime_s"]["plot"] = time.perf_counter() - t0
-    paths["summary"] = out / "summary.json"
-    paths["summary"].write_text(json.dumps(run.summary, indent=1) + "\n", "utf-8")
+    return paths
+
+
+def write_map_results(
+    out: Path, run: MapRun, title: str = "", plot: bool = True
+) -> dict[str, Path]:
+    """Write ``map.json``, ``summary.json`` and the figures into ``out`` (which must exist)."""
+    from slam.io.results import write_summary
+
+    paths = _write_map_files(out, run, title, plot)
+    paths["summary"] = write_summary(out, run.summary)
     return paths
 
 
@@ -278,6 +284,7 @@ def run_map(
     """``lineslam map``: resolve ``log``, build the map, write the results folder."""
     from slam.io.carmen import iter_scans
     from slam.io.catalog import resolve_log
+    from slam.io.results import write_summary
 
     resolved = resolve_log(log)
     t0 = time.perf_counter()
@@ -290,10 +297,10 @@ def run_map(
     )
     run.summary["log"] = str(resolved.log)
     t1 = time.perf_counter()
-    write_map_results(out, run, title=f"{resolved.name}: {run.summary['scans']} scans", plot=plot)
+    _write_map_files(out, run, title=f"{resolved.name}: {run.summary['scans']} scans", plot=plot)
     run.summary["runtime_s"]["write"] = time.perf_counter() - t1
     run.summary["runtime_s"]["total"] = time.perf_counter() - t0
-    (out / "summary.json").write_text(json.dumps(run.summary, indent=1) + "\n", "utf-8")
+    write_summary(out, run.summary)
     return run.summary
 
 
