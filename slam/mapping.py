@@ -9,7 +9,6 @@ the paper's Figs. 3-8 under ``figures/``.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -23,6 +22,7 @@ from linefit.line import Line
 from slam.config import RunConfig
 from slam.errors import InputError
 from slam.geometry import pose_compose
+from slam.inputs import InputPolicy
 from slam.lines.mapbuilder import LineMap, MapBuilder
 from slam.lines.mapio import write_map_json
 from slam.lines.transform import line_to_world
@@ -63,10 +63,24 @@ def fit_scan(scan: Scan, config: RunConfig) -> tuple[list[Line], int]:
     return list(lines), n_points
 
 
-def scan_pose(scan: Scan) -> FloatArray | None:
-    """The log's pose of the laser (``pose_odom_laser``, else ``pose_odom_base``)."""
-    pose = scan.pose_odom_laser if scan.pose_odom_laser is not None else scan.pose_odom_base
-    return None if pose is None else np.asarray(pose, dtype=float)
+_LOG_POSES = InputPolicy()
+"""The log's own poses: the logged laser pose, else the base's (no mounting)."""
+
+
+def scan_pose(scan: Scan, policy: InputPolicy | None = None) -> FloatArray | None:
+    """The laser pose of ``scan`` in the log's odometry frame, or None if it has no pose.
+
+    Read by the input policy (:meth:`slam.inputs.InputPolicy.pose_odom_laser`); the default
+    takes the log's own poses (``pose_odom_laser``, else ``pose_odom_base``).
+
+    Raises
+    ------
+    InputError
+        The pose is not finite.
+    """
+    if scan.pose_odom_laser is None and scan.pose_odom_base is None:
+        return None
+    return (policy or _LOG_POSES).pose_odom_laser(scan)
 
 
 @dataclass
@@ -214,17 +228,24 @@ def build_map(
     return MapRun(line_map, summary, figures)
 
 
-def write_map_results(
-    out: Path, run: MapRun, title: str = "", plot: bool = True
-) -> dict[str, Path]:
-    """Write ``map.json``, ``summary.json`` and the figures into ``out`` (which must exist)."""
+def _write_map_files(out: Path, run: MapRun, title: str, plot: bool) -> dict[str, Path]:
+    """Write ``map.json`` and the figures (their time goes to ``runtime_s["plot"]``)."""
     paths = {"map": write_map_json(out / "map.json", run.line_map)}
     if plot and run.figures is not None:
         t0 = time.perf_counter()
         paths.update(_draw(out / "figures", run, title))
         run.summary["runtime_s"]["plot"] = time.perf_counter() - t0
-    paths["summary"] = out / "summary.json"
-    paths["summary"].write_text(json.dumps(run.summary, indent=1) + "\n", "utf-8")
+    return paths
+
+
+def write_map_results(
+    out: Path, run: MapRun, title: str = "", plot: bool = True
+) -> dict[str, Path]:
+    """Write ``map.json``, ``summary.json`` and the figures into ``out`` (which must exist)."""
+    from slam.io.results import write_summary
+
+    paths = _write_map_files(out, run, title, plot)
+    paths["summary"] = write_summary(out, run.summary)
     return paths
 
 
@@ -263,6 +284,7 @@ def run_map(
     """``lineslam map``: resolve ``log``, build the map, write the results folder."""
     from slam.io.carmen import iter_scans
     from slam.io.catalog import resolve_log
+    from slam.io.results import write_summary
 
     resolved = resolve_log(log)
     t0 = time.perf_counter()
@@ -275,10 +297,10 @@ def run_map(
     )
     run.summary["log"] = str(resolved.log)
     t1 = time.perf_counter()
-    write_map_results(out, run, title=f"{resolved.name}: {run.summary['scans']} scans", plot=plot)
+    _write_map_files(out, run, title=f"{resolved.name}: {run.summary['scans']} scans", plot=plot)
     run.summary["runtime_s"]["write"] = time.perf_counter() - t1
     run.summary["runtime_s"]["total"] = time.perf_counter() - t0
-    (out / "summary.json").write_text(json.dumps(run.summary, indent=1) + "\n", "utf-8")
+    write_summary(out, run.summary)
     return run.summary
 
 

@@ -1,10 +1,12 @@
-"""The result of a :class:`~slam.line_slam.LineSlam` run and its files.
+"""The result of an estimator run (:class:`~slam.line_slam.LineSlam` or :class:`~slam.ekf.EkfSlam`).
 
-Files (``../shared/INTERFACES.md``): ``trajectory.tum`` (one laser pose per scan, time stamps as
-in the log; :func:`slam.io.write_results`, with ``trajectory_covariance.txt`` holding the pose
-marginals), ``map.json`` (world lines in normal form with their 2×2 marginal covariance and
-visible segments; :func:`slam.lines.mapio.write_map_json`) and ``summary.json``.
-:meth:`SlamResult.to_json_dict` / :meth:`SlamResult.from_json_dict` round-trip everything.
+One type for both estimators, and one writer of its files (``../shared/INTERFACES.md``):
+``trajectory.tum`` (one pose per scan, time stamps as in the log) with
+``trajectory_covariance.txt`` holding the pose covariances (:func:`slam.io.write_trajectory`),
+``map.json`` (world lines in normal form with their 2×2 marginal covariance and visible
+segments; :func:`slam.lines.mapio.write_map_json`) and ``summary.json``
+(:func:`slam.io.write_summary`).  :meth:`SlamResult.to_json_dict` /
+:meth:`SlamResult.from_json_dict` round-trip everything.
 """
 
 from __future__ import annotations
@@ -16,63 +18,58 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.errors import InputError
+from slam.io.results import to_jsonable
+
 __all__ = ["SlamResult"]
 
 FloatArray = NDArray[np.float64]
 
 
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.floating | float):
-        f = float(value)
-        return f if np.isfinite(f) else None
-    return value
-
-
 @dataclass(frozen=True, eq=False)
 class SlamResult:
-    """What a line-SLAM run produced (all scans, the final estimate).
+    """What an estimator run produced (all scans, the final estimate).
 
     Attributes
     ----------
     timestamps : ndarray, shape (N,)
         Scan time stamps as in the log.
     poses_world_laser : ndarray, shape (N, 3)
-        Laser pose of every scan: keyframes as optimised, other scans their keyframe's pose
-        composed with the odometry since.
+        Pose of every scan in the frame ``frame`` (m, m, rad).  Graph: keyframes as optimised,
+        other scans their keyframe's pose composed with the odometry since.  EKF: the filtered
+        estimate at the scan's time (pose ``k`` uses scans ``≤ k`` only).
     pose_covariances : ndarray, shape (N, 3, 3)
-        Marginal covariances (right tangent space, as GTSAM's ``Pose2``); non-keyframes add the
-        motion noise of their odometry offset; NaN when not computed.
+        Their covariances in the right tangent space (as GTSAM's ``Pose2`` marginals);
+        non-keyframes add the motion noise of their odometry offset; NaN when not computed.
     is_keyframe : ndarray of bool, shape (N,)
+        Graph: scans with a pose variable.  EKF: scans whose lines updated the filter (the
+        same rule on the odometry since the last one, :func:`slam.models.moved_enough`).
     keyframe_of_scan : ndarray of int, shape (N,)
-        The pose variable each scan hangs from.
+        Index of the keyframe each scan hangs from (``0`` for the first keyframe).
     landmark_ids : ndarray of int, shape (M,)
-        Landmark variable index of each map line (fused landmarks are absent).
+        Identifier of each map line (graph: landmark variable index, fused landmarks are
+        absent; EKF: index in the filter state).
     landmarks_r_alpha : ndarray, shape (M, 2)
         World lines in normal form (``r ≥ 0``, ``α ∈ (−π, π]``).
     landmark_covariances : ndarray, shape (M, 2, 2)
         Their marginal covariances on ``(r, α)``.
     landmark_segments : list of ndarray, each (k, 2, 2)
-        Visible pieces of each line (world end points), ordered along the tangent.
+        Visible pieces of each line (world end points, m), ordered along the tangent.
     landmark_segments_var : list of ndarray, each (k, 2)
-        Approximate variances (m²) of the pieces' ends along the line.
+        Approximate variances (m²) of the pieces' ends along the line (zeros where the
+        estimator does not estimate them, as the EKF).
     landmark_n_observations : ndarray of int, shape (M,)
         Line measurements on each landmark.
     scan_runtime_s : ndarray, shape (N,)
-        Wall-clock time of :meth:`LineSlam.add_scan` for each scan.
+        Wall-clock time spent on each scan (s).
     n_landmarks : ndarray of int, shape (N,)
-        Alive landmarks after each scan.
+        Landmarks alive after each scan.
     stats : dict
         Counters and timings (see :meth:`summary_dict`).
-    frame : str
-        ``"laser"``: the poses are of the laser.
+    frame : {"laser", "base"}
+        Frame whose poses ``poses_world_laser`` holds (the input policy's output frame).
+    state_dim : int or None
+        Size of a filter's state ``3 + 2M`` at the end (EKF); None for the graph.
     """
 
     timestamps: FloatArray
@@ -90,6 +87,7 @@ class SlamResult:
     n_landmarks: NDArray[np.int64]
     stats: dict[str, Any] = field(default_factory=dict)
     frame: str = "laser"
+    state_dim: int | None = None
 
     @property
     def n_scans(self) -> int:
@@ -97,14 +95,19 @@ class SlamResult:
         return int(self.timestamps.shape[0])
 
     # -- files -------------------------------------------------------------------------------
+    def _in_map(self, min_observations: int) -> NDArray[np.intp]:
+        """Indices of the landmarks with at least ``min_observations`` measurements."""
+        return np.flatnonzero(self.landmark_n_observations >= min_observations)
+
     def line_map(self, min_observations: int = 1) -> Any:
-        """The map as a :class:`slam.lines.mapbuilder.LineMap` (for ``map.json``)."""
+        """The map as a :class:`slam.lines.mapbuilder.LineMap` (for ``map.json``).
+
+        Only landmarks with at least ``min_observations`` measurements are in it.
+        """
         from slam.lines.mapbuilder import LineMap, MapLine
 
         out = []
-        for k in range(self.landmark_ids.shape[0]):
-            if self.landmark_n_observations[k] < min_observations:
-                continue
+        for k in self._in_map(min_observations):
             r, a = self.landmarks_r_alpha[k]
             seg = self.landmark_segments[k]
             var = self.landmark_segments_var[k]
@@ -130,11 +133,16 @@ class SlamResult:
             )
         return LineMap(lines=tuple(out), frame="world")
 
-    def summary_dict(self) -> dict[str, Any]:
-        """``summary.json``: the INTERFACES.md fields plus the run's counters."""
+    def summary_dict(self, min_observations: int = 1) -> dict[str, Any]:
+        """``summary.json``: the INTERFACES.md fields plus the run's counters.
+
+        ``lines_merged``, ``segments`` and ``compression`` (a segment counting as two points)
+        are of the map written with ``min_observations``; ``landmarks`` counts all of them.
+        """
         points = int(self.stats.get("points", 0))
-        n_map = int(self.landmark_ids.shape[0])
-        n_seg = int(sum(s.shape[0] for s in self.landmark_segments))
+        in_map = self._in_map(min_observations)
+        n_map = int(in_map.shape[0])
+        n_seg = int(sum(self.landmark_segments[k].shape[0] for k in in_map))
         out: dict[str, Any] = {
             "scans": self.n_scans,
             "points": points,
@@ -144,30 +152,43 @@ class SlamResult:
             "runtime_s": self.stats.get("runtime_s", {}),
             "frame": self.frame,
             "keyframes": int(np.count_nonzero(self.is_keyframe)),
-            "landmarks": n_map,
+            "landmarks": int(self.landmark_ids.shape[0]),
             "segments": n_seg,
         }
+        if self.state_dim is not None:
+            out["state_dim"] = int(self.state_dim)
         out.update({k: v for k, v in self.stats.items() if k not in out})
-        result: dict[str, Any] = _jsonable(out)
+        result: dict[str, Any] = to_jsonable(out)
         return result
 
-    def write(self, out_dir: str | Path, min_observations: int = 1) -> Path:
-        """Write ``trajectory.tum`` (+ covariances), ``map.json`` and ``summary.json``."""
-        from slam.io import write_results
+    def write_files(self, out_dir: str | Path, min_observations: int = 1) -> Path:
+        """Write ``trajectory.tum`` (+ ``trajectory_covariance.txt``) and ``map.json``.
+
+        The covariances are written when all are finite.  Returns the folder (created if
+        needed).  ``summary.json`` is left to the caller (:meth:`write`, or a runner that adds
+        its timings, :func:`slam.io.write_summary`).
+        """
+        from slam.io.results import write_trajectory
         from slam.lines.mapio import write_map_json
 
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+        if self.frame not in ("laser", "base"):
+            raise InputError(f"frame must be 'laser' or 'base', got {self.frame!r}")
         cov = self.pose_covariances
-        write_results(
-            out,
+        out = write_trajectory(
+            out_dir,
             self.timestamps,
             self.poses_world_laser,
-            self.summary_dict(),
-            frame=self.frame,
-            covariances=cov if np.isfinite(cov).all() else None,
+            cov if np.isfinite(cov).all() else None,
         )
         write_map_json(out / "map.json", self.line_map(min_observations))
+        return out
+
+    def write(self, out_dir: str | Path, min_observations: int = 1) -> Path:
+        """Write the results folder: :meth:`write_files` and ``summary.json``."""
+        from slam.io.results import write_summary
+
+        out = self.write_files(out_dir, min_observations)
+        write_summary(out, self.summary_dict(min_observations))
         return out
 
     # -- serialisation -----------------------------------------------------------------------
@@ -176,19 +197,20 @@ class SlamResult:
         return {
             "timestamps": self.timestamps.tolist(),
             "poses_world_laser": self.poses_world_laser.tolist(),
-            "pose_covariances": _jsonable(self.pose_covariances),
+            "pose_covariances": to_jsonable(self.pose_covariances),
             "is_keyframe": self.is_keyframe.tolist(),
             "keyframe_of_scan": self.keyframe_of_scan.tolist(),
             "landmark_ids": self.landmark_ids.tolist(),
             "landmarks_r_alpha": self.landmarks_r_alpha.tolist(),
-            "landmark_covariances": _jsonable(self.landmark_covariances),
+            "landmark_covariances": to_jsonable(self.landmark_covariances),
             "landmark_segments": [s.tolist() for s in self.landmark_segments],
             "landmark_segments_var": [v.tolist() for v in self.landmark_segments_var],
             "landmark_n_observations": self.landmark_n_observations.tolist(),
             "scan_runtime_s": self.scan_runtime_s.tolist(),
             "n_landmarks": self.n_landmarks.tolist(),
-            "stats": _jsonable(self.stats),
+            "stats": to_jsonable(self.stats),
             "frame": self.frame,
+            "state_dim": self.state_dim,
         }
 
     @classmethod
@@ -203,6 +225,7 @@ class SlamResult:
 
         n = len(doc["timestamps"])
         m = len(doc["landmark_ids"])
+        state_dim = doc.get("state_dim")
         return cls(
             timestamps=arr("timestamps", (n,)),
             poses_world_laser=arr("poses_world_laser", (n, 3)),
@@ -223,4 +246,5 @@ class SlamResult:
             n_landmarks=arr("n_landmarks", (n,), np.int64),
             stats=dict(doc.get("stats", {})),
             frame=str(doc.get("frame", "laser")),
+            state_dim=None if state_dim is None else int(state_dim),
         )

@@ -1,55 +1,66 @@
 """Runners: read a log, feed an estimator scan by scan, write the results folder.
 
-Shared by ``lineslam slam`` (the factor graph) and any other estimator with the same shape
-(the EKF baseline): an object with ``add_scan(scan)``, ``optimize()`` and ``result()``, whose
-result has ``write(out_dir)`` and ``summary_dict()``.
+``lineslam slam`` (:func:`run_slam`, the factor graph) and ``lineslam ekf`` (:func:`run_ekf`,
+the EKF baseline) run the same way (:func:`run_estimator_on_log`): the log is read with the input
+policy (:mod:`slam.inputs`: odometry sign, laser mounting of a catalogued log, output frame),
+the scans are fed to an estimator with ``add_scan``, ``optimize()`` and ``result()`` (a
+:class:`slam.result.SlamResult`), and the result's files are written.
 
-Results folder (``../shared/INTERFACES.md``): ``trajectory.tum`` (laser poses, log time stamps),
-``map.json``, ``summary.json`` (with ``runtime_s`` per stage: ``read``, ``estimate``,
-``optimize``, ``write``, ``total``), ``config.toml`` (written by the CLI before the run) and,
-with ``plot``, ``figures/``.
+Results folder (``../shared/INTERFACES.md``): ``trajectory.tum`` (poses in the policy's output
+frame, log time stamps), ``trajectory_covariance.txt``, ``map.json``, ``summary.json`` (written
+once, at the end, with ``runtime_s`` per stage: ``read``, ``extract`` (when the runner extracts
+the lines), ``estimate``, ``optimize``, ``write``, ``total``), ``config.toml`` (written by the
+CLI before the run) and, with ``plot``, ``figures/``.
 """
 
 from __future__ import annotations
 
-import json
+import itertools
 import time
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from slam.config import RunConfig
 from slam.errors import InputError
-from slam.inputs import InputPolicy, policy_for_log
+from slam.inputs import InputPolicy, policy_for_log, read_log_scans
 from slam.types import Scan
 
-__all__ = ["ScanEstimator", "feed_scans", "run_estimator_on_log", "run_slam"]
+if TYPE_CHECKING:
+    from linefit.config import LineFitConfig
+
+__all__ = ["ScanEstimator", "feed_scans", "run_ekf", "run_estimator_on_log", "run_slam"]
 
 
 class ScanEstimator(Protocol):
-    """What a runner needs from an estimator."""
+    """What a runner needs from an estimator.
 
-    def add_scan(self, scan: Scan) -> Any:
-        """Process one scan."""
+    ``add_scan(scan, lines)`` takes the scan's lines when the runner extracts them
+    (:func:`feed_scans` with ``linefit_config``).  An estimator with a true ``stopped``
+    attribute (the EKF after a guard tripped) is fed no more scans.
+    """
+
+    def add_scan(self, scan: Scan, lines: Any = None) -> Any:
+        """Process one scan (with its lines, or None)."""
 
     def optimize(self) -> Any:
         """Finish (final optimisation)."""
 
     def result(self) -> Any:
-        """The result: has ``write(out_dir)`` and ``summary_dict()``."""
+        """The result, a :class:`slam.result.SlamResult`."""
 
 
-def _timed(scans: Iterable[Scan], clock: dict[str, float]) -> Iterator[Scan]:
-    """Yield ``scans``, adding the time spent producing them to ``clock["read"]``."""
+def _timed(scans: Iterable[Any], clock: dict[str, float], stage: str) -> Iterator[Any]:
+    """Yield ``scans``, adding the time spent producing them to ``clock[stage]``."""
     it = iter(scans)
     while True:
         t0 = time.perf_counter()
         try:
             scan = next(it)
         except StopIteration:
-            clock["read"] += time.perf_counter() - t0
+            clock[stage] += time.perf_counter() - t0
             return
-        clock["read"] += time.perf_counter() - t0
+        clock[stage] += time.perf_counter() - t0
         yield scan
 
 
@@ -60,13 +71,21 @@ def feed_scans(
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     chunk: int = 256,
+    linefit_config: LineFitConfig | None = None,
 ) -> dict[str, float]:
     """Feed ``scans`` (at most ``max_scans``) to ``estimator``; return time per stage (s).
 
-    An estimator with ``add_scans`` (e.g. :class:`slam.line_slam.LineSlam`, which then extracts the
-    keyframes' lines in one vectorised call) gets the scans in chunks of ``chunk``.
+    An estimator with ``add_scans`` (e.g. :class:`slam.line_slam.LineSlam`, which then extracts
+    the keyframes' lines in one vectorised call) gets the scans in chunks of ``chunk``.  With
+    ``linefit_config`` the runner extracts every scan's lines on the way
+    (:func:`slam.extraction.iter_scan_lines`, batches of consecutive scans) and calls
+    ``add_scan(scan, lines)`` scan by scan; ``progress`` is then called with 1 per scan.
+    Feeding stops early once ``estimator.stopped`` is true.
     """
     clock = {"read": 0.0, "estimate": 0.0}
+    source: Iterable[Scan] = _timed(itertools.islice(scans, max_scans), clock, "read")
+    if linefit_config is not None:
+        return _feed_with_lines(estimator, source, clock, progress, linefit_config)
     n = 0
     batch_fn = getattr(estimator, "add_scans", None)
     buffer: list[Scan] = []
@@ -83,13 +102,13 @@ def feed_scans(
             progress(len(buffer))
         buffer.clear()
 
-    for scan in _timed(scans, clock):
+    for scan in source:
         buffer.append(scan)
         n += 1
         if len(buffer) >= (chunk if batch_fn is not None else 1):
             flush()
-        if max_scans is not None and n >= max_scans:
-            break
+            if getattr(estimator, "stopped", False):
+                break
     if buffer:
         flush()
     if n == 0:
@@ -97,52 +116,88 @@ def feed_scans(
     return clock
 
 
+def _feed_with_lines(
+    estimator: ScanEstimator,
+    scans: Iterable[Scan],
+    clock: dict[str, float],
+    progress: Callable[[int], None] | None,
+    linefit_config: LineFitConfig,
+) -> dict[str, float]:
+    """:func:`feed_scans` with the lines extracted by the runner (``clock["extract"]``)."""
+    from slam.extraction import iter_scan_lines
+
+    clock["extract"] = 0.0
+    n = 0
+    for scan, lines in _timed(iter_scan_lines(scans, linefit_config), clock, "extract"):
+        t0 = time.perf_counter()
+        estimator.add_scan(scan, lines)
+        clock["estimate"] += time.perf_counter() - t0
+        n += 1
+        if progress is not None:
+            progress(1)
+        if getattr(estimator, "stopped", False):
+            break
+    if n == 0:
+        raise InputError("the log contains no laser scans")
+    clock["extract"] -= clock["read"]  # reading happened inside the extraction's iterator
+    return clock
+
+
 def run_estimator_on_log(
     log: str | Path,
     out: Path,
     estimator: ScanEstimator,
+    policy: InputPolicy,
     *,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
-    odometry_sign: str = "velocity",
+    linefit_config: LineFitConfig | None = None,
+    min_observations: int = 1,
 ) -> dict[str, Any]:
     """Resolve ``log`` (file or dataset name), run ``estimator`` on it, write ``out``.
 
-    ``odometry_sign`` chooses the odometry (:func:`slam.io.carmen.iter_log_scans`).  Returns the
-    summary written to ``out/summary.json``.
+    The scans are read with ``policy``'s odometry sign (:func:`slam.inputs.read_log_scans`)
+    and fed by :func:`feed_scans` (``linefit_config``: the runner extracts the lines).  The
+    result's files are written with the map lines of at least ``min_observations``
+    measurements, then ``summary.json`` once, with the run's times.  Returns that summary.
     """
-    from slam.io.carmen import iter_log_scans, iter_scans
+    from slam.io.carmen import iter_scans
     from slam.io.catalog import resolve_log
+    from slam.io.results import write_summary
 
     resolved = resolve_log(log)
     t_start = time.perf_counter()
-    scans = iter_log_scans(resolved.log, odometry_sign)
-    clock = feed_scans(estimator, scans, max_scans=max_scans, progress=progress)
+    scans = read_log_scans(resolved.log, policy)
+    clock = feed_scans(
+        estimator,
+        scans,
+        max_scans=max_scans,
+        progress=progress,
+        linefit_config=linefit_config,
+    )
     t0 = time.perf_counter()
     estimator.optimize()
     clock["optimize"] = time.perf_counter() - t0
     result = estimator.result()
     t0 = time.perf_counter()
-    result.write(out)
+    result.write_files(out, min_observations)
     if plot:
         from slam.plotting.trajectory_map import plot_slam_result, raw_points_world
 
-        points = None
-        if hasattr(result, "poses_world_laser") and hasattr(result, "is_keyframe"):
-            points = raw_points_world(
-                iter_scans(resolved.log), result.poses_world_laser, result.is_keyframe
-            )
+        points = raw_points_world(
+            iter_scans(resolved.log), result.poses_world_laser, result.is_keyframe
+        )
         plot_slam_result(result, out / "figures", title=resolved.name, points_world=points)
     clock["write"] = time.perf_counter() - t0
     clock["total"] = time.perf_counter() - t_start
-    summary: dict[str, Any] = result.summary_dict()
+    summary: dict[str, Any] = result.summary_dict(min_observations)
     summary["log"] = str(resolved.log)
     summary["dataset"] = resolved.name
     runtime = dict(summary.get("runtime_s", {}))
     runtime.update({f"{k}": float(v) for k, v in clock.items()})
     summary["runtime_s"] = runtime
-    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", "utf-8")
+    write_summary(out, summary)
     return summary
 
 
@@ -160,13 +215,43 @@ def run_slam(
 
     policy = policy_for_log(InputPolicy.of(config.slam), log, config.slam.mount_source)
     slam = LineSlam(config.slam, config.linefit, policy)
-    summary = run_estimator_on_log(
-        log,
-        out,
-        slam,
-        max_scans=max_scans,
-        progress=progress,
-        plot=plot,
-        odometry_sign=policy.odometry_sign,
+    return run_estimator_on_log(
+        log, out, slam, policy, max_scans=max_scans, progress=progress, plot=plot
     )
-    return summary
+
+
+def run_ekf(
+    log: str | Path,
+    out: Path,
+    config: RunConfig,
+    *,
+    max_scans: int | None = None,
+    progress: Callable[[int], None] | None = None,
+    plot: bool = False,
+) -> dict[str, Any]:
+    """``lineslam ekf``: the EKF baseline on a log (see the module docstring).
+
+    Same input policy as :func:`run_slam` (the catalogue's laser mounting included); the
+    lines of every scan are extracted by the runner in batches of consecutive scans, the
+    filter runs with ``ekf.blas_threads`` BLAS threads, and the map keeps the landmarks with
+    at least ``ekf.min_landmark_observations`` measurements.  When a guard stops the filter
+    (``ekf.max_landmarks``, ``ekf.max_runtime_s``), the trajectory covers the scans processed
+    and ``summary.json`` says at which scan and why (``stopped_at_scan``, ``stop_reason``).
+    """
+    from slam.ekf import EkfSlam
+    from slam.ekf.threads import blas_threads
+
+    policy = policy_for_log(InputPolicy.of(config.slam), log, config.slam.mount_source)
+    ekf = EkfSlam(config.ekf, config.linefit, policy)
+    with blas_threads(config.ekf.blas_threads):
+        return run_estimator_on_log(
+            log,
+            out,
+            ekf,
+            policy,
+            max_scans=max_scans,
+            progress=progress,
+            plot=plot,
+            linefit_config=config.linefit,
+            min_observations=config.ekf.min_landmark_observations,
+        )

@@ -24,8 +24,10 @@ from slam.ekf.update import filterpy_update, joseph_update, line_measurements
 from slam.errors import InputError
 from slam.geometry import (
     line_to_parent,
+    pose_between,
     pose_compose,
     pose_exp,
+    pose_inverse,
     predict_line_measurement,
     wrap_angle,
 )
@@ -394,7 +396,7 @@ def test_bad_input_gives_clear_errors():
     )
     with pytest.raises(InputError, match=r"log\.clf:7.*no odometry"):
         ekf.add_scan(no_odom, LineSet.empty())
-    with pytest.raises(InputError, match="non-finite"):
+    with pytest.raises(InputError, match=r"scan 0: odometry is not finite"):
         ekf.add_scan(_scan(0, [0.0, np.nan, 0.0]), LineSet.empty())
     # a line with a singular or NaN covariance is skipped and counted, not used
     ekf = EkfSlam(EkfConfig(association=NO_OVERLAP_TEST))
@@ -480,6 +482,99 @@ def test_results_files_follow_the_interfaces(tmp_path):
     ):
         assert key in s
     assert s["scans"] == 40 and s["frame"] == "laser"
+    assert s["backend"] == "ekf" and s["state_dim"] == 3 + 2 * ekf.n_landmarks
+    # the pose covariances are written too (the graph's file), in the tangent space
+    from slam.io import read_results
+
+    back = read_results(tmp_path)
+    assert back.covariances is not None
+    np.testing.assert_allclose(back.covariances, res.pose_covariances, rtol=1e-8, atol=1e-15)
+
+
+def test_the_map_keeps_landmarks_with_enough_observations(tmp_path):
+    run = _line_run()
+    ekf = EkfSlam()
+    for scan, lines in zip(run.scans[:80], run.lines[:80], strict=True):
+        ekf.add_scan(scan, lines)
+    res = ekf.result()
+    n_obs = res.landmark_n_observations
+    assert np.any(n_obs < 5) and np.any(n_obs >= 5)  # the threshold below separates them
+    res.write(tmp_path, min_observations=5)
+    m = json.loads((tmp_path / "map.json").read_text())
+    assert [line["id"] for line in m["lines"]] == np.flatnonzero(n_obs >= 5).tolist()
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["lines_merged"] == len(m["lines"]) and s["landmarks"] == ekf.n_landmarks
+    n_seg = sum(len(line["segments"]) for line in m["lines"])
+    assert s["segments"] == n_seg
+    assert s["points"] == 0 and s["compression"] is None  # line-level scans: no readings
+
+
+def test_updates_are_the_keyframes_of_the_result():
+    """Scans whose lines updated the filter are the result's keyframes; the others hang from
+    the last one, their pose that one's composed with the odometry since."""
+    run = _line_run()
+    ekf = EkfSlam(EkfConfig(update_min_distance_m=0.5, update_min_angle_rad=0.5))
+    reports = [ekf.add_scan(s, ls) for s, ls in zip(run.scans[:60], run.lines[:60], strict=True)]
+    res = ekf.result()
+    updated = np.array([r.updated for r in reports])
+    assert res.is_keyframe[0] and 3 < np.count_nonzero(res.is_keyframe) < 40
+    np.testing.assert_array_equal(res.is_keyframe[1:], updated[1:])
+    kf = res.keyframe_of_scan
+    np.testing.assert_array_equal(kf, np.cumsum(res.is_keyframe) - 1)
+    scan_of_kf = np.flatnonzero(res.is_keyframe)
+    odom = np.array([s.pose_odom_laser for s in run.scans[:60]])
+    for k in np.flatnonzero(~res.is_keyframe):
+        j = scan_of_kf[kf[k]]
+        offset = pose_between(odom[j], odom[k])
+        np.testing.assert_allclose(
+            res.poses_world_laser[k], pose_compose(res.poses_world_laser[j], offset), atol=1e-12
+        )
+
+
+def test_base_output_frame_reports_base_poses_with_covariances_by_the_adjoint():
+    """``InputPolicy(output_frame="base")``: each pose is the laser's composed with the inverse
+    mounting, each covariance carried to the base's tangent space (checked against a numerical
+    Jacobian of ``ξ_base(ξ_laser)``)."""
+    from slam.geometry import pose_log
+    from slam.inputs import InputPolicy
+
+    run = _line_run()
+    mount = np.array([0.25, -0.08, 0.3])
+    laser = EkfSlam(policy=InputPolicy(pose_base_laser=tuple(mount)))
+    base = EkfSlam(policy=InputPolicy(pose_base_laser=tuple(mount), output_frame="base"))
+    for scan, lines in zip(run.scans[:40], run.lines[:40], strict=True):
+        laser.add_scan(scan, lines)
+        base.add_scan(scan, lines)
+    res_l, res_b = laser.result(), base.result()
+    assert res_l.frame == "laser" and res_b.frame == "base"
+    pl = res_l.poses_world_laser
+    th = pl[:, 2] - mount[2]
+    expected = np.column_stack(
+        [
+            pl[:, 0] - np.cos(th) * mount[0] + np.sin(th) * mount[1],
+            pl[:, 1] - np.sin(th) * mount[0] - np.cos(th) * mount[1],
+            th,
+        ]
+    )
+    np.testing.assert_allclose(res_b.poses_world_laser[:, :2], expected[:, :2], atol=1e-12)
+    np.testing.assert_allclose(wrap_angle(res_b.poses_world_laser[:, 2] - th), 0.0, atol=1e-12)
+    m_inv = pose_inverse(mount)
+    eps = 1e-6
+    for k in (5, 17, 39):
+        b0 = pose_compose(pl[k], m_inv)
+        J = np.zeros((3, 3))
+        for i in range(3):
+            step = np.zeros(3)
+            step[i] = eps
+            plus = pose_compose(pose_compose(pl[k], pose_exp(step)), m_inv)
+            minus = pose_compose(pose_compose(pl[k], pose_exp(-step)), m_inv)
+            J[:, i] = (pose_log(pose_between(b0, plus)) - pose_log(pose_between(b0, minus))) / (
+                2 * eps
+            )
+        P_l = res_l.pose_covariances[k]
+        assert np.trace(P_l) > 0.0
+        np.testing.assert_allclose(res_b.pose_covariances[k], J @ P_l @ J.T, rtol=1e-6)
+    np.testing.assert_array_equal(res_b.landmarks_r_alpha, res_l.landmarks_r_alpha)
 
 
 def test_run_config_round_trip_with_ekf_table(tmp_path):

@@ -1,7 +1,8 @@
 """EKF-SLAM baseline with line landmarks (filterpy), fed scans like the graph back-end.
 
 Public API: :class:`EkfSlam` (the filter), :class:`EkfConfig` (its settings, TOML table
-``[ekf]``), :class:`EkfResult` (trajectory, map, covariances, statistics, files).
+``[ekf]``).  :meth:`EkfSlam.result` returns a :class:`slam.result.SlamResult`, the result type
+(trajectory, map, covariances, statistics, files) of both estimators.
 
 The names are imported on first use (as in :mod:`slam.graph`): ``slam.config`` needs only
 :class:`EkfConfig`, and importing the filter pulls in filterpy and with it ``scipy.stats``
@@ -15,17 +16,16 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from slam.ekf.config import EkfConfig, MotionNoiseConfig
-    from slam.ekf.ekf_slam import EkfSlam, ScanReport
-    from slam.ekf.result import EkfResult
+    from slam.ekf.ekf_slam import EkfSlam
+    from slam.ekf.records import ScanReport
 
-__all__ = ["EkfConfig", "EkfResult", "EkfSlam", "MotionNoiseConfig", "ScanReport"]
+__all__ = ["EkfConfig", "EkfSlam", "MotionNoiseConfig", "ScanReport"]
 
 _LAZY = {
     "EkfConfig": "slam.ekf.config",
-    "EkfResult": "slam.ekf.result",
     "EkfSlam": "slam.ekf.ekf_slam",
     "MotionNoiseConfig": "slam.ekf.config",
-    "ScanReport": "slam.ekf.ekf_slam",
+    "ScanReport": "slam.ekf.records",
 }
 
 

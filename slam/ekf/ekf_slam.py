@@ -21,17 +21,27 @@ prediction touches only the pose rows and columns, ``O(M)``).
 
 One scan (:meth:`EkfSlam.add_scan`)
 -----------------------------------
+The laser odometry is read by the input policy (:class:`slam.inputs.InputPolicy`).  A scan is
+processed when the odometry since the last update reaches the graph's keyframe thresholds
+(:func:`slam.models.moved_enough`); other scans get the last update's pose composed with the
+odometry since, the covariance compounded with the motion noise.
+
 1. **Predict** with the odometry increment ``u = pose_odom[k-1]⁻¹ pose_odom[k]``
    (:mod:`slam.ekf.motion`).
-2. **Lines**: given, or extracted with :func:`linefit.extract_lines`; lines whose covariance is
-   not finite and positive definite are skipped (counted).
+2. **Lines**: given, or extracted with :func:`slam.extraction.extract_scan_lines`; lines with
+   too little support are dropped and lines whose covariance is not finite and positive
+   definite are skipped (both counted; :func:`slam.lines.lineset.supported_lines`,
+   :meth:`~slam.lines.lineset.LineSet.well_posed`).
 3. **Associate** with the graph's code (:mod:`slam.association`): candidates within range,
    segment-overlap test along the landmark, individual χ² gate on each (line, landmark) pair
    with ``S = H P Hᵀ + R`` from the current joint covariance; then nearest neighbour or JCBB.
 4. **Update** all matched lines at once, Joseph form (:mod:`slam.ekf.update`).
 5. **Augment** the state with unmatched lines that no landmark could explain (Eq. 30 with the
    cross-covariances, :mod:`slam.ekf.augment`).
-6. Optionally **merge** landmarks that became compatible (exact constraint update, then delete).
+6. Optionally **merge** landmarks that became compatible (:mod:`slam.ekf.merging`).
+
+:meth:`EkfSlam.result` reports the poses in the policy's output frame as a
+:class:`slam.result.SlamResult`, the result type of both estimators (:mod:`slam.ekf.records`).
 
 The ``O(n²)`` cost of an update (``n = 3 + 2M``) is guarded by ``EkfConfig.max_landmarks`` and
 ``max_runtime_s``; when a guard trips the result records at which scan and why.
@@ -39,7 +49,6 @@ The ``O(n²)`` cost of an update (``n = 3 + 2M``) is guarded by ``EkfConfig.max_
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
@@ -48,32 +57,25 @@ import numpy as np
 from numpy.typing import NDArray
 
 from linefit.line import Line, wrap_angle
-from slam.association import (
-    associate,
-    build_problem,
-    candidate_landmarks,
-    individual_gate,
-    overlap_mask,
-)
+from slam.association import associate, build_problem, candidate_landmarks, overlap_mask
 from slam.ekf.augment import augment_state
 from slam.ekf.config import EkfConfig
 from slam.ekf.conventions import cov_state_to_tangent, tangent_to_state_jacobian
 from slam.ekf.extents import LandmarkExtents
+from slam.ekf.merging import merge_compatible_landmarks, wrap_state_angles
 from slam.ekf.motion import odometry_covariance, predict_pose
-from slam.ekf.result import EkfResult
-from slam.ekf.update import (
-    MeasurementStack,
-    constrain_and_remove,
-    filterpy_update,
-    joseph_update,
-    line_measurements,
-)
-from slam.errors import EstimationError, InputError
-from slam.geometry import line_residual, pose_between
+from slam.ekf.records import ScanRecords, ScanReport
+from slam.ekf.update import filterpy_update, joseph_update, line_measurements
+from slam.errors import InputError
+from slam.geometry import pose_between
+from slam.inputs import InputPolicy
 from slam.lines import chi2_gate
-from slam.lines.lineset import LineSet
-from slam.models.anchored import model_error_covariance
+from slam.lines.lineset import LineSet, supported_lines
+from slam.models import landmarks_normal_form, moved_enough
 from slam.types import Scan
+
+if TYPE_CHECKING:
+    from slam.result import SlamResult
 
 if TYPE_CHECKING:
     from linefit.config import LineFitConfig
@@ -82,55 +84,6 @@ __all__ = ["EkfSlam", "ScanReport"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
-
-
-class ScanReport:
-    """What one :meth:`EkfSlam.add_scan` call did.
-
-    Attributes
-    ----------
-    index : int
-        Scan index.
-    n_lines, n_matched, n_new, n_ambiguous, n_invalid : int
-        Lines given / matched to landmarks / starting new landmarks / dropped as ambiguous /
-        skipped for a bad covariance.
-    updated : bool
-        False when the update policy skipped this scan's lines.
-    skipped : bool
-        True when the filter had stopped before this scan (no pose for it).
-    runtime_s : float
-        Time spent on the scan.
-    """
-
-    def __init__(self, index: int) -> None:
-        self.index = index
-        self.n_lines = 0
-        self.n_matched = 0
-        self.n_new = 0
-        self.n_ambiguous = 0
-        self.n_invalid = 0
-        self.updated = False
-        self.skipped = False
-        self.runtime_s = 0.0
-
-    def __repr__(self) -> str:
-        return (
-            f"ScanReport(index={self.index}, lines={self.n_lines}, matched={self.n_matched}, "
-            f"new={self.n_new}, ambiguous={self.n_ambiguous}, invalid={self.n_invalid})"
-        )
-
-
-def _valid_lines(lines: LineSet) -> NDArray[np.bool_]:
-    """Lines with finite ``(r, α)``, finite end points and a positive definite 2×2 covariance."""
-    cov = lines.cov
-    det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] * cov[:, 1, 0]
-    finite = (
-        np.all(np.isfinite(lines.r_alpha), axis=1)
-        & np.all(np.isfinite(cov), axis=(1, 2))
-        & np.all(np.isfinite(lines.endpoints), axis=(1, 2))
-    )
-    with np.errstate(invalid="ignore"):
-        return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 1, 1] > 0.0) & (det > 0.0)
 
 
 class EkfSlam:
@@ -142,9 +95,12 @@ class EkfSlam:
         Filter settings.
     linefit_config : LineFitConfig, optional
         Used only when :meth:`add_scan` is called without lines.
+    policy : InputPolicy, optional
+        How a scan's laser odometry is read and which frame :meth:`result` reports
+        (:mod:`slam.inputs`); default: the logged laser odometry, laser frame.
     initial_pose_world_laser : array_like, shape (3,), optional
-        Pose of the first scan in the world.  Default: the first scan's odometry pose (the
-        world frame is the odometry frame at the start).
+        Pose of the first scan's laser in the world.  Default: its odometry pose (the world
+        frame is the odometry frame at the start).
 
     Examples
     --------
@@ -158,10 +114,12 @@ class EkfSlam:
         self,
         config: EkfConfig | None = None,
         linefit_config: LineFitConfig | None = None,
+        policy: InputPolicy | None = None,
         initial_pose_world_laser: FloatArray | Sequence[float] | None = None,
     ) -> None:
         self.config = config or EkfConfig()
         self.linefit_config = linefit_config
+        self.policy = policy if policy is not None else InputPolicy()
         self._initial_pose = (
             None
             if initial_pose_world_laser is None
@@ -183,12 +141,7 @@ class EkfSlam:
         self.stopped = False
         self.stop_reason = ""
         self._elapsed_s = 0.0
-        # per-scan records
-        self._t: list[float] = []
-        self._poses: list[FloatArray] = []
-        self._covs: list[FloatArray] = []
-        self._runtime: list[float] = []
-        self._n_lm_hist: list[int] = []
+        self._records = ScanRecords()
         self.stats: dict[str, Any] = {
             "scans": 0,
             "points": 0,
@@ -233,8 +186,7 @@ class EkfSlam:
         return self.P[3:, 3:].reshape(M, 2, M, 2)[idx, :, idx, :].copy()
 
     def _wrap_angles(self) -> None:
-        self.x[2] = wrap_angle(self.x[2])
-        self.x[4::2] = np.asarray(wrap_angle(self.x[4::2]))
+        wrap_state_angles(self.x)
 
     # ------------------------------------------------------------------ filter steps
     def initialize(self, pose_world_laser: FloatArray, cov_state: FloatArray | None = None) -> None:
@@ -421,10 +373,8 @@ class EkfSlam:
     def merge_landmarks(self, candidates: IntArray | None = None) -> int:
         """Fuse pairs of landmarks that pass the χ² test on their joint marginal and overlap.
 
-        The fusion is the EKF update with the exact constraint ``l_i − l_j = 0`` (same
-        representative, ``R = 0``), after which ``l_j`` equals ``l_i`` and is deleted
-        (marginalised); both in one pass (:func:`slam.ekf.update.constrain_and_remove`).
-        Pairs are fused greedily by increasing ``D²``, one at a time.
+        :func:`slam.ekf.merging.merge_compatible_landmarks` with ``config.merge_probability``
+        and ``config.association.overlap_margin_m``.
 
         Parameters
         ----------
@@ -437,110 +387,31 @@ class EkfSlam:
         int
             Number of landmarks removed.
         """
-        removed = 0
-        touched = None if candidates is None else {int(c) for c in candidates}
-        while self.n_landmarks >= 2:
-            M = self.n_landmarks
-            lm = self.x[3:].reshape(M, 2)
-            if touched is None:
-                i, j = np.triu_indices(M, 1)
-            else:
-                if not touched:
-                    break
-                t = np.array(sorted(c for c in touched if c < M), dtype=np.intp)
-                is_t = np.zeros(M, dtype=bool)
-                is_t[t] = True
-                ii = np.repeat(t, M)
-                jj = np.tile(np.arange(M), t.size)
-                sel = (jj != ii) & (~is_t[jj] | (ii < jj))  # each pair once
-                i, j = ii[sel], jj[sel]
-            if i.size == 0:
-                break
-            res, sign = line_residual(lm[i], lm[j])
-            Ji = np.zeros((i.size, 2, 2))
-            Ji[:, 0, 0] = sign
-            Ji[:, 1, 1] = 1.0
-            base_i, base_j = 3 + 2 * i, 3 + 2 * j
-            P_ii = np.empty((i.size, 2, 2))
-            P_jj = np.empty((i.size, 2, 2))
-            P_ij = np.empty((i.size, 2, 2))
-            for a in range(2):
-                for b in range(2):
-                    P_ii[:, a, b] = self.P[base_i + a, base_i + b]
-                    P_jj[:, a, b] = self.P[base_j + a, base_j + b]
-                    P_ij[:, a, b] = self.P[base_i + a, base_j + b]
-            JP = Ji @ P_ij
-            C = Ji @ P_ii @ Ji.swapaxes(-1, -2) + P_jj - JP - JP.swapaxes(-1, -2)
-            lo, hi = self._extents.intervals(lm[:, 1])
-            gap = np.maximum(lo[i], lo[j]) - np.minimum(hi[i], hi[j])
-            overlap = gap <= self.config.association.overlap_margin_m
-            d2 = individual_gate(res, C, self.config.merge_probability, overlap)
-            best = int(np.argmin(d2))
-            if not np.isfinite(d2[best]):
-                break
-            a, b = int(i[best]), int(j[best])
-            H_sub = np.zeros((2, 4))
-            H_sub[:, :2] = Ji[best]
-            H_sub[:, 2:] = -np.eye(2)
-            cols = np.array([3 + 2 * a, 4 + 2 * a, 3 + 2 * b, 4 + 2 * b], dtype=np.intp)
-            meas = MeasurementStack(-res[best], H_sub, cols, np.zeros((2, 2)))
-            try:
-                self.x, self.P = constrain_and_remove(self.x, self.P, meas, cols[2:])
-            except EstimationError:
-                break
-            self._wrap_angles()
-            a_kept = a - 1 if a > b else a  # index of l_a once l_b is gone
-            pieces = self._extents.pieces(b)
-            self._extents.absorb(a, self.x[3 + 2 * a_kept : 5 + 2 * a_kept], pieces)
-            self._extents.delete(b)
-            self._n_obs[a] += self._n_obs[b]
-            del self._n_obs[b]
-            removed += 1
-            if touched is not None:
-                if b in touched:
-                    touched.add(a)
-                touched = {c - 1 if c > b else c for c in touched if c != b}
+        self.x, self.P, removed = merge_compatible_landmarks(
+            self.x,
+            self.P,
+            self._extents,
+            self._n_obs,
+            self.config.merge_probability,
+            self.config.association.overlap_margin_m,
+            candidates,
+        )
         self.stats["landmarks_merged"] += removed
         return removed
 
     # ------------------------------------------------------------------ scans
-    @staticmethod
-    def _odometry_of(scan: Scan) -> FloatArray:
-        pose = scan.pose_odom_laser if scan.pose_odom_laser is not None else scan.pose_odom_base
-        if pose is None:
-            raise InputError(f"scan {scan.index} has no odometry pose", path=scan.source or None)
-        pose = np.asarray(pose, dtype=float).reshape(3)
-        if not np.all(np.isfinite(pose)):
-            raise InputError(
-                f"scan {scan.index} has a non-finite odometry pose {pose.tolist()}",
-                path=scan.source or None,
-            )
-        return pose
-
     def _as_lineset(self, scan: Scan, lines: Sequence[Line] | LineSet | None) -> LineSet:
+        """The scan's lines as a set: given, or extracted; the support rule applied to fits."""
         if isinstance(lines, LineSet):
             return lines
         if lines is None:
-            try:
-                from linefit import extract_lines
-            except ImportError as exc:  # pragma: no cover - depends on what is installed
-                raise EstimationError(
-                    "line extraction (linefit.extract_lines) is not available; pass lines="
-                ) from exc
             from linefit.config import LineFitConfig
+            from slam.extraction import extract_scan_lines
 
-            cfg = self.linefit_config or LineFitConfig()
-            lines = list(
-                extract_lines(scan.ranges, scan.bearings, cfg, max_range_m=scan.max_range_m)
-            )
-        kept = [
-            ln
-            for ln in lines
-            if ln.n_points >= self.config.min_line_points
-            and ln.length >= self.config.min_line_length_m
-        ]
-        self.stats["lines_too_short"] += len(lines) - len(kept)
-        return LineSet.from_lines(kept)
+            lines = extract_scan_lines(scan, self.linefit_config or LineFitConfig())
+        keep = supported_lines(lines, self.config.min_line_points, self.config.min_line_length_m)
+        self.stats["lines_too_short"] += int(np.count_nonzero(~keep))
+        return LineSet.from_lines([ln for ln, k in zip(lines, keep, strict=True) if k])
 
     def add_scan(self, scan: Scan, lines: Sequence[Line] | LineSet | None = None) -> ScanReport:
         """Process one scan: predict with its odometry, then associate, update and augment.
@@ -573,7 +444,7 @@ class EkfSlam:
             return report
         t0 = time.perf_counter()
         report = ScanReport(scan.index)
-        odom = self._odometry_of(scan)
+        odom = self.policy.pose_odom_laser(scan)
         first_scan = not self._started
         if first_scan:
             self.initialize(odom if self._initial_pose is None else self._initial_pose)
@@ -583,9 +454,8 @@ class EkfSlam:
             assert self._update_odom is not None
             delta = pose_between(self._update_odom, odom)
         # the graph's keyframe rule on the odometry since the last update
-        due = first_scan or (
-            math.hypot(delta[0], delta[1]) >= self.config.update_min_distance_m
-            or abs(delta[2]) >= self.config.update_min_angle_rad
+        due = first_scan or moved_enough(
+            delta, self.config.update_min_distance_m, self.config.update_min_angle_rad
         )
         self.stats["scans"] += 1
         self.stats["points"] += int(np.count_nonzero(scan.valid_mask()))
@@ -602,14 +472,10 @@ class EkfSlam:
         ls = self._as_lineset(scan, lines)
         report.n_lines = len(ls)
         self.stats["lines_fit"] += len(ls) + self.stats["lines_too_short"] - short_before
-        valid = _valid_lines(ls) if len(ls) else np.zeros(0, dtype=bool)
+        valid = ls.well_posed()
         report.n_invalid = int(np.count_nonzero(~valid))
         self.stats["lines_invalid"] += report.n_invalid
-        ls = ls.subset(valid)
-        extra_r, extra_a = self.config.line_sigma_extra
-        if len(ls) and (extra_r > 0.0 or extra_a > 0.0):
-            cov = ls.cov + model_error_covariance(ls.r_alpha, ls.endpoints, extra_r, extra_a)
-            ls = LineSet(ls.r_alpha, cov, ls.endpoints, ls.ids)
+        ls = ls.subset(valid).with_model_error(*self.config.line_sigma_extra)
         if len(ls) > 0:
             self._process_lines(ls, report)
         report.runtime_s = time.perf_counter() - t0
@@ -667,17 +533,15 @@ class EkfSlam:
         one) the state's composed with the offset, its covariance compounded with the motion
         noise.
         """
-        self._t.append(float(timestamp))
         if offset is None:
-            self._poses.append(self.x[:3].copy())
-            self._covs.append(self.pose_covariance)
+            pose, cov = self.x[:3].copy(), self.pose_covariance
         else:
             Q_u = odometry_covariance(offset, self.config.odometry)
             pose, F, Q = predict_pose(self.x[:3], offset, Q_u)
-            self._poses.append(pose)
-            self._covs.append(cov_state_to_tangent(F @ self.P[:3, :3] @ F.T + Q, pose[2]))
-        self._runtime.append(report.runtime_s)
-        self._n_lm_hist.append(self.n_landmarks)
+            cov = cov_state_to_tangent(F @ self.P[:3, :3] @ F.T + Q, pose[2])
+        self._records.append(
+            timestamp, pose, cov, offset is None, report.runtime_s, self.n_landmarks
+        )
         self._elapsed_s += report.runtime_s
         if self.config.max_runtime_s is not None and self._elapsed_s > self.config.max_runtime_s:
             self._stop(
@@ -689,27 +553,16 @@ class EkfSlam:
     def optimize(self) -> None:
         """Nothing to finish: a filter's estimate is final after each scan (runner protocol)."""
 
-    def result(self) -> EkfResult:
-        """The trajectory so far, the current map in normal form, and the run statistics."""
+    def result(self) -> SlamResult:
+        """The trajectory so far, the current map in normal form, and the run statistics.
+
+        :meth:`slam.ekf.records.ScanRecords.result`: poses in the policy's output frame, the
+        updates as keyframes, ``state_dim`` the final state size.
+        """
         M = self.n_landmarks
-        lm = self.x[3:].reshape(M, 2).copy()
-        cov = self.landmark_marginals()
-        flip = lm[:, 0] < 0.0
-        lm[flip, 0] *= -1.0
-        lm[:, 1] = np.asarray(wrap_angle(np.where(flip, lm[:, 1] + np.pi, lm[:, 1])))
-        cov[flip, 0, 1] *= -1.0
-        cov[flip, 1, 0] *= -1.0
+        lm, cov = landmarks_normal_form(self.x[3:].reshape(M, 2), self.landmark_marginals())
+        assert cov is not None
         segments = [self._extents.segments(j, lm[j]) for j in range(M)]
-        return EkfResult(
-            timestamps=np.asarray(self._t, dtype=float),
-            poses_world_laser=np.asarray(self._poses, dtype=float).reshape(-1, 3),
-            pose_covariances=np.asarray(self._covs, dtype=float).reshape(-1, 3, 3),
-            landmarks_r_alpha=lm,
-            landmark_covariances=cov,
-            landmark_segments=segments,
-            landmark_n_observations=np.asarray(self._n_obs, dtype=np.int64),
-            scan_runtime_s=np.asarray(self._runtime, dtype=float),
-            n_landmarks=np.asarray(self._n_lm_hist, dtype=np.int64),
-            stats=dict(self.stats),
-            state_dim=int(self.x.shape[0]),
+        return self._records.result(
+            lm, cov, segments, self._n_obs, self.stats, self.policy, int(self.x.shape[0])
         )

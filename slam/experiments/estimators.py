@@ -1,8 +1,9 @@
 """Estimators behind one call, for experiments that feed them the same scans and lines.
 
-:func:`run_estimator` takes a name from :data:`ESTIMATORS`, the scans, their lines (laser frame)
-and the run configuration, and returns an :class:`EstimateOutput`: the trajectory with pose
-covariances (right-perturbation tangent space) and run times.  Names:
+:func:`run_estimator` takes a name from :data:`ESTIMATORS`, the scans, their lines (laser frame),
+the run configuration and the input policy (:class:`slam.inputs.InputPolicy`: laser odometry,
+mounting, output frame; the same for every estimator), and returns an :class:`EstimateOutput`:
+the trajectory with pose covariances (right-perturbation tangent space) and run times.  Names:
 
 * ``"ekf"`` — :class:`slam.ekf.EkfSlam` with ``RunConfig.ekf`` (association as configured);
 * ``"ekf-nn"``, ``"ekf-jcbb"`` — the same with the association forced;
@@ -35,7 +36,7 @@ from slam.config import RunConfig
 from slam.ekf import EkfSlam
 from slam.ekf.threads import blas_threads
 from slam.errors import ConfigError, EstimationError
-from slam.geometry import adjoint_pose2, pose_compose, pose_inverse
+from slam.inputs import InputPolicy
 from slam.lines.lineset import LineSet
 from slam.types import Scan
 
@@ -62,8 +63,8 @@ class EstimateOutput:
     stats : dict
         Estimator counters; ``stopped_at_scan`` / ``stop_reason`` when it stopped early;
         ``frame`` (``"laser"`` or ``"base"``) of the poses.
-    result : object
-        The estimator's own result object (e.g. :class:`slam.ekf.EkfResult`), for writing files.
+    result : SlamResult
+        The estimator's result (:class:`slam.result.SlamResult`), for writing files.
     """
 
     name: str
@@ -82,6 +83,7 @@ def _ekf(
     lines: ScanLines,
     config: RunConfig,
     initial_pose: FloatArray | None,
+    policy: InputPolicy,
     association: Literal["nn", "jcbb"] | None = None,
     use_lines: bool = True,
     time_budget_s: float | None = None,
@@ -92,10 +94,9 @@ def _ekf(
     if time_budget_s is not None:
         limit = min(time_budget_s, ekf_cfg.max_runtime_s or math.inf)
         ekf_cfg = replace(ekf_cfg, max_runtime_s=limit)
-    ekf = EkfSlam(ekf_cfg, linefit_config=config.linefit, initial_pose_world_laser=initial_pose)
-    mount = np.asarray(config.slam.pose_base_laser, dtype=float)
+    ekf = EkfSlam(ekf_cfg, config.linefit, policy, initial_pose_world_laser=initial_pose)
     with blas_threads(ekf_cfg.blas_threads):
-        for k, scan in enumerate(_laser_odometry(scans, config)):
+        for k, scan in enumerate(scans):
             if ekf.stopped:
                 break
             if use_lines:
@@ -103,36 +104,7 @@ def _ekf(
             else:
                 ekf.add_scan(scan, LineSet.empty())
     res = ekf.result()
-    if config.slam.output_frame == "base" and res.poses_world_laser.shape[0]:
-        # pose_world_base = pose_world_laser ∘ pose_base_laser⁻¹, covariance by Ad(mount),
-        # as the graph reports base poses (slam.line_slam.LineSlam.result)
-        poses = pose_compose(res.poses_world_laser, np.broadcast_to(pose_inverse(mount), (1, 3)))
-        Ad = adjoint_pose2(mount)
-        res = replace(
-            res, poses_world_laser=poses, pose_covariances=Ad @ res.pose_covariances @ Ad.T
-        )
-        res.stats["frame"] = "base"
-    return _output(name, res, {**res.stats, "frame": res.stats.get("frame", "laser")})
-
-
-def _laser_odometry(scans: Sequence[Scan], config: RunConfig) -> Sequence[Scan]:
-    """Scans whose laser odometry follows the graph's setting (``slam.laser_odometry``).
-
-    With ``"base"`` (a log whose logged laser poses lack the mounting,
-    :func:`slam.inputs.policy_for_log`) the laser odometry is
-    ``pose_odom_base ∘ pose_base_laser``, as :class:`slam.line_slam.LineSlam` computes it, so that
-    the EKF and odometry-only runs see the same motion as the graph.
-    """
-    cfg = config.slam
-    if cfg.laser_odometry != "base":
-        return scans
-    mount = np.asarray(cfg.pose_base_laser, dtype=float)
-    return [
-        s
-        if s.pose_odom_base is None
-        else replace(s, pose_odom_laser=pose_compose(np.asarray(s.pose_odom_base), mount))
-        for s in scans
-    ]
+    return _output(name, res, {**res.stats, "frame": res.frame})
 
 
 def _output(name: str, res: Any, stats: dict[str, Any]) -> EstimateOutput:
@@ -155,6 +127,7 @@ def _graph(
     lines: ScanLines,
     config: RunConfig,
     initial_pose: FloatArray | None,
+    policy: InputPolicy,
     backend: Literal["batch", "isam2"],
     time_budget_s: float | None = None,
 ) -> EstimateOutput:
@@ -165,13 +138,13 @@ def _graph(
 
     cfg = replace(config.slam, backend=backend)
     if initial_pose is not None and scans:
-        odom0 = scans[0].pose_odom_laser
-        if odom0 is None or not np.allclose(odom0, initial_pose, atol=1e-9):
+        odom0 = policy.pose_odom_laser(scans[0])
+        if not np.allclose(odom0, initial_pose, atol=1e-9):
             raise ConfigError(
                 f"{name}: the graph's world frame is the first scan's odometry pose; "
                 "an initial pose different from it is not supported"
             )
-    slam = LineSlam(cfg, config.linefit)
+    slam = LineSlam(cfg, config.linefit, policy)
     stop: dict[str, Any] = {}
     t0 = time.perf_counter()
     with warnings.catch_warnings():
@@ -193,11 +166,11 @@ def _graph(
             slam.add_scan(scan, scan_lines)
         slam.optimize()
     res = slam.result()
-    return _output(name, res, {**res.stats, "frame": getattr(res, "frame", "laser"), **stop})
+    return _output(name, res, {**res.stats, "frame": res.frame, **stop})
 
 
 EstimatorFn = Callable[..., EstimateOutput]
-"""``fn(scans, lines, config, initial_pose, time_budget_s=None) -> EstimateOutput``."""
+"""``fn(scans, lines, config, initial_pose, policy, time_budget_s=None) -> EstimateOutput``."""
 
 ESTIMATORS: dict[str, EstimatorFn] = {
     "ekf": partial(_ekf, "ekf"),
@@ -216,8 +189,12 @@ def run_estimator(
     config: RunConfig,
     initial_pose_world_laser: FloatArray | None = None,
     time_budget_s: float | None = None,
+    policy: InputPolicy | None = None,
 ) -> EstimateOutput:
     """Run the estimator ``name`` on scans (with their lines, or None to extract them).
+
+    ``policy`` reads the scans' laser odometry and chooses the reported frame (default:
+    ``InputPolicy.of(config.slam)``).
 
     With ``time_budget_s`` the estimator stops taking scans once that much time is spent
     (the EKF through ``ekf.max_runtime_s``; the graph optimises what it has); its statistics
@@ -235,7 +212,8 @@ def run_estimator(
             f"unknown estimator {name!r}; known: {', '.join(sorted(ESTIMATORS))}"
         ) from exc
     t0 = time.perf_counter()
-    out = fn(scans, lines, config, initial_pose_world_laser, time_budget_s=time_budget_s)
+    pol = policy if policy is not None else InputPolicy.of(config.slam)
+    out = fn(scans, lines, config, initial_pose_world_laser, pol, time_budget_s=time_budget_s)
     if out.poses_world_laser.shape[0] == 0:
         raise EstimationError(f"estimator {name} produced no poses")
     out.stats.setdefault("wall_time_s", time.perf_counter() - t0)

@@ -262,17 +262,10 @@ def _run_on_log(task: CompareTask) -> VariantOutcome:
         task.max_scans,
         odometry_sign=task.run_config.slam.odometry_sign,
     )
-    # the laser mounting of a catalogued log, for every estimator alike (the graph applies it
-    # itself; the EKF and odometry follow the same slam.* frame settings)
+    # the laser mounting of a catalogued log, for every estimator alike
     slam_cfg = task.run_config.slam
     pol = policy_for_log(InputPolicy.of(slam_cfg), task.data.name, slam_cfg.mount_source)
-    slam_cfg = replace(
-        slam_cfg,
-        pose_base_laser=pol.pose_base_laser,
-        laser_odometry=pol.laser_odometry,
-        output_frame=pol.output_frame,
-    )
-    rc = replace(task.run_config, linefit=_linefit_for(task), slam=slam_cfg)
+    rc = replace(task.run_config, linefit=_linefit_for(task))
     t0 = time.perf_counter()
     est = run_estimator(
         task.variant.estimator,
@@ -281,6 +274,7 @@ def _run_on_log(task: CompareTask) -> VariantOutcome:
         rc,
         None,
         time_budget_s=task.variant.time_budget_s,
+        policy=pol,
     )
     wall = time.perf_counter() - t0
     n = est.poses_world_laser.shape[0]

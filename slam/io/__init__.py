@@ -40,7 +40,15 @@ from slam.io.relations import (
     relations_from_trajectory,
     write_relations,
 )
-from slam.io.results import Results, read_results, write_metrics, write_results
+from slam.io.results import (
+    Results,
+    read_results,
+    to_jsonable,
+    write_metrics,
+    write_results,
+    write_summary,
+    write_trajectory,
+)
 from slam.io.rosbag import iter_rosbag_scans, read_rosbag_odometry
 from slam.io.trajectory import Trajectory
 from slam.io.tum import read_tum, write_tum
@@ -75,11 +83,14 @@ __all__ = [
     "relations_from_trajectory",
     "resolve_log",
     "scan_trajectory",
+    "to_jsonable",
     "verify_dataset",
     "write_g2o",
     "write_geojson",
     "write_metrics",
     "write_relations",
     "write_results",
+    "write_summary",
+    "write_trajectory",
     "write_tum",
 ]

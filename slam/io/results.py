@@ -3,8 +3,11 @@
 Main entry points::
 
     write_results(out_dir, timestamps, poses, summary, *, frame="laser", covariances=None)
+    write_trajectory(out_dir, timestamps, poses, covariances=None) -> Path
+    write_summary(out_dir, summary) -> Path
     read_results(out_dir) -> Results       # .trajectory, .summary, .frame, .covariances
     write_metrics(out_dir, metrics) -> Path
+    to_jsonable(value)                     # what JSON can hold (NaN -> null)
 
 Files
 -----
@@ -51,6 +54,8 @@ __all__ = [
     "write_covariances",
     "write_metrics",
     "write_results",
+    "write_summary",
+    "write_trajectory",
 ]
 
 TRAJECTORY_FILE = "trajectory.tum"
@@ -126,6 +131,31 @@ def read_covariances(path: str | Path) -> tuple[FloatArray, FloatArray]:
     return values[:, 0].copy(), c
 
 
+def write_trajectory(
+    out_dir: str | Path,
+    timestamps: ArrayLike,
+    poses: ArrayLike,
+    covariances: ArrayLike | None = None,
+) -> Path:
+    """Write ``trajectory.tum`` and, with ``covariances``, ``trajectory_covariance.txt``.
+
+    Returns the folder (created if needed).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    write_tum(out / TRAJECTORY_FILE, timestamps, poses)
+    if covariances is not None:
+        write_covariances(out / COVARIANCE_FILE, timestamps, covariances)
+    return out
+
+
+def write_summary(out_dir: str | Path, summary: Mapping[str, Any]) -> Path:
+    """Write ``summary.json`` (:func:`to_jsonable`, one-space indent); returns its path."""
+    path = Path(out_dir) / SUMMARY_FILE
+    path.write_text(json.dumps(to_jsonable(summary), indent=1) + "\n", "utf-8")
+    return path
+
+
 def write_results(
     out_dir: str | Path,
     timestamps: ArrayLike,
@@ -141,13 +171,8 @@ def write_results(
     """
     if frame not in ("laser", "base"):
         raise InputError(f"frame must be 'laser' or 'base', got {frame!r}")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    write_tum(out / TRAJECTORY_FILE, timestamps, poses)
-    if covariances is not None:
-        write_covariances(out / COVARIANCE_FILE, timestamps, covariances)
-    data = {**dict(summary), "frame": frame}
-    (out / SUMMARY_FILE).write_text(json.dumps(to_jsonable(data), indent=2) + "\n")
+    out = write_trajectory(out_dir, timestamps, poses, covariances)
+    write_summary(out, {**dict(summary), "frame": frame})
     return out
 
 

@@ -11,8 +11,9 @@ from numpy.typing import NDArray
 from linefit.line import Line
 from slam.errors import InputError
 from slam.geometry import pose_compose
+from slam.models.anchored import model_error_covariance
 
-__all__ = ["LineSet"]
+__all__ = ["LineSet", "supported_lines"]
 
 FloatArray = NDArray[np.float64]
 
@@ -82,6 +83,36 @@ class LineSet:
         pts = np.concatenate([self.endpoints, np.zeros((len(self), 2, 1))], axis=-1)
         return pose_compose(np.broadcast_to(pose, pts.shape), pts)[..., :2]
 
+    def well_posed(self) -> NDArray[np.bool_]:
+        """Lines usable as measurements, shape (K,).
+
+        Finite ``(r, α)``, finite end points, and a finite, positive definite ``(r, α)``
+        covariance (``σ_r² > 0``, ``σ_α² > 0``, determinant ``> 0``).
+        """
+        cov = self.cov
+        det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] * cov[:, 1, 0]
+        finite = (
+            np.all(np.isfinite(self.r_alpha), axis=1)
+            & np.all(np.isfinite(cov), axis=(1, 2))
+            & np.all(np.isfinite(self.endpoints), axis=(1, 2))
+        )
+        with np.errstate(invalid="ignore"):
+            return finite & (cov[:, 0, 0] > 0.0) & (cov[:, 1, 1] > 0.0) & (det > 0.0)
+
+    def with_model_error(self, sigma_offset_m: float, sigma_angle_rad: float) -> LineSet:
+        """The lines with the model error added to their covariances.
+
+        :func:`slam.models.anchored.model_error_covariance` (offset ``sigma_offset_m`` along the
+        normal and angle ``sigma_angle_rad`` about each segment's mid-point); the set itself
+        when both are zero or it is empty.
+        """
+        if len(self) == 0 or (sigma_offset_m <= 0.0 and sigma_angle_rad <= 0.0):
+            return self
+        extra = model_error_covariance(
+            self.r_alpha, self.endpoints, sigma_offset_m, sigma_angle_rad
+        )
+        return LineSet(self.r_alpha, self.cov + extra, self.endpoints, self.ids)
+
     def subset(self, mask_or_index: NDArray[np.bool_] | NDArray[np.intp]) -> LineSet:
         """The lines selected by a boolean mask or an index array."""
         return LineSet(
@@ -90,3 +121,16 @@ class LineSet:
             self.endpoints[mask_or_index],
             self.ids[mask_or_index],
         )
+
+
+def supported_lines(
+    lines: Sequence[Line], min_points: int, min_length_m: float
+) -> NDArray[np.bool_]:
+    """Lines fitted to at least ``min_points`` points and at least ``min_length_m`` long (K,).
+
+    The support rule both estimators apply to a scan's fitted lines before using them
+    (``min_line_points`` and ``min_line_length_m`` of their configurations).
+    """
+    return np.array(
+        [ln.n_points >= min_points and ln.length >= min_length_m for ln in lines], dtype=bool
+    ).reshape(len(lines))

@@ -1,4 +1,8 @@
-"""Models shared by both estimators (numpy only): odometry noise, the anchored line chart."""
+"""Models shared by both estimators (numpy only).
+
+Odometry noise and the keyframe rule (:mod:`slam.models.motion`), the anchored line chart
+(:mod:`slam.models.anchored`).
+"""
 
 from slam.models.anchored import (
     anchored_from_r_alpha,
@@ -9,7 +13,7 @@ from slam.models.anchored import (
     observe_anchored,
     r_alpha_from_anchored,
 )
-from slam.models.motion import MotionNoiseConfig
+from slam.models.motion import MotionNoiseConfig, moved_enough
 
 __all__ = [
     "MotionNoiseConfig",
@@ -18,6 +22,7 @@ __all__ = [
     "drift_covariance",
     "landmarks_normal_form",
     "model_error_covariance",
+    "moved_enough",
     "observe_anchored",
     "r_alpha_from_anchored",
 ]

@@ -1,7 +1,9 @@
-"""Odometry noise model shared by both estimators.
+"""Odometry models shared by both estimators.
 
-A random walk in distance travelled and angle turned: the graph's odometry factors and the
-EKF's prediction use the same :class:`MotionNoiseConfig`.
+* :class:`MotionNoiseConfig`: a random walk in distance travelled and angle turned; the graph's
+  odometry factors and the EKF's prediction use the same noise.
+* :func:`moved_enough`: the rule on the odometry since the last keyframe that makes a scan a
+  keyframe (graph) or an update (EKF).
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from numpy.typing import NDArray
 
 from slam.validate import nonneg, positive
 
-__all__ = ["MotionNoiseConfig"]
+__all__ = ["MotionNoiseConfig", "moved_enough"]
 
 FloatArray = NDArray[np.float64]
 
@@ -72,3 +74,21 @@ class MotionNoiseConfig:
         out[..., 1, 1] = var_xy
         out[..., 2, 2] = var_th
         return out
+
+
+def moved_enough(delta: FloatArray, min_distance_m: float, min_angle_rad: float) -> bool:
+    """Whether a relative motion reaches a keyframe threshold.
+
+    Parameters
+    ----------
+    delta : ndarray, shape (3,)
+        Odometry since the last keyframe ``(dx_m, dy_m, dtheta_rad)``.
+    min_distance_m, min_angle_rad : float
+        A motion that travels at least ``min_distance_m`` or turns at least ``min_angle_rad``
+        reaches the threshold.
+
+    Returns
+    -------
+    bool
+    """
+    return bool(np.hypot(delta[0], delta[1]) >= min_distance_m or abs(delta[2]) >= min_angle_rad)
