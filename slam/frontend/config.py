@@ -191,8 +191,8 @@ class LoopClosureConfig:
     min_window_xy_m, min_window_theta_rad, max_window_xy_m, max_window_theta_rad : float
         Bounds on those half-widths (m, rad).  ``max_window_xy_m`` (5 m) covers the front
         end's drift between closures: with loop closing off, against the default run, the
-        translation error over any 10-200 m of path stays below about 3.3 m on Intel, ACES and
-        fr079 (``scripts/front_end_drift.py``).  Wider windows mostly admit aliases in
+        translation error over any 10-200 m of path stays below 3.3 m on Intel, ACES and fr079
+        (``scripts/front_end_drift.py``).  Wider windows mostly admit aliases in
         buildings whose rooms repeat (fr079).
     window_of_pairs : bool
         A hypothesis must lie within the window of the old lines it pairs (the median of
