@@ -4,7 +4,7 @@ Fits every scan once (timed separately), then builds the map from the same lines
 side in one run: with the vectorised bounding-box prefilter (default) and testing every pair
 (``spatial_prefilter=False``).  Prints time per scan, candidate pairs tested and the ratios.
 
-    LINESLAM_DATA=/work/shared/datasets .venv/bin/python scripts/bench_map.py [--scans 1000]
+    LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/bench_map.py [--scans 1000]
 """
 
 from __future__ import annotations

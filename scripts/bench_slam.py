@@ -6,15 +6,15 @@ and prints for each the time per stage (from ``summary.json``'s ``runtime_s``), 
 second and the ratio of the back-ends' totals.  With ``--relations`` the relations error of
 each run is printed too, so a speed-up that costs accuracy shows.
 
-    LINESLAM_DATA=/work/shared/datasets .venv/bin/python scripts/bench_slam.py intel
+    LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/bench_slam.py intel
     .venv/bin/python scripts/bench_slam.py intel --max-scans 2000 --backend batch
     .venv/bin/python scripts/bench_slam.py intel --backend isam2 --config coarse.toml --relations
 
 With ``--config`` every back-end also runs with that configuration, one run after the other in
 the same process, and the totals are printed as ratios to the first run.
 
-The issue's target: the whole Intel log (13,631 scans) in under 120 s on a 2-core machine
-(Cartographer reports 179 s for it).
+Target: the whole Intel log (13,631 scans) in under 120 s on a 2-core machine (Cartographer
+reports 179 s for it).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ windows), as the median, 99th percentile and largest value.  The loop-closure se
 (``LoopClosureConfig.window_xy_per_m``, ``max_window_xy_m``) should cover the drift a loop can
 have accumulated, and not much more: a wider window admits aliases in repeating buildings.
 
-    LINESLAM_DATA=/work/shared/datasets .venv/bin/python scripts/front_end_drift.py
+    LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/front_end_drift.py
     .venv/bin/python scripts/front_end_drift.py --logs fr079 --windows 10 50 100
 
 The reference is the default run, not ground truth: its own error (a few centimetres on

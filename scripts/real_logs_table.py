@@ -6,7 +6,7 @@ the log hides reversing, ``SlamConfig.odometry_sign``) and of ``lineslam slam`` 
 configuration (one run per back-end asked for), its wall-clock and CPU time, and the loop
 closures accepted / judged.  Prints a Markdown table.
 
-    LINESLAM_DATA=/work/shared/datasets .venv/bin/python scripts/real_logs_table.py
+    LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/real_logs_table.py
     .venv/bin/python scripts/real_logs_table.py --logs aces --backend isam2 --backend batch
     .venv/bin/python scripts/real_logs_table.py --backend batch --config batch10.toml
 

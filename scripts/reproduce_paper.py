@@ -8,7 +8,7 @@ The simulated poses are the odometry of the simulator; each scan's pose covarian
 odometry covariance compounded from the first pose (`compose_chain`), i.e. the paper's P^ij
 with i = the first pose.
 
-    LINESLAM_DATA=/work/shared/datasets .venv/bin/python scripts/reproduce_paper.py [--seed 0]
+    LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/reproduce_paper.py [--seed 0]
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ script runs ``lineslam slam`` on one log with the default configuration and with
 small perturbations of it, one after another, and prints the relations error of each and the
 spread (mean, worst).
 
-    LINESLAM_DATA=/work/shared/datasets .venv/bin/python scripts/sensitivity.py fr079
+    LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/sensitivity.py fr079
     .venv/bin/python scripts/sensitivity.py aces --variants default keyframe-0.19 sigma-range+2%
     .venv/bin/python scripts/sensitivity.py fr079 --config my.toml   # perturb another setting
 

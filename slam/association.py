@@ -72,16 +72,16 @@ class AssociationConfig:
     method : {"nn", "jcbb"}
         Nearest neighbour or joint compatibility branch and bound.
     gate_probability : float
-        Individual χ² gate (2 dof).
+        Individual χ² gate (2 dof), as a probability (0.999: ``D² ≤ 13.8``).
     joint_probability : float
-        JCBB's joint gate (``2h`` dof for ``h`` pairings).
+        JCBB's joint gate (``2h`` dof for ``h`` pairings), as a probability.
     overlap_margin_m : float
         Largest gap (m) along the landmark between its extent and the measured segment.
     overlap_sigma_factor : float
         The margin grows by this many standard deviations of the segment's end points in the
         world (pose uncertainty), so that a loop closure after drift can still overlap.
     max_range_m : float
-        Landmarks whose extent is farther than this from the laser are not candidates.
+        Landmarks whose extent is farther than this (m) from the laser are not candidates.
     max_candidates : int
         At most this many candidates per scan (after the overlap test, those whose lines pass
         closest to a measured segment): bounds the size of the joint covariance computed.

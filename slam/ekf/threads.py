@@ -1,9 +1,9 @@
 """Limit BLAS threads while filtering.
 
 The EKF's work per scan is a few rank-``2m`` products on an ``n × n`` covariance; on a small,
-shared machine multi-threaded BLAS makes them slower, not faster (measured on the Intel log:
-600 scans took 18.7 s with the default OpenBLAS threads and 2.3 s with one thread, on the
-2-core machine while other jobs ran).  Runners wrap the filtering loop in
+shared machine multi-threaded BLAS makes them slower, not faster (the first 600 Intel scans:
+18.7 s with the default OpenBLAS threads, 2.3 s with one thread, on a 2-core machine with
+other jobs running).  Runners wrap the filtering loop in
 :func:`blas_threads` with ``EkfConfig.blas_threads``.
 """
 

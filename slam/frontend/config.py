@@ -27,11 +27,24 @@ class RelocalisationConfig:
     Attributes
     ----------
     enabled : bool
+        Relocalise at all (off: a keyframe whose registration fails rests on odometry).
     min_matched_fraction : float
         Relocalise when the registration paired fewer than this fraction of the lines (and
         fewer than all of them).
     window_xy_m, window_theta_rad : float
-        Search window around the odometry prediction.
+        Half-widths of the search window around the odometry prediction (m, rad).  The
+        refinement of a hypothesis also takes them as the σ of a weak zero-mean prior on the
+        correction, so that a scan pairing only parallel lines cannot slide it along them.
+    cell_m, angle_tolerance_rad, offset_tolerance_m, overlap_margin_m : float
+        The search's vote grid (m), match tolerances (rad, m) and largest gap between matched
+        segments (m); the same meaning as in :class:`LoopClosureConfig`.
+    min_matched_length_m, min_matches, min_direction_angle_rad, max_ambiguity : float
+        Least matched length (m), least number of pairs, least angle between two matched
+        directions (rad), largest runner-up score as a fraction of the winner's; as in
+        :class:`LoopClosureConfig`, with looser defaults for the short, local search.
+    corridor_closures : bool
+        Accept a correction whose paired lines are all parallel (as in
+        :class:`LoopClosureConfig`).
     """
 
     enabled: bool = True
@@ -98,6 +111,7 @@ class FrontendConfig:
         relative-pose factor from the previous keyframe with the registration's covariance
         multiplied by ``pose_factor_inflation`` (see ``docs/real-logs.md``).
     pose_factor_inflation : float
+        Factor (≥ 1) on the registration's covariance for ``pose_factor = "inflated"``.
     """
 
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
@@ -164,30 +178,37 @@ class LoopClosureConfig:
     Attributes
     ----------
     enabled : bool
+        Search for loop closures at all (off: the front end alone, registration,
+        relocalisation and fusion, carries the estimate).
     interval_keyframes : int
+        Search every this many keyframes.
     local_keyframes : int
+        The local submap is the landmarks seen during the last this many keyframes; also the
+        memory (in keyframes) of rejected and gated hypotheses, and how far before the old
+        landmarks' last sighting the judged loop starts.
     window_xy_per_m, window_theta_per_m : float
-        Search half-widths per metre of path since the old landmarks were seen.
+        Search half-widths per metre of path since the old landmarks were seen (m/m, rad/m).
     min_window_xy_m, min_window_theta_rad, max_window_xy_m, max_window_theta_rad : float
-        ``max_window_xy_m``: the front end's drift with loop closing off, against the default
-        runs' trajectories, stayed under 3.1 m (99th percentile) over every 10-200 m of path
-        on Intel, ACES and fr079, largest 3.4 m (``scripts/front_end_drift.py``,
-        2026-11-29).  Wider windows mostly admit aliases: fr079's repeating rooms offered
-        5-13 m corrections where well under 1 m was needed.
+        Bounds on those half-widths (m, rad).  ``max_window_xy_m`` (5 m) covers the front
+        end's drift between closures: with loop closing off, against the default run, the
+        translation error over any 10-200 m of path stays below 3.3 m on Intel, ACES and fr079
+        (``scripts/front_end_drift.py``).  Wider windows mostly admit aliases in
+        buildings whose rooms repeat (fr079).
     window_of_pairs : bool
         A hypothesis must lie within the window of the old lines it pairs (the median of
         their windows), not only within the search window (that of the oldest line in
         reach): where the local lines match walls seen 20 m ago, a 9 m correction is not
         allowed because a wall in reach was seen 200 m ago.
     cell_m : float
-        Translation grid of the vote.
+        Translation grid of the vote (m).
     angle_tolerance_rad, offset_tolerance_m : float
-        A transformed local line matches an old line within these.
+        A transformed local line matches an old line within these (rad, m).
     overlap_margin_m : float
-        Largest gap along the line between matched segments.
+        Largest gap along the line between matched segments (m).
     min_matched_length_m : float
-        Matched local lines must add up to this length.
+        Matched local lines must add up to this length (m).
     min_matches : int
+        Least number of matched line pairs of a hypothesis.
     min_direction_angle_rad : float
         Matched lines must include two directions at least this far apart.
     max_ambiguity : float
@@ -238,10 +259,10 @@ class LoopClosureConfig:
         (the map before the loop is the reference).  False: the whole graph.
     judge_hopeless_after : int
         After this many linearisations a judgement that explains at most one of its pairs
-        stops (it is then rejected: acceptance needs ``max(min_matches − 1, 2)``).  Measured
-        on Intel and fr079 (one run each, 2026-11-29): none of the 50 accepted closures had
-        fewer than 2 explained pairs after 5 linearisations; 26 of the 54 rejected ones had
-        at most 1.  0: judgements always run their ``judge_iterations``.
+        stops (it is then rejected: acceptance needs ``max(min_matches − 1, 2)``).  On Intel
+        and fr079 no accepted closure had fewer than 2 explained pairs after 5
+        linearisations, while about half of the rejected ones had at most 1.  0: judgements
+        always run their ``judge_iterations``.
     skip_repeated_rejections : bool
         A candidate that repeats a hypothesis judged and rejected during the last
         ``local_keyframes`` keyframes (a correction within twice the angle and offset

@@ -63,7 +63,7 @@ class RegistrationConfig:
     Attributes
     ----------
     gate_probability : float
-        χ² gate (2 dof) for pairing a scan line with a map line.
+        χ² gate (2 dof) for pairing a scan line with a map line, as a probability.
     overlap_margin_m : float
         Largest gap (m) along the map line between the scan segment and the map segment for a
         pair to count; keeps collinear walls of other rooms out.
@@ -72,7 +72,7 @@ class RegistrationConfig:
     association_rounds : int
         How many times pairs are found again at the current estimate.
     step_tolerance : float
-        Stop when the update ``‖ξ‖`` falls below this.
+        Stop when the update ``‖ξ‖`` (m and rad together) falls below this.
     robust_kernel : {"none", "huber", "cauchy"}
         Kernel on the whitened residual norm (IRLS weights).
     robust_k : float

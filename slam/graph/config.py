@@ -20,22 +20,24 @@ class SolverConfig:
     Attributes
     ----------
     max_iterations : int
-        Iterations of a final (:meth:`LineSlam.optimize`) solve.
+        Most iterations of a final (:meth:`LineSlam.optimize`) solve.
     online_iterations : int
-        Iterations of a periodic solve while scans arrive (batch back-end).
+        Most iterations of a periodic solve while scans arrive (batch back-end).
     batch_interval : int
-        Keyframes between periodic solves (batch back-end).
+        Keyframes between periodic solves (batch back-end); between solves, new poses get
+        their covariance by compounding the odometry.  1: a solve every keyframe, whose cost
+        grows with the graph.
     relative_tolerance : float
         Converged when the cost decreases by less than this fraction.
     step_tolerance : float
-        Converged when the largest update component is below this.
+        Converged when the largest update component is below this (m or rad).
     lambda_initial, lambda_min, lambda_max : float
         Levenberg-Marquardt damping ``λ·D`` (``D`` ≈ ``diag(AᵀA)``): a Gauss-Newton step that
         raises the cost is retried with ``λ = lambda_initial``, growing (×2, ×4, ...) per
         failure and following Nielsen's rule after a success; below ``lambda_min`` the solver
         returns to pure Gauss-Newton, above ``lambda_max`` it stops.
     robust_kernel : {"none", "huber", "cauchy"}
-        Kernel on line factors (IRLS).
+        Kernel on line factors (IRLS); the odometry factors are never robustified.
     robust_k : float
         Kernel width in standard deviations of the whitened residual.
     ordering : {"colamd", "metis"}
@@ -84,11 +86,11 @@ class Isam2Config:
         radians for a pose's heading and a landmark's ``φ``.  With ``final_relinearizations``
         the final :meth:`~slam.graph.backend.Isam2Backend.optimize` relinearises everything
         at the estimate until the step is below ``final_step_tolerance``, so they trade the
-        accuracy of the online estimate (not of the final one) for time.  But the online estimate
-        decides which loop closures pass: on Intel 0.03 / 0.03 took 117 s against 163 s with
-        0.01 / 0.01 (iSAM2's own time 34 s against 61 s), while fr079 went to 1.08 m and the
-        simulated loop of ``tests/test_graph_sim.py`` accepted two wrong closures with
-        translation thresholds of 0.015-0.03 (``docs/real-logs.md``, sixth session).
+        accuracy of the online estimate (not of the final one) for time.  But the online
+        estimate decides which loop closures pass: coarser thresholds (0.03 / 0.03) make Intel
+        16-28 % faster, while fr079 went to 1.08 m and the simulated loop of
+        ``tests/test_graph_sim.py`` accepted two wrong closures with translation thresholds
+        from 0.015 m on (``docs/real-logs.md``, "Tried and rejected").
     relin_translation_m, relin_angle_rad, relin_range_m : float
         A keyframe's line-factor block (a ``LinearContainerFactor``) is linearised again at
         iSAM2's linearisation point when a variable of it moved more than these (pose
@@ -99,7 +101,8 @@ class Isam2Config:
     full_refresh_interval : int
         Read back the whole estimate at least every this many updates.
     final_updates : int
-        Most extra updates (no new factors) run by :meth:`optimize` to converge.
+        Most extra updates (no new factors, forced relinearisation) run by :meth:`optimize`
+        to converge.
     final_relinearizations : int
         After those, the final :meth:`~slam.graph.backend.Isam2Backend.optimize` rebuilds
         iSAM2 at the estimate (every factor relinearised: one Gauss-Newton step) at most this
@@ -109,7 +112,7 @@ class Isam2Config:
         the simulated loop of ``tests/test_graph_sim.py`` ATE 2.3 → 1.7 mm; on Intel, 5 per
         ``optimize`` call, 25 rebuilds cost ~9 s and the step was still 1.8 mm (with the
         Cauchy kernel's weights refreshed at each rebuild the iteration converges linearly),
-        relations error 0.0308 against 0.0292 m.  Meant for coarser thresholds.
+        relations error 0.0308 against 0.0292 m without.  Meant for coarser thresholds.
     final_step_tolerance : float
         Metres or radians, any component of any variable.
     relinearize_skip : int

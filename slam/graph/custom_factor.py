@@ -1,7 +1,7 @@
 """Reference implementation of the line factor as a ``gtsam.CustomFactor``.
 
-Slow (one Python callback per factor and linearisation, see the brief's "custom-factor hazard"
-and ``scripts/bench_graph.py``) but written the way GTSAM's own Python examples write factors,
+Slow (one Python callback per factor and linearisation, each copying the ``Values``; see
+``scripts/bench_graph.py``) but written the way GTSAM's own Python examples write factors,
 so that it can be read against the maths and checked against the vectorised fast path
 (:mod:`slam.graph.factors`): the tests compare the two linearisations entry by entry and the
 solutions of whole problems.

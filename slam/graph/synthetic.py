@@ -32,9 +32,8 @@ __all__ = ["SYNTHETIC_MOTION", "SyntheticProblem", "synthetic_problem"]
 FloatArray = NDArray[np.float64]
 
 SYNTHETIC_MOTION = MotionNoiseConfig(sigma_theta_per_m=0.02, sigma_theta_per_rad=0.05)
-"""The synthetic problems' odometry noise, fixed here (equal to the library's defaults today) so
-that the synthetic benchmarks and tests do not move when the defaults are changed for real logs
-(the seventh session tried larger heading noise, ``docs/real-logs.md``)."""
+"""The synthetic problems' odometry noise, fixed here (equal to the library's defaults) so that
+the synthetic benchmarks and tests do not move if the defaults are changed for real logs."""
 
 
 @dataclass(frozen=True, eq=False)

@@ -75,9 +75,10 @@ class FusionConfig:
     max_gap_m : float
         Largest gap (m) between the two landmarks' extents along the line.
     max_angle_rad : float
-        Pre-filter: pairs whose normals differ by more (mod π) are not tested.
+        Pre-filter: pairs whose normals differ by more (rad, mod π) are not tested.
     max_distance_m : float
-        Pre-filter: largest distance between one landmark's extent mid-point and the other line.
+        Pre-filter: largest distance (m) between one landmark's extent mid-point and the other
+        line.
     retest_growth : float
         A pair that failed the test is tested again once its landmarks have this many times the
         measurements (together) they had then.
@@ -126,13 +127,14 @@ class SlamConfig:
     motion, keyframes, association, fusion, solver, isam2
         Sub-configurations.
     prior_sigma_xy_m, prior_sigma_theta_rad : float
-        Prior on the first pose (defines the world frame: the first laser pose).
+        Standard deviations (m, rad) of the prior on the first pose (it defines the world
+        frame: the first laser pose).
     frontend, tentative, loop_closure
         Registration front end, tentative landmarks, loop closing.
     pose_base_laser : tuple of 3 floats
-        Laser pose on the robot base (the mounting): used with the base odometry
-        (``laser_odometry = "base"``, or when a scan has no logged laser pose) and to report
-        base poses (``output_frame = "base"``).
+        Laser pose on the robot base, ``(x m, y m, θ rad)`` (the mounting): used with the base
+        odometry (``laser_odometry = "base"``, or when a scan has no logged laser pose) and to
+        report base poses (``output_frame = "base"``).
     mount_source : {"catalog", "config"}
         ``"catalog"``: for a catalogued log whose laser poses lack the recorded mounting, the
         runner (:func:`slam.inputs.policy_for_log`) sets ``pose_base_laser`` from the
@@ -152,9 +154,9 @@ class SlamConfig:
         motion); logs whose ``tv`` is never negative are unchanged.  ``"logged"``: the
         odometry poses as logged.
     line_model_sigma_r_m, line_model_sigma_alpha_rad : float
-        Model error added to every measured line's covariance, at the segment's mid-point
-        (:func:`slam.models.anchored.model_error_covariance`); 0 for simulated data whose
-        fit covariances are exact.
+        Model error (m, rad) added to every measured line's covariance, at the segment's
+        mid-point (:func:`slam.models.anchored.model_error_covariance`): real walls are not
+        the fit's straight lines.  0 for simulated data whose fit covariances are exact.
     min_line_points : int
         Lines with fewer supporting points are ignored (neither matched nor new landmarks).
     min_line_length_m : float
@@ -164,7 +166,7 @@ class SlamConfig:
         Compute the marginal covariance of every keyframe pose for the result (non-keyframe
         scans get their keyframe's covariance compounded with the odometry noise).
     map_segment_gap_m : float
-        In the output map, observed pieces of a line closer than this are one segment.
+        In the output map, observed pieces of a line closer than this (m) are one segment.
     map_min_observations : int
         Landmarks with fewer line measurements stay in the graph but are left out of the
         output map (one-off lines: clutter, lines fitted across depth jumps).

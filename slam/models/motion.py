@@ -36,10 +36,18 @@ class MotionNoiseConfig:
 
     Attributes
     ----------
-    sigma_xy_per_m, sigma_xy_per_rad, sigma_theta_per_m, sigma_theta_per_rad : float
-        See above.
+    sigma_xy_per_m : float
+        Position noise per axis after 1 m of travel (m/√m).
+    sigma_xy_per_rad : float
+        Position noise per axis after turning 1 rad (m/√rad).
+    sigma_theta_per_m : float
+        Heading noise after 1 m of travel (rad/√m).
+    sigma_theta_per_rad : float
+        Heading noise after turning 1 rad (rad/√rad).  ``scripts/calibrate_odometry.py``
+        fits ``sigma_xy_per_m``, ``sigma_theta_per_m`` and this one to a log's short
+        relations; the defaults are one setting for all logs.
     sigma_xy_min_m, sigma_theta_min_rad : float
-        Floors, so that a standstill is not a perfect constraint.
+        Floors per step (m, rad), so that a standstill is not a perfect constraint.
     """
 
     sigma_xy_per_m: float = 0.05
