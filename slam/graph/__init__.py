@@ -55,6 +55,7 @@ _LAZY = {
     "values_from_arrays": "slam.graph.custom_factor",
 }
 
+
 def __getattr__(name: str) -> Any:
     """Import on first use (``slam.graph.config`` must not pull in gtsam)."""
     if name in _LAZY:

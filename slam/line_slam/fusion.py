@@ -31,7 +31,7 @@ from slam.graph.problem import LineGraph, MergeRecord
 from slam.line_slam.audit import MergeAudit
 from slam.line_slam.clock import StageClock
 from slam.line_slam.config import FusionConfig, SlamConfig
-from slam.line_slam.keyframes import KeyframeTrack
+from slam.line_slam.keyframes import EveryKeyframes, KeyframeTrack
 from slam.line_slam.landmarks import LandmarkBook
 from slam.models.anchored import anchored_jacobian, drift_covariance
 
@@ -122,15 +122,11 @@ class LandmarkFusion:
         self.clock = clock
         self.pending_audit: list[MergeRecord] = []
         """The last round's merges, audited at the next round (or at the end)."""
-        self._since = 0
+        self._every = EveryKeyframes()
 
     def due(self) -> bool:
         """Count a keyframe; whether a round is due (every ``fusion.interval_keyframes``)."""
-        self._since += 1
-        if self.config.fusion.enabled and self._since >= self.config.fusion.interval_keyframes:
-            self._since = 0
-            return True
-        return False
+        return self._every.tick(self.config.fusion.enabled, self.config.fusion.interval_keyframes)
 
     def round(self, x_now: FloatArray, everywhere: bool = False) -> int:
         """One fusion round near ``x_now`` (over all alive landmarks with ``everywhere``).

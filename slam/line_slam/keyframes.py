@@ -20,8 +20,9 @@ from numpy.typing import NDArray
 from slam.geometry import pose_between
 from slam.graph.problem import GrowableArray
 from slam.line_slam.config import KeyframeConfig
+from slam.models.motion import moved_enough
 
-__all__ = ["ANGLE_WEIGHT_M_PER_RAD", "KeyframeTrack", "OdometryStep"]
+__all__ = ["ANGLE_WEIGHT_M_PER_RAD", "EveryKeyframes", "KeyframeTrack", "OdometryStep"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -78,10 +79,7 @@ class KeyframeTrack:
     # -- decisions ---------------------------------------------------------------------------
     def is_keyframe(self, delta: FloatArray) -> bool:
         """Whether a motion ``delta`` since the last keyframe makes a keyframe."""
-        k = self.config
-        return bool(
-            np.hypot(delta[0], delta[1]) >= k.min_distance_m or abs(delta[2]) >= k.min_angle_rad
-        )
+        return moved_enough(delta, self.config.min_distance_m, self.config.min_angle_rad)
 
     def keyframe_mask(self, poses_odom_laser: Sequence[FloatArray]) -> list[bool]:
         """Which of the next scans (their odometry poses) will become keyframes."""
@@ -162,3 +160,18 @@ class KeyframeTrack:
     def path_since(self, keyframes: IntArray) -> FloatArray:
         """Path driven (m) since each of ``keyframes``."""
         return self.path_m - self._kf_path.data[np.asarray(keyframes, dtype=np.intp)]
+
+
+class EveryKeyframes:
+    """A step due every ``interval`` keyframes (fusion rounds, loop-closure attempts)."""
+
+    def __init__(self) -> None:
+        self._since = 0
+
+    def tick(self, enabled: bool, interval: int) -> bool:
+        """Count a keyframe; whether the step is due (the count restarts when it is)."""
+        self._since += 1
+        if enabled and self._since >= interval:
+            self._since = 0
+            return True
+        return False

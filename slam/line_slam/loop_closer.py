@@ -46,7 +46,7 @@ from slam.graph.batch import BatchSolver
 from slam.line_slam.audit import MergeAudit
 from slam.line_slam.clock import StageClock
 from slam.line_slam.config import SlamConfig
-from slam.line_slam.keyframes import KeyframeTrack
+from slam.line_slam.keyframes import EveryKeyframes, KeyframeTrack
 from slam.line_slam.landmarks import LandmarkBook
 from slam.line_slam.local_map import drift_sigmas
 
@@ -204,19 +204,15 @@ class LoopCloser:
         self._rejected: list[tuple[int, FloatArray, int]] = []
         # hypotheses the marginals' gate turned away: (keyframe, correction)
         self._gated: list[tuple[int, FloatArray]] = []
-        self._since = 0
+        self._every = EveryKeyframes()
         self._judge = BatchSolver(
             replace(config.solver, relative_tolerance=config.loop_closure.judge_relative_tolerance)
         )
 
     def due(self) -> bool:
         """Count a keyframe; whether an attempt is due (every ``interval_keyframes``)."""
-        self._since += 1
         lcc = self.config.loop_closure
-        if lcc.enabled and self._since >= lcc.interval_keyframes:
-            self._since = 0
-            return True
-        return False
+        return self._every.tick(lcc.enabled, lcc.interval_keyframes)
 
     # -- one attempt -------------------------------------------------------------------------
     def attempt(self, pose: int) -> int:

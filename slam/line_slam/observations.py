@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 from linefit.line import Line
 from slam.frontend.tentative import Observation
 from slam.line_slam.config import SlamConfig
+from slam.lines.lineset import supported_lines
 from slam.models.anchored import model_error_covariance
 
 __all__ = ["ScanLines", "usable_lines"]
@@ -77,11 +78,11 @@ def usable_lines(lines: Sequence[Line], config: SlamConfig) -> tuple[ScanLines, 
     pieces: list[FloatArray] = []
     pieces_var: list[FloatArray] = []
     rejected = 0
-    for ln in lines:
+    supported = supported_lines(lines, config.min_line_points, config.min_line_length_m)
+    for ln, ok_support in zip(lines, supported, strict=True):
         cov = np.asarray(ln.cov, dtype=float)[:2, :2]
         ok = (
-            ln.n_points >= config.min_line_points
-            and ln.length >= config.min_line_length_m
+            ok_support
             and np.isfinite(cov).all()
             and np.isfinite([ln.r, ln.alpha]).all()
             and cov[0, 0] > 0.0
