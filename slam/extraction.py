@@ -13,6 +13,7 @@ from collections.abc import Iterable, Iterator, Sequence
 import numpy as np
 
 from linefit import Line, LineFitConfig, extract_lines_batch
+from slam.errors import InputError
 from slam.types import Scan
 
 __all__ = ["extract_lines_of_scans", "extract_scan_lines", "iter_scan_lines"]
@@ -42,7 +43,11 @@ def extract_lines_of_scans(
     for members in groups.values():
         first = scans[members[0]]
         ranges = np.stack([scans[n].ranges for n in members])
-        lines = extract_lines_batch(ranges, first.bearings, cfg, max_range_m=first.max_range_m)
+        try:
+            lines = extract_lines_batch(ranges, first.bearings, cfg, max_range_m=first.max_range_m)
+        except InputError as exc:
+            where = first.source or f"scan {first.index}"
+            raise InputError(f"{exc.reason} (scans from {where})") from None
         for n, ls in zip(members, lines, strict=True):
             out[n] = list(ls)
     return out

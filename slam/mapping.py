@@ -56,11 +56,10 @@ def valid_beams(scan: Scan, config: RunConfig) -> NDArray[np.bool_]:
 
 def fit_scan(scan: Scan, config: RunConfig) -> tuple[list[Line], int]:
     """Lines of one scan (laser frame) and the number of points that could enter a fit."""
-    from linefit import extract_lines
+    from slam.extraction import extract_scan_lines
 
     n_points = int(np.count_nonzero(valid_beams(scan, config)))
-    lines = extract_lines(scan.ranges, scan.bearings, config.linefit, max_range_m=scan.max_range_m)
-    return list(lines), n_points
+    return extract_scan_lines(scan, config.linefit), n_points
 
 
 _LOG_POSES = InputPolicy()
@@ -170,7 +169,7 @@ def build_map(
         Called with 1 after every scan.
     fit : callable, optional
         ``fit(scan, config) -> (lines, n_points)``; default :func:`fit_scan`
-        (:func:`linefit.extract_lines`).
+        (:func:`slam.extraction.extract_scan_lines`).
     pose_covs : sequence of ndarray (3, 3), optional
         One pose covariance per scan (right perturbation), e.g. odometry compounded from the
         first pose; default ``config.map.pose_cov`` for every scan.

@@ -21,13 +21,12 @@ from itertools import islice
 from pathlib import Path
 from typing import Annotated, Literal
 
-import numpy as np
 import typer
 
-from linefit import Line, LineFitConfig, extract_lines_batch
+from linefit import Line
 from slam.cli._app import app
 from slam.cli.common import ConfigOpt, QuietOpt, SeedOpt, SigmaDOpt, SigmaPhiOpt, build_config
-from slam.errors import InputError
+from slam.extraction import extract_lines_of_scans
 from slam.io.carmen import iter_scans
 from slam.io.catalog import resolve_log
 from slam.types import Scan
@@ -61,27 +60,6 @@ def _batches(scans: Iterator[Scan], size: int) -> Iterator[list[Scan]]:
         if not chunk:
             return
         yield chunk
-
-
-def _extract_chunk(chunk: list[Scan], config: LineFitConfig) -> list[list[Line]]:
-    """Lines of a chunk of scans; scans of one beam layout are extracted together."""
-    out: list[list[Line]] = [[] for _ in chunk]
-    layouts: dict[tuple[int, bytes], list[int]] = {}
-    for k, scan in enumerate(chunk):
-        layouts.setdefault((scan.n_beams, scan.bearings.tobytes()), []).append(k)
-    for members in layouts.values():
-        ranges = np.stack([chunk[k].ranges for k in members])
-        max_range = np.array([chunk[k].max_range_m for k in members])
-        try:
-            lines = extract_lines_batch(
-                ranges, chunk[members[0]].bearings, config, max_range_m=max_range
-            )
-        except InputError as exc:
-            first = chunk[members[0]]
-            raise InputError(f"{exc.reason} (scans from {first.source or first.index})") from None
-        for k, ln in zip(members, lines, strict=True):
-            out[k] = ln
-    return out
 
 
 @app.command("extract")
@@ -135,7 +113,7 @@ def extract(
         tqdm(total=total, unit="scan", desc="extract", disable=quiet) as bar,
     ):
         for chunk in _batches(scans, BATCH_SCANS):
-            results = _extract_chunk(chunk, config.linefit)
+            results = extract_lines_of_scans(chunk, config.linefit)
             for scan, lines in zip(chunk, results, strict=True):
                 handle.write(json.dumps(scan_record(scan, lines)) + "\n")
                 n_lines += len(lines)
