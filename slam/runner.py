@@ -1,15 +1,18 @@
 """Runners: read a log, feed an estimator scan by scan, write the results folder.
 
 ``lineslam slam`` (:func:`run_slam`, the factor graph) and ``lineslam ekf`` (:func:`run_ekf`,
-the EKF baseline) run the same way (:func:`run_estimator_on_log`): the log is read with the input
-policy (:mod:`slam.inputs`: odometry sign, laser mounting of a catalogued log, output frame),
-the scans are fed to an estimator with ``add_scan``, ``optimize()`` and ``result()`` (a
+the EKF baseline) run the same way (:func:`run_estimator_on_log`): the log (a CARMEN file, a ROS
+bag, or a catalogue name) is opened with the run's ``[scanner]`` settings
+(:func:`slam.inputs.open_log`: beam geometry, range limits, laser mounting, odometry, output
+frame), the scans are fed to an estimator with ``add_scan``, ``optimize()`` and ``result()`` (a
 :class:`slam.result.SlamResult`), and the result's files are written.
 
 Results folder (``../shared/INTERFACES.md``): ``trajectory.tum`` (poses in the policy's output
 frame, log time stamps), ``trajectory_covariance.txt``, ``map.json``, ``summary.json`` (written
 once, at the end, with ``runtime_s`` per stage: ``read``, ``extract`` (when the runner extracts
-the lines), ``estimate``, ``optimize``, ``write``, ``total``), ``config.toml`` (written by the
+the lines), ``estimate``, ``optimize``, ``write``, ``total``; ``input``, what was read and
+assumed, :meth:`slam.inputs.LogInput.describe`; ``scans_in_log`` and ``partial`` for a run over
+the first scans; ``warnings``, counted, :mod:`slam.diagnostics`), ``config.toml`` (written by the
 CLI before the run) and, with ``plot``, ``figures/``.
 """
 
@@ -18,12 +21,14 @@ from __future__ import annotations
 import itertools
 import time
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from slam.config import RunConfig
+from slam.diagnostics import WarningTally, tally_warnings
 from slam.errors import InputError
-from slam.inputs import InputPolicy, policy_for_log, read_log_scans
+from slam.inputs import InputPolicy, LogInput, open_log
 from slam.types import Scan
 
 if TYPE_CHECKING:
@@ -143,115 +148,149 @@ def _feed_with_lines(
     return clock
 
 
+def _tallying(tally: WarningTally | None) -> AbstractContextManager[WarningTally]:
+    return nullcontext(tally) if tally is not None else tally_warnings()
+
+
+def _source(log: str | Path | LogInput, config: RunConfig, max_scans: int | None) -> LogInput:
+    if isinstance(log, LogInput):
+        return log
+    return open_log(log, config.scanner, max_scans=max_scans)
+
+
 def run_estimator_on_log(
-    log: str | Path,
+    log: str | Path | LogInput,
     out: Path,
     estimator: ScanEstimator,
-    policy: InputPolicy,
+    policy: InputPolicy | None = None,
     *,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
     linefit_config: LineFitConfig | None = None,
     min_observations: int = 1,
+    tally: WarningTally | None = None,
 ) -> dict[str, Any]:
-    """Resolve ``log`` (file or dataset name), run ``estimator`` on it, write ``out``.
+    """Run ``estimator`` on a log (an opened :class:`~slam.inputs.LogInput`, a file or a name).
 
-    The scans are read with ``policy``'s odometry sign (:func:`slam.inputs.read_log_scans`)
-    and fed by :func:`feed_scans` (``linefit_config``: the runner extracts the lines).  The
-    result's files are written with the map lines of at least ``min_observations``
-    measurements, then ``summary.json`` once, with the run's times.  Returns that summary.
+    The scans are read as the log was opened (:func:`slam.inputs.open_log`; a path or name is
+    opened with the default :class:`~slam.inputs.ScannerConfig`; ``policy`` is then only
+    documentation: the estimator holds its own) and fed by :func:`feed_scans`
+    (``linefit_config``: the runner extracts the lines).  The result's files are written with
+    the map lines of at least ``min_observations`` measurements, then ``summary.json`` once,
+    with the run's times and the warnings counted.  Returns that summary.
     """
-    from slam.io.carmen import iter_scans
-    from slam.io.catalog import resolve_log
     from slam.io.results import write_summary
 
-    resolved = resolve_log(log)
-    t_start = time.perf_counter()
-    scans = read_log_scans(resolved.log, policy)
-    clock = feed_scans(
-        estimator,
-        scans,
-        max_scans=max_scans,
-        progress=progress,
-        linefit_config=linefit_config,
-    )
-    t0 = time.perf_counter()
-    estimator.optimize()
-    clock["optimize"] = time.perf_counter() - t0
-    result = estimator.result()
-    t0 = time.perf_counter()
-    result.write_files(out, min_observations)
-    if plot:
-        from slam.plotting.trajectory_map import plot_slam_result, raw_points_world
-
-        points = raw_points_world(
-            iter_scans(resolved.log), result.poses_world_laser, result.is_keyframe
+    source = log if isinstance(log, LogInput) else open_log(log, max_scans=max_scans)
+    with _tallying(tally) as tallied:
+        t_start = time.perf_counter()
+        clock = feed_scans(
+            estimator,
+            source.scans(max_scans),
+            max_scans=max_scans,
+            progress=progress,
+            linefit_config=linefit_config,
         )
-        plot_slam_result(result, out / "figures", title=resolved.name, points_world=points)
-    clock["write"] = time.perf_counter() - t0
-    clock["total"] = time.perf_counter() - t_start
-    summary: dict[str, Any] = result.summary_dict(min_observations)
-    summary["log"] = str(resolved.log)
-    summary["dataset"] = resolved.name
-    runtime = dict(summary.get("runtime_s", {}))
-    runtime.update({f"{k}": float(v) for k, v in clock.items()})
-    summary["runtime_s"] = runtime
+        t0 = time.perf_counter()
+        estimator.optimize()
+        clock["optimize"] = time.perf_counter() - t0
+        result = estimator.result()
+        t0 = time.perf_counter()
+        result.write_files(out, min_observations)
+        graph = getattr(estimator, "graph", None)
+        if graph is not None:
+            from slam.io.g2o import write_line_graph_g2o
+
+            write_line_graph_g2o(out / "graph.g2o", graph, result)
+        if plot:
+            from slam.plotting.trajectory_map import plot_slam_result, raw_points_world
+
+            points = raw_points_world(
+                source.scans(max_scans, need_odometry=False),
+                result.poses_world_laser,
+                result.is_keyframe,
+            )
+            plot_slam_result(result, out / "figures", title=source.name, points_world=points)
+        clock["write"] = time.perf_counter() - t0
+        clock["total"] = time.perf_counter() - t_start
+        summary: dict[str, Any] = result.summary_dict(min_observations)
+        summary.update(source.run_summary(result.n_scans, max_scans))
+        runtime = dict(summary.get("runtime_s", {}))
+        runtime.update({f"{k}": float(v) for k, v in clock.items()})
+        summary["runtime_s"] = runtime
+        summary["warnings"] = tallied.as_list()
     write_summary(out, summary)
     return summary
 
 
 def run_slam(
-    log: str | Path,
+    log: str | Path | LogInput,
     out: Path,
     config: RunConfig,
     *,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
+    tally: WarningTally | None = None,
 ) -> dict[str, Any]:
-    """``lineslam slam``: factor-graph line SLAM on a log (see the module docstring)."""
+    """``lineslam slam``: factor-graph line SLAM on a log (see the module docstring).
+
+    Besides the common files it writes ``graph.g2o``, the final factor graph
+    (:func:`slam.io.g2o.write_line_graph_g2o`).
+    """
     from slam.line_slam import LineSlam
 
-    policy = policy_for_log(InputPolicy.of(config.slam), log, config.slam.mount_source)
-    slam = LineSlam(config.slam, config.linefit, policy)
-    return run_estimator_on_log(
-        log, out, slam, policy, max_scans=max_scans, progress=progress, plot=plot
-    )
+    with _tallying(tally) as tallied:
+        source = _source(log, config, max_scans)
+        slam = LineSlam(config.slam, config.linefit, source.policy)
+        return run_estimator_on_log(
+            source,
+            out,
+            slam,
+            source.policy,
+            max_scans=max_scans,
+            progress=progress,
+            plot=plot,
+            tally=tallied,
+        )
 
 
 def run_ekf(
-    log: str | Path,
+    log: str | Path | LogInput,
     out: Path,
     config: RunConfig,
     *,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
+    tally: WarningTally | None = None,
 ) -> dict[str, Any]:
     """``lineslam ekf``: the EKF baseline on a log (see the module docstring).
 
-    Same input policy as :func:`run_slam` (the catalogue's laser mounting included); the
-    lines of every scan are extracted by the runner in batches of consecutive scans, the
-    filter runs with ``ekf.blas_threads`` BLAS threads, and the map keeps the landmarks with
-    at least ``ekf.min_landmark_observations`` measurements.  When a guard stops the filter
+    Same input as :func:`run_slam` (:func:`slam.inputs.open_log`); the lines of every scan are
+    extracted by the runner in batches of consecutive scans, the filter runs with
+    ``ekf.blas_threads`` BLAS threads, and the map keeps the landmarks with at least
+    ``ekf.min_landmark_observations`` measurements.  When a guard stops the filter
     (``ekf.max_landmarks``, ``ekf.max_runtime_s``), the trajectory covers the scans processed
     and ``summary.json`` says at which scan and why (``stopped_at_scan``, ``stop_reason``).
     """
     from slam.ekf import EkfSlam
     from slam.ekf.threads import blas_threads
 
-    policy = policy_for_log(InputPolicy.of(config.slam), log, config.slam.mount_source)
-    ekf = EkfSlam(config.ekf, config.linefit, policy)
-    with blas_threads(config.ekf.blas_threads):
-        return run_estimator_on_log(
-            log,
-            out,
-            ekf,
-            policy,
-            max_scans=max_scans,
-            progress=progress,
-            plot=plot,
-            linefit_config=config.linefit,
-            min_observations=config.ekf.min_landmark_observations,
-        )
+    with _tallying(tally) as tallied:
+        source = _source(log, config, max_scans)
+        ekf = EkfSlam(config.ekf, config.linefit, source.policy)
+        with blas_threads(config.ekf.blas_threads):
+            return run_estimator_on_log(
+                source,
+                out,
+                ekf,
+                source.policy,
+                max_scans=max_scans,
+                progress=progress,
+                plot=plot,
+                linefit_config=config.linefit,
+                min_observations=config.ekf.min_landmark_observations,
+                tally=tallied,
+            )

@@ -26,9 +26,25 @@ import typer
 from linefit import Line
 from slam.cli._app import app
 from slam.cli.common import ConfigOpt, QuietOpt, SeedOpt, SigmaDOpt, SigmaPhiOpt, build_config
+from slam.cli.scanner_opts import (
+    BaseFrameOpt,
+    BeamsOpt,
+    FirstAngleOpt,
+    FovOpt,
+    FrameOpt,
+    MaxRangeOpt,
+    MinRangeOpt,
+    MountOpt,
+    OdometryOpt,
+    OdomTopicOpt,
+    ScanTopicOpt,
+    StepOpt,
+    echo_warnings,
+    with_scanner_options,
+)
+from slam.config import RunConfig
 from slam.extraction import extract_lines_of_scans
-from slam.io.carmen import iter_scans
-from slam.io.catalog import resolve_log
+from slam.inputs import LogInput
 from slam.types import Scan
 
 __all__ = ["config_path_for", "extract", "scan_record"]
@@ -65,7 +81,10 @@ def _batches(scans: Iterator[Scan], size: int) -> Iterator[list[Scan]]:
 @app.command("extract")
 def extract(
     log: Annotated[
-        str, typer.Argument(help="CARMEN log file, or a dataset name (intel, aces, fr079).")
+        str,
+        typer.Argument(
+            help="CARMEN log, ROS 1 .bag, ROS 2 bag folder, or a dataset name (intel, aces, fr079)."
+        ),
     ],
     out: Annotated[
         Path, typer.Option("--out", help="Output FILE.jsonl (one JSON object per scan).")
@@ -89,21 +108,61 @@ def extract(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    first_angle: FirstAngleOpt = None,
+    step: StepOpt = None,
+    fov: FovOpt = None,
+    beams: BeamsOpt = None,
+    min_range: MinRangeOpt = None,
+    max_range: MaxRangeOpt = None,
+    mount: MountOpt = None,
+    frame: FrameOpt = None,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+    odometry: OdometryOpt = None,
+    base_frame: BaseFrameOpt = None,
 ) -> None:
     """Fit lines to every scan of LOG (Pfister et al. 2003, Secs. II-IV) and write FILE.jsonl."""
+    from slam.diagnostics import tally_warnings
+    from slam.inputs import open_log
+
     config = build_config(config_file, sigma_d, sigma_phi, seed)
+    config = with_scanner_options(
+        config,
+        first_angle=first_angle,
+        step=step,
+        fov=fov,
+        beams=beams,
+        min_range=min_range,
+        max_range=max_range,
+        mount=mount,
+        frame=frame,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        odometry=odometry,
+        base_frame=base_frame,
+    )
     if grouping is not None:
         config = replace(config, linefit=replace(config.linefit, grouping=grouping))
-    resolved = resolve_log(log)
+    with tally_warnings() as tally:
+        source = open_log(log, config.scanner, max_scans=limit)
+        _extract(source, out, config, plot, plot_every, limit, quiet)
+    echo_warnings(tally)
+
+
+def _extract(
+    source: LogInput,
+    out: Path,
+    config: RunConfig,
+    plot: Path | None,
+    plot_every: int,
+    limit: int | None,
+    quiet: bool,
+) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     config.to_toml(config_path_for(out))
-    total = resolved.manifest.scans if resolved.manifest is not None else None
-    if limit is not None:
-        total = min(total, limit) if total is not None else limit
+    total = source.total(limit)
     every = plot_every if plot_every > 0 else max(1, (total or 1200) // 12)
-    scans: Iterator[Scan] = iter_scans(resolved.log)
-    if limit is not None:
-        scans = islice(scans, limit)
+    scans: Iterator[Scan] = source.scans(limit, need_odometry=False)
 
     from tqdm import tqdm
 
@@ -127,7 +186,7 @@ def extract(
                         lines,
                         config.linefit,
                         max_range_m=scan.max_range_m,
-                        title=f"{resolved.name} scan {scan.index}: {len(lines)} lines",
+                        title=f"{source.name} scan {scan.index}: {len(lines)} lines",
                     )
             n_scans += len(chunk)
             bar.update(len(chunk))
