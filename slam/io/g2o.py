@@ -31,7 +31,7 @@ The whole line-SLAM graph (``graph.g2o`` of ``lineslam slam``)
 all of which ``gtsam.readG2o`` and g2o read as a pose graph, and the extension (lines that
 g2o and GTSAM skip as unknown tags)::
 
-    # LINESLAM_SCAN i timestamp                 keyframe i is the scan of this log time stamp
+    LINESLAM_SCAN i timestamp                   keyframe i is the scan of this log time stamp
     LINESLAM_VERTEX_LINE2D k r alpha            landmark k (ids after the poses), world line
     LINESLAM_EDGE_SE2_LINE2D i k r alpha I_rr I_ralpha I_alphaalpha
 
@@ -39,7 +39,8 @@ A ``LINESLAM_EDGE_SE2_LINE2D`` is a line measurement: the line ``(r, α)`` measu
 laser frame of pose ``i`` (``{p : p·(cos α, sin α) = r}``), predicted from landmark ``k`` by
 :func:`slam.geometry` Eq. 30 (:mod:`slam.graph.factors`), with the inverse of its 2×2
 covariance (upper triangle).  Only landmarks still in the graph (not fused into another) and
-their factors are written; a landmark's id is ``n_poses +`` its index among them.
+their factors are written; a landmark's id is ``n_poses +`` its index among them.  The file
+has no ``#`` comment lines: ``gtsam.readG2o`` (4.2/4.3) stops reading edges at one.
 """
 
 from __future__ import annotations
@@ -215,7 +216,7 @@ def read_g2o(path: str | Path) -> PoseGraph2D:
 
 _LINE_VERTEX = "LINESLAM_VERTEX_LINE2D"
 _LINE_EDGE = "LINESLAM_EDGE_SE2_LINE2D"
-_SCAN = "# LINESLAM_SCAN"
+_SCAN = "LINESLAM_SCAN"
 
 
 def write_line_graph_g2o(path: str | Path, graph: Any, result: Any = None) -> Path:
@@ -254,11 +255,6 @@ def write_line_graph_g2o(path: str | Path, graph: Any, result: Any = None) -> Pa
     f_info = np.linalg.inv(np.asarray(graph.factor_cov, dtype=float)[keep]).reshape(-1, 2, 2)
     path = Path(path)
     with path.open("w", encoding="utf-8") as handle:
-        handle.write(
-            "# lineslam factor graph: VERTEX_SE2 = laser poses (world), EDGE_SE2 = odometry;\n"
-            f"# {_LINE_VERTEX} / {_LINE_EDGE}: line landmarks and line measurements "
-            "(slam/io/g2o.py)\n"
-        )
         if stamps is not None:
             for i, t in enumerate(stamps):
                 handle.write(f"{_SCAN} {i} {t:.6f}\n")
@@ -331,9 +327,9 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
                 lines_v.append([float(t) for t in tokens[1:]])
             elif tokens[0] == _LINE_EDGE and len(tokens) == 8:
                 lines_e.append([float(t) for t in tokens[1:]])
-            elif line.startswith(_SCAN) and len(tokens) == 4:
-                stamps[int(tokens[2])] = float(tokens[3])
-            elif tokens[0] in (_LINE_VERTEX, _LINE_EDGE):
+            elif tokens[0] == _SCAN and len(tokens) == 3:
+                stamps[int(tokens[1])] = float(tokens[2])
+            elif tokens[0] in (_LINE_VERTEX, _LINE_EDGE, _SCAN):
                 raise ValueError
             else:
                 plain.append(line)
