@@ -183,12 +183,11 @@ class LogTransform:
     """A rewrite of a ``FLASER`` + ``ODOM`` CARMEN log, line by line (module docstring).
 
     Subclasses are frozen dataclasses (their fields are the parameters, which key the cache)
-    and implement :meth:`rewrite`.
+    and rewrite one message at a time (``_line``); what they carry from line to line lives in
+    the pass's state, so one transform can rewrite several logs, also at once.
     """
 
     kind: ClassVar[str] = ""
-    #: Whether laser lines are left out (their poses are then filled in for scoring).
-    drops_scans: ClassVar[bool] = False
     #: Frame of the poses the (rewritten) relations refer to.
     relations_frame: ClassVar[Frame] = "laser"
 
@@ -240,7 +239,6 @@ class DecimateScans(LogTransform):
     every: int
     start: int = 0
     kind: ClassVar[str] = "decimate-scans"
-    drops_scans: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         if self.every < 1 or not 0 <= self.start < self.every:
