@@ -679,9 +679,9 @@ def _policy(
     frame = scanner.output_frame
     if frame == "base" and mount is None:
         warnings.warn(
-            f"{where}: the laser's mounting on the robot is not known (no [scanner] "
-            "pose_base_laser, no catalogue entry, no laser and odometry pose in the log, no "
-            "tf): the trajectory is reported for the laser (state --mount X,Y,THETA_DEG)",
+            f"{where}: the laser's mounting on the robot is not known (not stated, not "
+            "catalogued, not derived from the log's poses, not in tf): the trajectory is "
+            "reported for the laser (state --mount X,Y,THETA_DEG)",
             InputWarning,
             stacklevel=3,
         )
