@@ -27,7 +27,7 @@ import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal, Protocol
+from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +35,9 @@ from numpy.typing import NDArray
 from slam.errors import ConfigError, InputError
 from slam.geometry import adjoint_pose2, pose_compose, pose_inverse
 from slam.types import Scan
+
+if TYPE_CHECKING:
+    from slam.io.carmen import CarmenStats
 
 __all__ = ["InputPolicy", "InputSettings", "policy_for_log", "read_log_scans"]
 
@@ -192,9 +195,19 @@ def policy_for_log(policy: InputPolicy, log: str | Path, mount_source: str) -> I
     return replace(policy, pose_base_laser=mount, laser_odometry="base", output_frame="base")
 
 
-def read_log_scans(log: str | Path, policy: InputPolicy) -> Iterator[Scan]:
-    """The scans of a log file (or catalogued name), odometry read by the policy's sign rule."""
+def read_log_scans(
+    log: str | Path,
+    policy: InputPolicy,
+    *,
+    stats: CarmenStats | None = None,
+    strict: bool = False,
+) -> Iterator[Scan]:
+    """The scans of a log file (or catalogued name), odometry read by the policy's sign rule.
+
+    ``stats`` is filled while reading (with the log's anomalies); ``strict`` makes the first
+    anomaly an error (:func:`slam.io.carmen.iter_log_scans`).
+    """
     from slam.io.carmen import iter_log_scans
     from slam.io.catalog import resolve_log
 
-    return iter_log_scans(resolve_log(log).log, policy.odometry_sign)
+    return iter_log_scans(resolve_log(log).log, policy.odometry_sign, stats=stats, strict=strict)

@@ -3,8 +3,10 @@
 The poses are the log's own estimates (CARMEN: the laser pose logged with each scan, i.e. the
 odometry), each with the fixed covariance of ``[map]`` (``pose_sigma_xy_m``,
 ``pose_sigma_theta_rad``).  Results folder (INTERFACES.md): ``map.json`` (world = the log's
-odometry frame), ``summary.json``, ``config.toml`` and, unless disabled, figures in the style of
-the paper's Figs. 3-8 under ``figures/``.
+odometry frame), ``summary.json`` (with the log's anomalies, ``log_anomalies``),
+``config.toml`` and, unless disabled, figures in the style of the paper's Figs. 3-8 under
+``figures/``.  The folder is written into a temporary folder and put in place whole when
+complete (:func:`slam.io.atomic.staged_dir`).
 """
 
 from __future__ import annotations
@@ -279,27 +281,53 @@ def run_map(
     plot: bool = True,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
+    strict: bool = False,
 ) -> dict[str, Any]:
-    """``lineslam map``: resolve ``log``, build the map, write the results folder."""
-    from slam.io.carmen import iter_scans
+    """``lineslam map``: resolve ``log``, build the map, write the results folder.
+
+    ``config`` is written as ``config.toml``; ``strict``: a log anomaly is an error.
+
+    Raises
+    ------
+    InputError
+        The log has no laser scans with a pose, or a malformed line.
+    OutputError
+        ``out`` cannot be written, or is or holds the log.
+    """
+    from slam.config import check_run_config
+    from slam.io.atomic import staged_dir
+    from slam.io.carmen import CarmenStats, iter_scans
     from slam.io.catalog import resolve_log
     from slam.io.results import write_summary
 
+    config = check_run_config(config)
     resolved = resolve_log(log)
-    t0 = time.perf_counter()
-    run = build_map(
-        iter_scans(resolved.log),
-        config,
-        max_scans=max_scans,
-        collect_figures=plot,
-        progress=progress,
-    )
-    run.summary["log"] = str(resolved.log)
-    t1 = time.perf_counter()
-    _write_map_files(out, run, title=f"{resolved.name}: {run.summary['scans']} scans", plot=plot)
-    run.summary["runtime_s"]["write"] = time.perf_counter() - t1
-    run.summary["runtime_s"]["total"] = time.perf_counter() - t0
-    write_summary(out, run.summary)
+    stats = CarmenStats(path=str(resolved.log))
+    with staged_dir(out, inputs=[resolved.log]) as work:
+        config.to_toml(work / "config.toml")
+        t0 = time.perf_counter()
+        run = build_map(
+            iter_scans(resolved.log, stats=stats, strict=strict),
+            config,
+            max_scans=max_scans,
+            collect_figures=plot,
+            progress=progress,
+        )
+        if run.summary["scans"] == 0:
+            odometry = f" ({stats.odometry} ODOM messages)" if stats.odometry else ""
+            without = run.summary["scans_without_pose"]
+            what = (
+                f"no laser scans with a pose ({without} without)" if without else "no laser scans"
+            )
+            raise InputError(f"the log contains {what}{odometry}", str(resolved.log))
+        run.summary["log"] = str(resolved.log)
+        t1 = time.perf_counter()
+        title = f"{resolved.name}: {run.summary['scans']} scans"
+        _write_map_files(work, run, title=title, plot=plot)
+        run.summary["runtime_s"]["write"] = time.perf_counter() - t1
+        run.summary["runtime_s"]["total"] = time.perf_counter() - t0
+        run.summary["log_anomalies"] = stats.anomalies.to_dict()
+        write_summary(work, run.summary)
     return run.summary
 
 

@@ -9,8 +9,13 @@ the scans are fed to an estimator with ``add_scan``, ``optimize()`` and ``result
 Results folder (``../shared/INTERFACES.md``): ``trajectory.tum`` (poses in the policy's output
 frame, log time stamps), ``trajectory_covariance.txt``, ``map.json``, ``summary.json`` (written
 once, at the end, with ``runtime_s`` per stage: ``read``, ``extract`` (when the runner extracts
-the lines), ``estimate``, ``optimize``, ``write``, ``total``), ``config.toml`` (written by the
-CLI before the run) and, with ``plot``, ``figures/``.
+the lines), ``estimate``, ``optimize``, ``write``, ``total``, and the log's anomalies,
+``log_anomalies``, :mod:`slam.io.anomalies`), ``config.toml`` (the configuration used) and,
+with ``plot``, ``figures/``.
+
+The folder is written into a temporary folder beside ``out`` and put in place whole when the
+run is complete (:func:`slam.io.atomic.staged_dir`): a failed or interrupted run leaves
+``out`` as it was, a successful one replaces an earlier results folder whole.
 """
 
 from __future__ import annotations
@@ -21,13 +26,14 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from slam.config import RunConfig
+from slam.config import RunConfig, check_run_config
 from slam.errors import InputError
 from slam.inputs import InputPolicy, policy_for_log, read_log_scans
 from slam.types import Scan
 
 if TYPE_CHECKING:
     from linefit.config import LineFitConfig
+    from slam.io.carmen import CarmenStats
 
 __all__ = ["ScanEstimator", "feed_scans", "run_ekf", "run_estimator_on_log", "run_slam"]
 
@@ -112,8 +118,17 @@ def feed_scans(
     if buffer:
         flush()
     if n == 0:
-        raise InputError("the log contains no laser scans")
+        raise _NoScansError("the log contains no laser scans")
     return clock
+
+
+class _NoScansError(InputError):
+    """The scans fed were none."""
+
+
+def _no_scans(log: Path, stats: CarmenStats) -> InputError:
+    odometry = f" ({stats.odometry} ODOM messages)" if stats.odometry else ""
+    return InputError(f"the log contains no laser scans{odometry}", str(log))
 
 
 def _feed_with_lines(
@@ -138,7 +153,7 @@ def _feed_with_lines(
         if getattr(estimator, "stopped", False):
             break
     if n == 0:
-        raise InputError("the log contains no laser scans")
+        raise _NoScansError("the log contains no laser scans")
     clock["extract"] -= clock["read"]  # reading happened inside the extraction's iterator
     return clock
 
@@ -154,50 +169,71 @@ def run_estimator_on_log(
     plot: bool = False,
     linefit_config: LineFitConfig | None = None,
     min_observations: int = 1,
+    config: RunConfig | None = None,
+    strict: bool = False,
 ) -> dict[str, Any]:
     """Resolve ``log`` (file or dataset name), run ``estimator`` on it, write ``out``.
 
     The scans are read with ``policy``'s odometry sign (:func:`slam.inputs.read_log_scans`)
     and fed by :func:`feed_scans` (``linefit_config``: the runner extracts the lines).  The
     result's files are written with the map lines of at least ``min_observations``
-    measurements, then ``summary.json`` once, with the run's times.  Returns that summary.
+    measurements, ``config.toml`` (with ``config``), then ``summary.json`` once, with the
+    run's times and the log's anomalies (``strict``: the first anomaly is an error).  The
+    folder appears at ``out`` only when complete (module docstring).  Returns the summary.
+
+    Raises
+    ------
+    OutputError
+        ``out`` cannot be written, or is or holds the log (:mod:`slam.io.atomic`).
+    InputError
+        The log has no laser scans, or a malformed line (``LogFormatError``; with
+        ``strict``, an anomaly).
     """
-    from slam.io.carmen import iter_scans
+    from slam.io.atomic import staged_dir
+    from slam.io.carmen import CarmenStats, iter_scans
     from slam.io.catalog import resolve_log
     from slam.io.results import write_summary
 
     resolved = resolve_log(log)
-    t_start = time.perf_counter()
-    scans = read_log_scans(resolved.log, policy)
-    clock = feed_scans(
-        estimator,
-        scans,
-        max_scans=max_scans,
-        progress=progress,
-        linefit_config=linefit_config,
-    )
-    t0 = time.perf_counter()
-    estimator.optimize()
-    clock["optimize"] = time.perf_counter() - t0
-    result = estimator.result()
-    t0 = time.perf_counter()
-    result.write_files(out, min_observations)
-    if plot:
-        from slam.plotting.trajectory_map import plot_slam_result, raw_points_world
+    stats = CarmenStats(path=str(resolved.log))
+    with staged_dir(out, inputs=[resolved.log]) as work:
+        if config is not None:
+            config.to_toml(work / "config.toml")
+        t_start = time.perf_counter()
+        scans = read_log_scans(resolved.log, policy, stats=stats, strict=strict)
+        try:
+            clock = feed_scans(
+                estimator,
+                scans,
+                max_scans=max_scans,
+                progress=progress,
+                linefit_config=linefit_config,
+            )
+        except _NoScansError:
+            raise _no_scans(resolved.log, stats) from None
+        t0 = time.perf_counter()
+        estimator.optimize()
+        clock["optimize"] = time.perf_counter() - t0
+        result = estimator.result()
+        t0 = time.perf_counter()
+        result.write_files(work, min_observations)
+        if plot:
+            from slam.plotting.trajectory_map import plot_slam_result, raw_points_world
 
-        points = raw_points_world(
-            iter_scans(resolved.log), result.poses_world_laser, result.is_keyframe
-        )
-        plot_slam_result(result, out / "figures", title=resolved.name, points_world=points)
-    clock["write"] = time.perf_counter() - t0
-    clock["total"] = time.perf_counter() - t_start
-    summary: dict[str, Any] = result.summary_dict(min_observations)
-    summary["log"] = str(resolved.log)
-    summary["dataset"] = resolved.name
-    runtime = dict(summary.get("runtime_s", {}))
-    runtime.update({f"{k}": float(v) for k, v in clock.items()})
-    summary["runtime_s"] = runtime
-    write_summary(out, summary)
+            points = raw_points_world(
+                iter_scans(resolved.log), result.poses_world_laser, result.is_keyframe
+            )
+            plot_slam_result(result, work / "figures", title=resolved.name, points_world=points)
+        clock["write"] = time.perf_counter() - t0
+        clock["total"] = time.perf_counter() - t_start
+        summary: dict[str, Any] = result.summary_dict(min_observations)
+        summary["log"] = str(resolved.log)
+        summary["dataset"] = resolved.name
+        runtime = dict(summary.get("runtime_s", {}))
+        runtime.update({f"{k}": float(v) for k, v in clock.items()})
+        summary["runtime_s"] = runtime
+        summary["log_anomalies"] = stats.anomalies.to_dict()
+        write_summary(work, summary)
     return summary
 
 
@@ -209,14 +245,28 @@ def run_slam(
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
+    strict: bool = False,
 ) -> dict[str, Any]:
-    """``lineslam slam``: factor-graph line SLAM on a log (see the module docstring)."""
+    """``lineslam slam``: factor-graph line SLAM on a log (see the module docstring).
+
+    Writes ``config`` as ``config.toml`` with the results; ``strict``: a log anomaly is an
+    error.
+    """
     from slam.line_slam import LineSlam
 
+    config = check_run_config(config)
     policy = policy_for_log(InputPolicy.of(config.slam), log, config.slam.mount_source)
     slam = LineSlam(config.slam, config.linefit, policy)
     return run_estimator_on_log(
-        log, out, slam, policy, max_scans=max_scans, progress=progress, plot=plot
+        log,
+        out,
+        slam,
+        policy,
+        max_scans=max_scans,
+        progress=progress,
+        plot=plot,
+        config=config,
+        strict=strict,
     )
 
 
@@ -228,6 +278,7 @@ def run_ekf(
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
+    strict: bool = False,
 ) -> dict[str, Any]:
     """``lineslam ekf``: the EKF baseline on a log (see the module docstring).
 
@@ -241,6 +292,7 @@ def run_ekf(
     from slam.ekf import EkfSlam
     from slam.ekf.threads import blas_threads
 
+    config = check_run_config(config)
     policy = policy_for_log(InputPolicy.of(config.slam), log, config.slam.mount_source)
     ekf = EkfSlam(config.ekf, config.linefit, policy)
     with blas_threads(config.ekf.blas_threads):
@@ -254,4 +306,6 @@ def run_ekf(
             plot=plot,
             linefit_config=config.linefit,
             min_observations=config.ekf.min_landmark_observations,
+            config=config,
+            strict=strict,
         )

@@ -26,9 +26,11 @@ from slam.cli.common import (
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
+    StrictOpt,
     build_config,
     check_max_scans,
-    prepare_out_dir,
+    check_out_dir,
+    warn_log_anomalies,
 )
 
 __all__ = ["ekf"]
@@ -47,6 +49,7 @@ def ekf(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    strict: StrictOpt = False,
 ) -> None:
     """EKF-SLAM baseline: trajectory.tum, map.json, summary.json."""
     from tqdm import tqdm
@@ -63,9 +66,12 @@ def ekf(
         ekf_cfg = replace(ekf_cfg, association=replace(ekf_cfg.association, method=method))
         run_config = replace(run_config, ekf=ekf_cfg)
     check_max_scans(max_scans)
-    prepare_out_dir(out, run_config)
+    check_out_dir(out)
     with tqdm(desc="ekf", unit="scan", disable=quiet, total=max_scans) as bar:
-        summary = run_ekf(log, out, run_config, max_scans=max_scans, progress=bar.update)
+        summary = run_ekf(
+            log, out, run_config, max_scans=max_scans, progress=bar.update, strict=strict
+        )
+    warn_log_anomalies(summary["log"], summary.get("log_anomalies"))
     if not quiet:
         rt = summary.get("runtime_s", {})
         msg = (

@@ -82,7 +82,7 @@ def evaluate(
         max_unmatched_fraction=max_unmatched,
         sources=sources,
     )
-    path = write_metrics(results_dir, report.to_dict())
+    path = write_metrics(results_dir, report.to_dict())  # whole or not at all
     if not quiet:
         typer.echo(report.format_table())
         typer.echo(f"wrote {path}")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator
+from contextlib import nullcontext
 from dataclasses import replace
 from itertools import islice
 from pathlib import Path
@@ -25,9 +26,21 @@ import typer
 
 from linefit import Line
 from slam.cli._app import app
-from slam.cli.common import ConfigOpt, QuietOpt, SeedOpt, SigmaDOpt, SigmaPhiOpt, build_config
+from slam.cli.common import (
+    ConfigOpt,
+    QuietOpt,
+    SeedOpt,
+    SigmaDOpt,
+    SigmaPhiOpt,
+    StrictOpt,
+    build_config,
+    out_path,
+    warn_log_anomalies,
+)
+from slam.errors import InputError
 from slam.extraction import extract_lines_of_scans
-from slam.io.carmen import iter_scans
+from slam.io.atomic import check_output_file, staged_files, staged_into
+from slam.io.carmen import CarmenStats, iter_scans
 from slam.io.catalog import resolve_log
 from slam.types import Scan
 
@@ -68,7 +81,10 @@ def extract(
         str, typer.Argument(help="CARMEN log file, or a dataset name (intel, aces, fr079).")
     ],
     out: Annotated[
-        Path, typer.Option("--out", help="Output FILE.jsonl (one JSON object per scan).")
+        Path,
+        typer.Option(
+            "--out", parser=out_path, help="Output FILE.jsonl (one JSON object per scan)."
+        ),
     ],
     plot: Annotated[
         Path | None, typer.Option("--plot", help="Directory for paper-style figures of some scans.")
@@ -89,48 +105,63 @@ def extract(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    strict: StrictOpt = False,
 ) -> None:
-    """Fit lines to every scan of LOG (Pfister et al. 2003, Secs. II-IV) and write FILE.jsonl."""
+    """Fit lines to every scan of LOG (Pfister et al. 2003, Secs. II-IV) and write FILE.jsonl.
+
+    FILE.jsonl and FILE.config.toml are written under temporary names beside them and renamed
+    into place when every scan is done: a failed or interrupted run leaves earlier files as
+    they were.
+    """
     config = build_config(config_file, sigma_d, sigma_phi, seed)
     if grouping is not None:
         config = replace(config, linefit=replace(config.linefit, grouping=grouping))
+    check_output_file(out)
     resolved = resolve_log(log)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    config.to_toml(config_path_for(out))
     total = resolved.manifest.scans if resolved.manifest is not None else None
     if limit is not None:
         total = min(total, limit) if total is not None else limit
     every = plot_every if plot_every > 0 else max(1, (total or 1200) // 12)
-    scans: Iterator[Scan] = iter_scans(resolved.log)
-    if limit is not None:
-        scans = islice(scans, limit)
+    stats = CarmenStats(path=str(resolved.log))
 
     from tqdm import tqdm
 
     n_scans = n_lines = 0
     with (
-        out.open("w", encoding="utf-8") as handle,
-        tqdm(total=total, unit="scan", desc="extract", disable=quiet) as bar,
+        staged_files([out, config_path_for(out)], inputs=[resolved.log]) as (lines_tmp, cfg_tmp),
+        staged_into(plot, inputs=[resolved.log]) if plot is not None else nullcontext() as figs,
     ):
-        for chunk in _batches(scans, BATCH_SCANS):
-            results = extract_lines_of_scans(chunk, config.linefit)
-            for scan, lines in zip(chunk, results, strict=True):
-                handle.write(json.dumps(scan_record(scan, lines)) + "\n")
-                n_lines += len(lines)
-                if plot is not None and scan.index % every == 0:
-                    from slam.plotting.scan import save_scan_figure
+        config.to_toml(cfg_tmp)
+        scans: Iterator[Scan] = iter_scans(resolved.log, stats=stats, strict=strict)
+        if limit is not None:
+            scans = islice(scans, limit)
+        with (
+            lines_tmp.open("w", encoding="utf-8") as handle,
+            tqdm(total=total, unit="scan", desc="extract", disable=quiet) as bar,
+        ):
+            for chunk in _batches(scans, BATCH_SCANS):
+                results = extract_lines_of_scans(chunk, config.linefit)
+                for scan, lines in zip(chunk, results, strict=True):
+                    handle.write(json.dumps(scan_record(scan, lines)) + "\n")
+                    n_lines += len(lines)
+                    if figs is not None and scan.index % every == 0:
+                        from slam.plotting.scan import save_scan_figure
 
-                    save_scan_figure(
-                        plot / f"scan_{scan.index:06d}.png",
-                        scan.ranges,
-                        scan.bearings,
-                        lines,
-                        config.linefit,
-                        max_range_m=scan.max_range_m,
-                        title=f"{resolved.name} scan {scan.index}: {len(lines)} lines",
-                    )
-            n_scans += len(chunk)
-            bar.update(len(chunk))
+                        save_scan_figure(
+                            figs / f"scan_{scan.index:06d}.png",
+                            scan.ranges,
+                            scan.bearings,
+                            lines,
+                            config.linefit,
+                            max_range_m=scan.max_range_m,
+                            title=f"{resolved.name} scan {scan.index}: {len(lines)} lines",
+                        )
+                n_scans += len(chunk)
+                bar.update(len(chunk))
+        if n_scans == 0:
+            odometry = f" ({stats.odometry} ODOM messages)" if stats.odometry else ""
+            raise InputError(f"the log contains no laser scans{odometry}", str(resolved.log))
+    warn_log_anomalies(resolved.log, stats.anomalies.to_dict())
     if not quiet:
         per_scan = n_lines / max(n_scans, 1)
         typer.echo(

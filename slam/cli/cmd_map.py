@@ -17,9 +17,11 @@ from slam.cli.common import (
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
+    StrictOpt,
     build_config,
     check_max_scans,
-    prepare_out_dir,
+    check_out_dir,
+    warn_log_anomalies,
 )
 
 __all__ = ["map_command"]
@@ -34,6 +36,7 @@ def map_command(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    strict: StrictOpt = False,
     pose_sigma_xy: Annotated[
         float | None,
         typer.Option("--pose-sigma-xy", help="σ (m) of each scan pose's x and y in the map."),
@@ -72,9 +75,18 @@ def map_command(
     if overrides:
         config = replace(config, map=replace(config.map, **overrides))
     check_max_scans(max_scans)
-    prepare_out_dir(out, config)
+    check_out_dir(out)
     with tqdm(desc="map", unit="scan", disable=quiet, total=max_scans) as bar:
-        summary = run_map(log, out, config, plot=plot, max_scans=max_scans, progress=bar.update)
+        summary = run_map(
+            log,
+            out,
+            config,
+            plot=plot,
+            max_scans=max_scans,
+            progress=bar.update,
+            strict=strict,
+        )
+    warn_log_anomalies(summary["log"], summary.get("log_anomalies"))
     if not quiet:
         typer.echo(
             f"{summary['scans']} scans, {summary['points']} points -> {summary['lines_fit']} lines"

@@ -17,9 +17,11 @@ from slam.cli.common import (
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
+    StrictOpt,
     build_config,
     check_max_scans,
-    prepare_out_dir,
+    check_out_dir,
+    warn_log_anomalies,
 )
 
 __all__ = ["slam_command"]
@@ -38,6 +40,7 @@ def slam_command(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    strict: StrictOpt = False,
     max_scans: MaxScansOpt = None,
     plot: Annotated[
         bool, typer.Option("--plot/--no-plot", help="Draw the trajectory and the line map.")
@@ -58,11 +61,14 @@ def slam_command(
             raise typer.BadParameter("--backend must be batch or isam2")
         config = replace(config, slam=replace(config.slam, backend=backend))  # type: ignore[arg-type]
     check_max_scans(max_scans)
-    prepare_out_dir(out, config)
+    check_out_dir(out)
     with tqdm(
         desc=f"slam ({config.slam.backend})", unit="scan", disable=quiet, total=max_scans
     ) as bar:
-        summary = run_slam(log, out, config, max_scans=max_scans, progress=bar.update, plot=plot)
+        summary = run_slam(
+            log, out, config, max_scans=max_scans, progress=bar.update, plot=plot, strict=strict
+        )
+    warn_log_anomalies(summary["log"], summary.get("log_anomalies"))
     if not quiet:
         rt = summary.get("runtime_s", {})
         typer.echo(
