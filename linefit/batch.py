@@ -15,11 +15,12 @@ from numpy.typing import ArrayLike, NDArray
 from linefit.assemble import lines_from_fit
 from linefit.collinear import merge_collinear
 from linefit.config import LineFitConfig
+from linefit.errors import ConfigError
 from linefit.fitted import Fitted, Groups
 from linefit.hough import hough_groups
 from linefit.line import Line
 from linefit.noise import SigmaRangeFn
-from linefit.readings import check_batch, scan_points, valid_readings
+from linefit.readings import check_batch, check_reach, scan_points, valid_readings
 from linefit.refine import refine
 from linefit.split_merge import split_merge_groups
 
@@ -57,9 +58,20 @@ def extract_lines_batch(
     -------
     list of list of Line
         The lines of each scan (see :func:`extract_lines`).
+
+    Raises
+    ------
+    InputError
+        Bad arrays (:func:`linefit.readings.check_batch`), or readings beyond any laser's
+        reach without a range limit (:func:`linefit.readings.check_reach`).
+    ConfigError
+        ``config`` is not a :class:`LineFitConfig`.
     """
+    if config is not None and not isinstance(config, LineFitConfig):
+        raise ConfigError(f"config must be a LineFitConfig, got {type(config).__name__}")
     cfg = config if config is not None else LineFitConfig()
     d, phi, mr = check_batch(ranges, bearings, max_range_m)
+    check_reach(d, mr, cfg)
     n_scans, n_beams = d.shape
     valid = valid_readings(d, mr, cfg)
     # scans with too few valid readings hold no line

@@ -96,7 +96,10 @@ def extract_lines(
     ------
     InputError
         Mismatched or non-1-D arrays, non-numeric values, non-finite or non-monotonic
-        bearings.
+        bearings, bearings sweeping more than a full turn (degrees given for radians),
+        readings beyond any laser's reach (over 1e5 m) when nothing limits the range.
+    ConfigError
+        ``config`` is not a :class:`LineFitConfig`.
 
     Examples
     --------
