@@ -34,7 +34,7 @@ def _vector(value: Any, what: str, fail: Any) -> FloatArray:
             raise fail(f"{what} must be an array of numbers") from None
     if value.ndim != 1:
         raise fail(f"{what} must be one-dimensional, got shape {value.shape}")
-    return value  # type: ignore[no-any-return]
+    return value
 
 
 def _pose(value: Any, what: str, fail: Any) -> FloatArray | None:
@@ -47,7 +47,7 @@ def _pose(value: Any, what: str, fail: Any) -> FloatArray | None:
             raise fail(f"{what} must be three numbers (x, y, theta)") from None
     if value.shape != (3,):
         raise fail(f"{what} must have shape (3,) (x, y, theta), got {value.shape}")
-    return value  # type: ignore[no-any-return]
+    return value
 
 
 @dataclass(frozen=True, eq=False)
