@@ -37,6 +37,12 @@ def _vector(value: Any, what: str, fail: Any) -> FloatArray:
     return value
 
 
+def _good_pose(value: Any) -> bool:
+    return value is None or (
+        type(value) is np.ndarray and value.shape == (3,) and value.dtype.kind == "f"
+    )
+
+
 def _pose(value: Any, what: str, fail: Any) -> FloatArray | None:
     if value is None:
         return None
@@ -91,6 +97,26 @@ class Scan:
 
     def __post_init__(self) -> None:
         """Check the fields (lists become float arrays); raise :class:`InputError` naming them."""
+        r, b, t = self.ranges, self.bearings, self.timestamp
+        if (  # the common case, cheaply: float arrays, a finite float stamp, proper poses
+            type(r) is np.ndarray
+            and type(b) is np.ndarray
+            and r.ndim == 1
+            and r.shape == b.shape
+            and r.dtype.kind == "f"
+            and b.dtype.kind == "f"
+            and type(t) is float
+            and math.isfinite(t)
+            and type(self.index) is int
+            and _good_pose(self.pose_odom_base)
+            and _good_pose(self.pose_odom_laser)
+            and isinstance(self.max_range_m, float)
+            and self.max_range_m > 0.0
+        ):
+            return
+        self._check_fields()
+
+    def _check_fields(self) -> None:
         where = self.source or None
 
         def fail(message: str) -> InputError:
