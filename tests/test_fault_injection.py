@@ -29,6 +29,7 @@ import pytest
 from conftest import REPO_ROOT
 
 from slam.cli import main
+from slam.io import atomic
 from slam.io.atomic import PARTIAL_MARK, staged_dir
 
 DEMO_LOG = REPO_ROOT / "datasets" / "sim" / "demo" / "log.clf"
@@ -445,3 +446,24 @@ def test_failing_extract_keeps_the_earlier_file(tmp_path, capsys):
     assert snapshot(target) == before
     assert (tmp_path / "lines.config.toml").read_text() == config_before
     assert leftovers(tmp_path) == []
+
+
+def test_parent_folders_of_a_failed_run_are_removed(tmp_path, capsys):
+    bad = tmp_path / "bad.clf"
+    bad.write_text("FLASER 3 1 2 x\n")
+    for cmd, out in (("slam", "a/b/run"), ("extract", "c/d/lines.jsonl")):
+        code, _, err = run_cli([cmd, bad, "--out", tmp_path / out, "--quiet"], capsys)
+        assert code == 2 and "bad.clf:1:" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.clf"]
+
+
+def test_stale_folders_of_other_machines_are_left_alone(tmp_path, capsys):
+    foreign = tmp_path / f".run{PARTIAL_MARK}999999999-zzzzzz-abc"
+    foreign.mkdir()
+    dead_here = tmp_path / f".run{PARTIAL_MARK}999999999-{atomic._HOST}-abc"
+    dead_here.mkdir()
+    code, _, err = run_cli(
+        ["slam", DEMO_LOG, "--out", tmp_path / "run", "--max-scans", "5", "--quiet"], capsys
+    )
+    assert code == 0, err
+    assert foreign.is_dir() and not dead_here.exists()

@@ -14,8 +14,9 @@ output is a file (``lineslam extract``) does the same with temporary files besid
   serialised (a lock on the parent folder), so the target ends up holding one run's folder
   whole, never a mix;
 * a run killed outright (``SIGKILL``, power loss) leaves its temporary folder
-  ``.NAME.partial-PID-XXXX`` beside the target (the target itself untouched); the next run
-  into the same target removes such folders whose process is gone.
+  ``.NAME.partial-PID-HOST-XXXX`` beside the target (the target itself untouched); the next
+  run into the same target on the same machine removes such folders whose process is gone;
+* parent folders created for a run that then fails are removed again (if still empty).
 
 Nothing is copied: results are written once, where they will stay, and renamed.
 
@@ -23,9 +24,10 @@ Refused before anything is read or written (:class:`~slam.errors.OutputError`, o
 the path): an empty path; a target that exists and is not a folder (a file, ``/dev/null``) or,
 for files, not a regular file; a folder that is neither empty nor a lineslam results folder
 (one holding a ``config.toml`` written by lineslam), so that ``--out ~`` cannot wipe a home
-folder; the current folder or one holding it; a parent that is a file; a target that is, or
-holds, the command's input.  Errors of the file system while writing (read-only, full disk,
-permission denied) become an :class:`~slam.errors.OutputError` naming the target.
+folder; the current folder or one holding it; a mount point; a symbolic link; a parent that
+is a file; a target that is, or holds, the command's input.  Errors of the file system while
+writing (read-only, full disk, permission denied) become an :class:`~slam.errors.OutputError`
+naming the target.
 """
 
 from __future__ import annotations
@@ -207,11 +209,42 @@ def _output_error(exc: OSError, shown: str) -> OutputError:
     return OutputError(shown, f"cannot write: {reason}")
 
 
-def _mkdirs(folder: Path, shown: str) -> None:
+def _mkdirs(folder: Path, shown: str) -> list[Path]:
+    """Create ``folder`` and its missing parents; return those created, outermost first."""
+    missing = []
+    here = folder
+    while not here.exists():
+        missing.append(here)
+        here = here.parent
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise _output_error(exc, shown) from None
+    return missing[::-1]
+
+
+def _remove_created(created: list[Path]) -> None:
+    """Remove the folders :func:`_mkdirs` created, if still empty (a failed run)."""
+    for folder in reversed(created):
+        try:
+            folder.rmdir()
+        except OSError:
+            return
+
+
+def _temp_prefix(name: str) -> str:
+    """``.NAME.partial-PID-HOST-``: whose temporary file or folder it is."""
+    return f".{name}{PARTIAL_MARK}{os.getpid()}-{_HOST}-"
+
+
+def _host_tag() -> str:
+    import hashlib
+    import socket
+
+    return hashlib.blake2s(socket.gethostname().encode(), digest_size=3).hexdigest()
+
+
+_HOST = _host_tag()
 
 
 def _pid_alive(pid: int) -> bool:
@@ -225,7 +258,7 @@ def _pid_alive(pid: int) -> bool:
 
 
 def _remove_stale(parent: Path, name: str) -> None:
-    """Remove ``.NAME.partial-PID-*`` left by killed runs (their process is gone)."""
+    """Remove ``.NAME.partial-PID-HOST-*`` left by killed runs of this host (process gone)."""
     prefix = f".{name}{PARTIAL_MARK}"
     try:
         entries = list(os.scandir(parent))
@@ -234,8 +267,10 @@ def _remove_stale(parent: Path, name: str) -> None:
     for entry in entries:
         if not entry.name.startswith(prefix):
             continue
-        pid_text = entry.name[len(prefix) :].split("-", 1)[0]
-        if not pid_text.isdigit() or int(pid_text) == os.getpid() or _pid_alive(int(pid_text)):
+        pid_text, host, *_ = [*entry.name[len(prefix) :].split("-", 2), "", ""]
+        if not pid_text.isdigit() or host != _HOST:
+            continue  # not ours to judge (e.g. written from another machine)
+        if int(pid_text) == os.getpid() or _pid_alive(int(pid_text)):
             continue
         if entry.is_dir(follow_symlinks=False):
             shutil.rmtree(entry.path, ignore_errors=True)
@@ -303,9 +338,7 @@ def _replace_dir(work: Path, target: Path, shown: str) -> None:
         if _exchange(work, target):
             shutil.rmtree(work, ignore_errors=True)  # now holds the old folder
             return
-        old = target.with_name(
-            f".{target.name}{PARTIAL_MARK}{os.getpid()}-old-{secrets.token_hex(4)}"
-        )
+        old = target.with_name(f"{_temp_prefix(target.name)}old-{secrets.token_hex(4)}")
         os.rename(target, old)
         try:
             os.rename(work, target)
@@ -353,14 +386,14 @@ def staged_dir(
     """
     shown = _shown(target)
     path = check_output_dir(target, inputs)
-    _mkdirs(path.parent, shown)
+    created = _mkdirs(path.parent, shown)
     _remove_stale(path.parent, path.name)
     try:
-        work = Path(
-            tempfile.mkdtemp(prefix=f".{path.name}{PARTIAL_MARK}{os.getpid()}-", dir=path.parent)
-        )
+        work = Path(tempfile.mkdtemp(prefix=_temp_prefix(path.name), dir=path.parent))
     except OSError as exc:
+        _remove_created(created)
         raise _output_error(exc, shown) from None
+    done = False
     try:
         for name in reuse:
             _link_tree(path / name, work / name)
@@ -377,9 +410,12 @@ def staged_dir(
             except OSError as exc:
                 raise _output_error(exc, shown) from None
             _COMMITTED.append(path)
+            done = True
     finally:
         if work.exists():
             shutil.rmtree(work, ignore_errors=True)
+        if not done:
+            _remove_created(created)
 
 
 def _link_tree(source: Path, dest: Path) -> None:
@@ -424,14 +460,14 @@ def staged_files(
     if len({str(p) for p in paths}) != len(paths):
         raise OutputError(shown[0], "the same file is named twice")
     work: list[Path] = []
+    created: list[Path] = []
+    done = False
     try:
         for p, s in zip(paths, shown, strict=True):
-            _mkdirs(p.parent, s)
+            created += _mkdirs(p.parent, s)
             _remove_stale(p.parent, p.name)
             try:
-                fd, name = tempfile.mkstemp(
-                    prefix=f".{p.name}{PARTIAL_MARK}{os.getpid()}-", dir=p.parent
-                )
+                fd, name = tempfile.mkstemp(prefix=_temp_prefix(p.name), dir=p.parent)
             except OSError as exc:
                 raise _output_error(exc, s) from None
             os.close(fd)
@@ -457,10 +493,13 @@ def staged_files(
                     raise _output_error(exc, s) from None
                 if record:
                     _COMMITTED.append(p)
+            done = True
     finally:
         for w in work:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(w)
+        if not done:
+            _remove_created(created)
 
 
 @contextlib.contextmanager
@@ -479,14 +518,14 @@ def staged_into(
         raise OutputError(shown, "exists and is not a folder")
     _check_parent(path, shown)
     _check_inputs(path, inputs, shown)
-    _mkdirs(path.parent, shown)
+    created = _mkdirs(path.parent, shown)
     _remove_stale(path.parent, path.name)
     try:
-        work = Path(
-            tempfile.mkdtemp(prefix=f".{path.name}{PARTIAL_MARK}{os.getpid()}-", dir=path.parent)
-        )
+        work = Path(tempfile.mkdtemp(prefix=_temp_prefix(path.name), dir=path.parent))
     except OSError as exc:
+        _remove_created(created)
         raise _output_error(exc, shown) from None
+    done = False
     try:
         try:
             yield work
@@ -505,8 +544,11 @@ def staged_into(
             except OSError as exc:
                 raise _output_error(exc, shown) from None
             _COMMITTED.append(path)
+            done = True
     finally:
         shutil.rmtree(work, ignore_errors=True)
+        if not done:
+            _remove_created(created)
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
