@@ -9,8 +9,9 @@ solution, as in the later iterations of a solve):
   (``linearize_line_factors``, robust IRLS weights included) and the construction of the
   ``gtsam.JacobianFactor`` objects, each per line factor;
 * ``lin/f``: ``BatchSolver.linearize`` of the whole graph, per factor (line factors +
-  odometry factors + prior, the count used by every ``/f`` column); ``elim``: solving that linear system (``GaussianFactorGraph.optimize``, COLAMD
-  ordering computed outside the timing); ``iter/f``: the two together, one whole Gauss-Newton
+  odometry factors + prior, the count used by every ``/f`` column); ``elim``: solving that
+  linear system (``GaussianFactorGraph.optimize``, COLAMD ordering computed outside the
+  timing); ``iter/f``: the two together, one whole Gauss-Newton
   iteration of the batch back-end, per factor;
 * ``CF GN/f``: the same Gauss-Newton iteration (``NonlinearFactorGraph.linearize`` then
   ``GaussianFactorGraph.optimize``, same ordering method) over ``gtsam.CustomFactor`` line
