@@ -695,7 +695,7 @@ def _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag):
 @jit
 def _cell_key(cells, c, n_rho):
     """Heap key of cell ``c``: more votes first, then the first cell in (angle, distance) order."""
-    return cells[c, 2] * 16777216 - (cells[c, 0] * n_rho + cells[c, 1])
+    return np.int64(cells[c, 2]) * 16777216 - (np.int64(cells[c, 0]) * n_rho + cells[c, 1])
 
 
 @jit
@@ -1234,9 +1234,12 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
     bins = np.empty(nmax, dtype=np.int32)
     cnt_row = np.zeros(n_rho, dtype=np.int64)
     id_row = np.full(n_rho, -1, dtype=np.int64)
-    cells = np.empty((n_beta * nmax, 3), dtype=np.int64)
-    heap = np.empty(n_beta * nmax + 1, dtype=np.int64)
-    hcell = np.empty(n_beta * nmax + 1, dtype=np.int64)
+    # a cell kept has at least hough_min_votes points of its angle row: at most n / min_votes
+    # per row (small buffers: no large allocation per call)
+    cap_cells = n_beta * (nmax // max(1, ip[I_MINVOTES]) + 1) + 1
+    cells = np.empty((cap_cells, 3), dtype=np.int32)
+    heap = np.empty(cap_cells, dtype=np.int64)
+    hcell = np.empty(cap_cells, dtype=np.int32)
     alive = np.empty(nmax, dtype=np.bool_)
     alist = np.empty(nmax, dtype=np.int64)
     grp = np.empty(nmax, dtype=np.bool_)
