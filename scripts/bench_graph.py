@@ -2,8 +2,9 @@
 
 Side by side, in one run, at 250, 1000 and 4000 poses:
 
-What each column times (wall clock, best of several repetitions; the problem is at its
-solution, as in the later iterations of a solve):
+What each column times (process CPU time, all threads, best of several repetitions, so that
+other jobs on a shared machine change the figures little; iSAM2 in wall-clock time; the problem
+is at its solution, as in the later iterations of a solve):
 
 * ``numpy`` / ``+JacF``: the fast path's linearisation of every line factor in numpy
   (``linearize_line_factors``, robust IRLS weights included) and the construction of the
@@ -31,9 +32,12 @@ Prints the table and the growth of each per-factor cost from the smallest to the
 from __future__ import annotations
 
 import argparse
+import os
+import platform
 import time
 from collections.abc import Callable
 from functools import partial
+from pathlib import Path
 
 import gtsam
 import numpy as np
@@ -65,11 +69,12 @@ def one_factor_each(
 
 
 def best_of(fn: Callable[[], object], repeat: int) -> float:
+    """Least process CPU time (s) of ``repeat`` calls of ``fn``."""
     times = []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         fn()
-        times.append(time.perf_counter() - t0)
+        times.append(time.process_time() - t0)
     return min(times)
 
 
@@ -148,6 +153,16 @@ def isam2_feed(src: LineGraph) -> tuple[float, float, float]:
     )
 
 
+def cpu_model() -> str:
+    """CPU model and logical CPU count (Linux), for the record."""
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:
+        return platform.machine()
+    models = [ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")]
+    return f"{models[0] if models else platform.machine()}, {len(models)} logical CPUs"
+
+
 def gauss_newton_step(
     linearize: Callable[[], gtsam.GaussianFactorGraph], ordering: gtsam.Ordering
 ) -> gtsam.VectorValues:
@@ -160,6 +175,7 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[250, 1000, 4000])
     parser.add_argument("--no-isam2", action="store_true")
     args = parser.parse_args()
+    print(f"machine: {cpu_model()}; load average {os.getloadavg()[0]:.2f} at start", flush=True)
     rows = []
     config = SolverConfig()
     for n in args.sizes:
