@@ -1,0 +1,805 @@
+"""Variants of the catalogued logs that the system was never tuned on, and how a run is scored.
+
+Main entry points::
+
+    VARIANTS                                   # the table: name, dataset, bar (m), transform
+    make_variant(variant, cache_dir) -> VariantFiles      # log + relations, generated once
+    score_run(trajectory, frame, files) -> RunScore       # relations metric on every relation
+    fill_dropped_scans(trajectory, odometry) -> Trajectory
+
+Transforms
+----------
+Each transform rewrites a CARMEN log (``FLASER`` + ``ODOM`` lines) text line by text line;
+time stamps, comments and every field it does not name are left as logged, so the log's
+relations still apply (rewritten only by :class:`MoveOdometryToCentre`):
+
+:class:`DecimateScans`
+    Keep every ``every``-th ``FLASER`` line, counting from the ``start``-th (0-based); every
+    ``ODOM`` line is kept.
+:class:`ClipRanges`
+    Readings above ``limit_m`` become the log's no-return value (``no_return_m``); the scans
+    are written as ``ROBOTLASER1`` lines whose maximum range is that value (a ``FLASER`` line
+    cannot say which reading means no return), with the source's beam layout.
+:class:`BiasOdometry`
+    The ``ODOM`` lines' poses are re-integrated with every increment ``(dx, dy, dθ)`` (in the
+    frame of the previous ``ODOM`` pose) changed to ``(s·dx, s·dy, dθ + b·|dθ|)``; a
+    ``FLASER`` line's odometry pose (``odom_x odom_y odom_theta``) is the last rewritten
+    ``ODOM`` pose composed with its own increment from that line, biased the same way (the
+    reader's model of laser lines between odometry messages), and its laser pose keeps its
+    logged offset from the odometry pose; an ``ODOM`` line's ``tv`` becomes ``s·tv`` and
+    ``rv`` becomes ``rv + b·|rv|``.
+:class:`MoveOdometryToCentre`
+    The laser poses of the ``FLASER`` lines stay; the odometry poses (``FLASER`` ``odom_*`` and
+    ``ODOM`` ``x y theta``) move to a robot centre ``pose_laser_centre`` from the laser
+    (``centre = laser ∘ T``), and the relations are rewritten for the centre,
+    ``rel_c = T⁻¹ ∘ rel_l ∘ T``.  The source's laser and odometry poses must coincide (true of
+    the three public logs), so an ``ODOM`` pose is a laser pose.
+:class:`DecimateBeams`
+    Every ``every``-th beam from the first; the scans are written as ``ROBOTLASER1`` lines,
+    which state their geometry (start angle, field of view ``= step·(n − 1)``, angular
+    resolution, maximum range); laser and robot pose are the ``FLASER`` line's two poses.
+
+A variant log is a log the dataset catalogue does not know: it is named after the variant
+(``<cache>/<variant>-<key>/aces-every3.clf``), so none of the catalogue's facts about the source's
+sensor apply to it (the beam layout of ``FLASER`` lines then follows CARMEN's rule, which gives
+the same bearings for the three logs; the range limit is the reader's default 80 m, so ACES's
+clipped 50.00 m readings read as returns; fr079's 0.04 m mounting is not applied).  With
+``catalogued_name=True`` it keeps the source's file name (``.../aces.clf``) and the catalogue's
+facts apply as to the original.  The relations file is written beside it.  Variants are cached
+under a key made of the source log's sha256, the transform's parameters and the naming.
+
+Scoring
+-------
+:func:`score_run` evaluates a run's ``trajectory.tum`` (in the frame the run reports; never
+converted, so a run that reports the wrong frame is penalised) with the Kümmerle relations
+metric on **every** relation (``max_unmatched_fraction = 0``).  A scan that a variant dropped
+takes the pose of the last kept scan composed with the odometry between the two, taken from the
+source log: ``pose(dropped) = pose(kept) ∘ odom(kept)⁻¹ ∘ odom(dropped)``
+(:func:`fill_dropped_scans`; the odometry of the frame the run reports, as logged:
+``odometry_sign = "logged"``, the poses of the log's lines; ``"velocity"`` would take the
+odometry as the estimators read it, with fr079's hidden reversing repaired).  The odometry
+baseline is the variant's own logged odometry in the frame of the relations: base poses for the
+centre relations of :class:`MoveOdometryToCentre`, laser poses otherwise (filled in the same way
+where scans were dropped, i.e. the source's odometry).  Both are also scored on the relations
+with ``|t2 − t1| < 10 s``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Iterator
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slam.errors import ConfigError, EvaluationError, InputError, LogFormatError
+from slam.evaluation.relations_metric import RelationsMetric, relations_metric
+from slam.evaluation.timestamps import match_timestamps
+from slam.geometry import pose_between, pose_compose, pose_inverse
+from slam.io._text import iter_text_lines
+from slam.io.carmen import scan_trajectory
+from slam.io.catalog import resolve_log, sha256_file
+from slam.io.relations import Relations, read_relations, write_relations
+from slam.io.trajectory import Trajectory
+
+__all__ = [
+    "SHORT_RELATION_S",
+    "VARIANTS",
+    "BiasOdometry",
+    "ClipRanges",
+    "DecimateBeams",
+    "DecimateScans",
+    "LogTransform",
+    "MoveOdometryToCentre",
+    "RunScore",
+    "Variant",
+    "VariantFiles",
+    "default_cache_dir",
+    "fill_dropped_scans",
+    "make_variant",
+    "rewrite_lines",
+    "score_run",
+    "variant_by_name",
+]
+
+FloatArray = NDArray[np.float64]
+Frame = Literal["laser", "base"]
+
+#: Relations with ``|t2 − t1|`` below this (s) are also scored on their own.
+SHORT_RELATION_S = 10.0
+#: Bump when a transform's output changes for the same parameters (invalidates the cache).
+MAKER_VERSION = 2
+_STAMP_TOL_S = 1e-5
+
+
+# ---------------------------------------------------------------------------------------------
+# Lines of a CARMEN log
+# ---------------------------------------------------------------------------------------------
+_OTHER_LASERS = ("RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
+
+
+def _flaser_beams(tokens: list[str], where: str) -> int:
+    """Beam count of a ``FLASER`` line whose fields are all there (else LogFormatError)."""
+    try:
+        n = int(tokens[1])
+    except (IndexError, ValueError):
+        raise LogFormatError("FLASER without a beam count", where) from None
+    if n < 1 or len(tokens) < n + 9:
+        raise LogFormatError(f"FLASER with {n} readings has only {len(tokens)} fields", where)
+    return n
+
+
+def _pose(tokens: list[str], start: int, where: str) -> FloatArray:
+    try:
+        return np.array([float(v) for v in tokens[start : start + 3]])
+    except ValueError:
+        raise LogFormatError("pose field is not a number", where) from None
+
+
+def _pose_tokens(pose: FloatArray) -> list[str]:
+    return [f"{pose[0]:.6f}", f"{pose[1]:.6f}", f"{pose[2]:.6f}"]
+
+
+def _join(tokens: list[str]) -> str:
+    return " ".join(tokens) + "\n"
+
+
+def _robotlaser(
+    tokens: list[str], n: int, readings: list[str], first_rad: float, step_rad: float, max_m: float
+) -> str:
+    """A ``FLASER`` line (``tokens``, ``n`` readings) as ``ROBOTLASER1`` with ``readings``.
+
+    Field of view ``= step·(len(readings) − 1)``; laser and robot pose are the ``FLASER``
+    line's ``x y theta`` and ``odom_x odom_y odom_theta``; no remissions; velocities, safety
+    distances and turn axis 0; time stamp, hostname and logger time stamp as logged.
+    """
+    m = len(readings)
+    out = ["ROBOTLASER1", "0", repr(first_rad), repr(step_rad * (m - 1)), repr(step_rad)]
+    out += [repr(max_m), "0", "0", str(m), *readings, "0", *tokens[2 + n : 8 + n]]
+    out += ["0", "0", "0", "0", "0", *tokens[8 + n :]]
+    return _join(out)
+
+
+@dataclass
+class _Pass:
+    """What a transform carries from line to line during one pass over a log."""
+
+    laser_lines: int = 0
+    #: Odometry pose of the last ``ODOM`` line (else of the last laser line, while no ``ODOM``
+    #: line has come), as logged and as rewritten.
+    odometry: tuple[FloatArray, FloatArray] | None = None
+    odom_lines: int = 0
+
+
+class LogTransform:
+    """A rewrite of a ``FLASER`` + ``ODOM`` CARMEN log, line by line (module docstring).
+
+    Subclasses are frozen dataclasses (their fields are the parameters, which key the cache)
+    and rewrite one message at a time (``_line``); what they carry from line to line lives in
+    the pass's state, so one transform can rewrite several logs, also at once.
+    """
+
+    kind: ClassVar[str] = ""
+    #: Frame of the poses the (rewritten) relations refer to.
+    relations_frame: ClassVar[Frame] = "laser"
+
+    def params(self) -> dict[str, Any]:
+        """The parameters, with the transform's kind (JSON-ready)."""
+        return {"kind": self.kind, **asdict(self)}  # type: ignore[call-overload]
+
+    def rewrite(self, lines: Iterable[tuple[int, str]], source: str) -> Iterator[str]:
+        """The variant's lines (newline-terminated) from ``(line_number, text)`` of the source.
+
+        Raises
+        ------
+        LogFormatError
+            A malformed ``FLASER``/``ODOM`` line (file and line named), or a laser message
+            other than ``FLASER``.
+        """
+        state = _Pass()
+        for number, text in lines:
+            tokens = text.split()
+            if not tokens or tokens[0].startswith("#"):
+                yield text if text.endswith("\n") else text + "\n"
+                continue
+            where = f"{source}:{number}"
+            if tokens[0] in _OTHER_LASERS:
+                raise LogFormatError(f"{tokens[0]}: the variants rewrite FLASER logs only", where)
+            yield from self._line(tokens, where, state)
+
+    def _line(
+        self, tokens: list[str], where: str, state: _Pass
+    ) -> Iterator[str]:  # pragma: no cover
+        raise NotImplementedError
+
+    def relations(self, relations: Relations) -> Relations:
+        """The relations of the variant (unchanged unless the transform moves the frame)."""
+        return relations
+
+
+def rewrite_lines(
+    transform: LogTransform, lines: Iterable[str], source: str = "<lines>"
+) -> list[str]:
+    """``transform`` applied to a log given as text lines (for tests and small logs)."""
+    return list(transform.rewrite(enumerate(lines, start=1), source))
+
+
+@dataclass(frozen=True)
+class DecimateScans(LogTransform):
+    """Keep every ``every``-th ``FLASER`` line from the ``start``-th (0-based); all ``ODOM``."""
+
+    every: int
+    start: int = 0
+    kind: ClassVar[str] = "decimate-scans"
+
+    def __post_init__(self) -> None:
+        if self.every < 1 or not 0 <= self.start < self.every:
+            raise ConfigError(f"need every >= 1 and 0 <= start < every, got {self}")
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if tokens[0] != "FLASER":
+            yield _join(tokens)
+            return
+        _flaser_beams(tokens, where)
+        index = state.laser_lines
+        state.laser_lines += 1
+        if index >= self.start and (index - self.start) % self.every == 0:
+            yield _join(tokens)
+
+
+@dataclass(frozen=True)
+class ClipRanges(LogTransform):
+    """Readings above ``limit_m`` become ``no_return_m``; written as ``ROBOTLASER1``.
+
+    A ``FLASER`` line cannot say which reading means "no return", so the variant's scans are
+    written as ``ROBOTLASER1`` lines whose maximum range is ``no_return_m`` (the source's
+    no-return reading), with the source's beam layout ``first_angle_rad``, ``step_rad``.
+    """
+
+    limit_m: float
+    no_return_m: float
+    first_angle_rad: float
+    step_rad: float
+    kind: ClassVar[str] = "clip-ranges"
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.limit_m < self.no_return_m and self.step_rad > 0.0):
+            raise ConfigError(f"need 0 < limit_m < no_return_m and step_rad > 0, got {self}")
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if tokens[0] != "FLASER":
+            yield _join(tokens)
+            return
+        n = _flaser_beams(tokens, where)
+        token = f"{self.no_return_m:.2f}"
+        if float(token) != self.no_return_m:
+            token = repr(self.no_return_m)
+        readings = tokens[2 : 2 + n]
+        try:
+            ranges = [float(v) for v in readings]
+        except ValueError:
+            raise LogFormatError("range reading is not a number", where) from None
+        readings = [token if r > self.limit_m else v for r, v in zip(ranges, readings, strict=True)]
+        yield _robotlaser(
+            tokens, n, readings, self.first_angle_rad, self.step_rad, self.no_return_m
+        )
+
+
+@dataclass(frozen=True)
+class BiasOdometry(LogTransform):
+    """Odometry re-integrated with ``(dx, dy, dθ) → (s·dx, s·dy, dθ + b·|dθ|)``.
+
+    The ``ODOM`` lines are the odometry's chain: each one's increment from the previous
+    ``ODOM`` line is biased and integrated.  A ``FLASER`` line's odometry pose is the
+    rewritten pose of the last ``ODOM`` line composed with its own biased increment from that
+    line (as :func:`slam.io.carmen.velocity_signed_scans` reads laser lines); before the first
+    ``ODOM`` line (or in a log without any) laser lines chain on each other.
+    """
+
+    translation_scale: float
+    heading_bias: float
+    kind: ClassVar[str] = "bias-odometry"
+
+    def _biased(
+        self, previous: tuple[FloatArray, FloatArray] | None, raw: FloatArray
+    ) -> FloatArray:
+        if previous is None:
+            return raw.copy()
+        d = pose_between(previous[0], raw)
+        biased = np.array(
+            [
+                self.translation_scale * d[0],
+                self.translation_scale * d[1],
+                d[2] + self.heading_bias * abs(d[2]),
+            ]
+        )
+        return pose_compose(previous[1], biased)
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if tokens[0] == "ODOM":
+            if len(tokens) < 8:
+                raise LogFormatError("ODOM with fewer than 8 fields", where)
+            raw = _pose(tokens, 1, where)
+            new = self._biased(state.odometry, raw)
+            state.odometry = (raw, new)
+            state.odom_lines += 1
+            tokens[1:4] = _pose_tokens(new)
+            try:
+                tv, rv = float(tokens[4]), float(tokens[5])
+            except ValueError:
+                raise LogFormatError("ODOM tv or rv is not a number", where) from None
+            tokens[4] = f"{self.translation_scale * tv:.6f}"
+            tokens[5] = f"{rv + self.heading_bias * abs(rv):.6f}"
+        elif tokens[0] == "FLASER":
+            n = _flaser_beams(tokens, where)
+            laser = _pose(tokens, 2 + n, where)
+            base = _pose(tokens, 5 + n, where)
+            new = self._biased(state.odometry, base)
+            if state.odom_lines == 0:
+                state.odometry = (base, new)
+            tokens[2 + n : 5 + n] = _pose_tokens(pose_compose(new, pose_between(base, laser)))
+            tokens[5 + n : 8 + n] = _pose_tokens(new)
+        yield _join(tokens)
+
+
+@dataclass(frozen=True)
+class MoveOdometryToCentre(LogTransform):
+    """Odometry poses moved to ``laser ∘ pose_laser_centre``; relations rewritten for it."""
+
+    pose_laser_centre: tuple[float, float, float]
+    kind: ClassVar[str] = "move-odometry"
+    relations_frame: ClassVar[Frame] = "base"
+    #: Largest difference between a source line's laser and odometry pose (m or rad).
+    same_pose_tol: ClassVar[float] = 1e-6
+
+    @property
+    def _t(self) -> FloatArray:
+        return np.asarray(self.pose_laser_centre, dtype=float)
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if tokens[0] == "ODOM":
+            if len(tokens) < 8:
+                raise LogFormatError("ODOM with fewer than 8 fields", where)
+            tokens[1:4] = _pose_tokens(pose_compose(_pose(tokens, 1, where), self._t))
+        elif tokens[0] == "FLASER":
+            n = _flaser_beams(tokens, where)
+            laser = _pose(tokens, 2 + n, where)
+            base = _pose(tokens, 5 + n, where)
+            d = pose_between(base, laser)
+            if np.abs(d).max() > self.same_pose_tol:
+                raise LogFormatError(
+                    "laser and odometry poses differ; the mount variant needs a log whose "
+                    "laser poses are its odometry poses",
+                    where,
+                )
+            tokens[5 + n : 8 + n] = _pose_tokens(pose_compose(laser, self._t))
+        yield _join(tokens)
+
+    def relations(self, relations: Relations) -> Relations:
+        """``T⁻¹ ∘ rel ∘ T`` for every relation (planar; z, roll, pitch kept)."""
+        t = np.broadcast_to(self._t, relations.poses.shape)
+        poses = pose_compose(pose_compose(pose_inverse(t), relations.poses), t)
+        return Relations(
+            relations.t1,
+            relations.t2,
+            poses,
+            relations.z,
+            relations.roll,
+            relations.pitch,
+            relations.line_numbers,
+        )
+
+
+@dataclass(frozen=True)
+class DecimateBeams(LogTransform):
+    """Every ``every``-th beam from the first, written as ``ROBOTLASER1`` with its geometry.
+
+    ``first_angle_rad``, ``step_rad`` and ``max_range_m`` are those of the source's ``FLASER``
+    lines (the catalogue's laser facts).
+    """
+
+    every: int
+    first_angle_rad: float
+    step_rad: float
+    max_range_m: float
+    kind: ClassVar[str] = "decimate-beams"
+
+    def __post_init__(self) -> None:
+        if self.every < 1 or not (self.step_rad > 0.0 and self.max_range_m > 0.0):
+            raise ConfigError(f"need every >= 1, step_rad > 0, max_range_m > 0, got {self}")
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if tokens[0] != "FLASER":
+            yield _join(tokens)
+            return
+        n = _flaser_beams(tokens, where)
+        kept = tokens[2 : 2 + n : self.every]
+        step = self.every * self.step_rad
+        yield _robotlaser(tokens, n, kept, self.first_angle_rad, step, self.max_range_m)
+
+
+# ---------------------------------------------------------------------------------------------
+# The table of variants
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Variant:
+    """One row of the robustness table.
+
+    Attributes
+    ----------
+    name : str
+        Row name (``--only``).
+    dataset : str
+        Catalogued source log.
+    bar_m : float
+        Mean absolute translation error (m) the run should stay within.
+    transform : LogTransform or None
+        ``None``: the log as it is.
+    description : str
+        One line for the table's notes.
+    """
+
+    name: str
+    dataset: str
+    bar_m: float
+    transform: LogTransform | None
+    description: str = ""
+
+    def params(self) -> dict[str, Any]:
+        """JSON-ready description (name, dataset, bar, transform parameters)."""
+        return {
+            "name": self.name,
+            "dataset": self.dataset,
+            "bar_m": self.bar_m,
+            "transform": None if self.transform is None else self.transform.params(),
+            "description": self.description,
+        }
+
+
+_HALF_PI = math.pi / 2.0
+_FR079_STEP_RAD = math.radians(0.5)
+_ONE_DEG_RAD = math.radians(1.0)
+_FR079_NO_RETURN_M = 81.91
+_ACES_NO_RETURN_M = 50.0
+
+VARIANTS: tuple[Variant, ...] = (
+    Variant("aces-every3", "aces", 0.08, DecimateScans(3), "every 3rd FLASER line"),
+    Variant("aces-every4", "aces", 0.08, DecimateScans(4), "every 4th FLASER line"),
+    Variant("fr079-every4-from0", "fr079", 0.10, DecimateScans(4, 0), "every 4th from line 0"),
+    Variant("fr079-every4-from1", "fr079", 0.10, DecimateScans(4, 1), "every 4th from line 1"),
+    Variant("fr079-every4-from2", "fr079", 0.10, DecimateScans(4, 2), "every 4th from line 2"),
+    Variant(
+        "aces-max8m",
+        "aces",
+        0.08,
+        ClipRanges(8.0, _ACES_NO_RETURN_M, -_HALF_PI, _ONE_DEG_RAD),
+        "readings > 8 m set to no return (50.00), ROBOTLASER1",
+    ),
+    Variant(
+        "fr079-max8m",
+        "fr079",
+        0.10,
+        ClipRanges(8.0, _FR079_NO_RETURN_M, -_HALF_PI, _FR079_STEP_RAD),
+        "readings > 8 m set to no return (81.91), ROBOTLASER1",
+    ),
+    Variant(
+        "fr079-odom-bias",
+        "fr079",
+        0.10,
+        BiasOdometry(1.02, 0.02),
+        "odometry translation x1.02, heading increments dθ + 0.02|dθ|",
+    ),
+    Variant(
+        "aces-mount-0.2",
+        "aces",
+        0.05,
+        MoveOdometryToCentre((-0.2, 0.0, 0.0)),
+        "laser 0.2 m ahead of the odometry centre; relations for the centre",
+    ),
+    Variant(
+        "fr079-beams90",
+        "fr079",
+        0.10,
+        DecimateBeams(4, -_HALF_PI, _FR079_STEP_RAD, _FR079_NO_RETURN_M),
+        "every 4th beam (90 beams, 2°), ROBOTLASER1",
+    ),
+    Variant(
+        "fr079-beams180",
+        "fr079",
+        0.10,
+        DecimateBeams(2, -_HALF_PI, _FR079_STEP_RAD, _FR079_NO_RETURN_M),
+        "every 2nd beam (180 beams, 1°), ROBOTLASER1",
+    ),
+    Variant("intel", "intel", 0.03, None, "unmodified"),
+    Variant("aces", "aces", 0.045, None, "unmodified"),
+    Variant("fr079", "fr079", 0.08, None, "unmodified"),
+)
+
+
+def variant_by_name(name: str) -> Variant:
+    """The row of :data:`VARIANTS` called ``name``."""
+    for variant in VARIANTS:
+        if variant.name == name:
+            return variant
+    raise ConfigError(f"unknown variant {name!r}; known: {', '.join(v.name for v in VARIANTS)}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Making (and caching) a variant
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class VariantFiles:
+    """The files of a variant.
+
+    Attributes
+    ----------
+    variant : Variant
+    log : Path
+        The variant log (the source log itself for an unmodified row).
+    relations : Path
+        Its relations (rewritten where the transform moves the frame).
+    source_log : Path
+        The catalogued log it was made from (odometry of dropped scans comes from here).
+    """
+
+    variant: Variant
+    log: Path
+    relations: Path
+    source_log: Path
+
+
+def default_cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/lineslam/variants``, else ``~/.cache/lineslam/variants``."""
+    base = os.environ.get("XDG_CACHE_HOME")
+    return (Path(base) if base else Path.home() / ".cache") / "lineslam" / "variants"
+
+
+def _cache_key(source_sha256: str, transform: LogTransform, catalogued_name: bool) -> str:
+    text = json.dumps(
+        {
+            "source": source_sha256,
+            "version": MAKER_VERSION,
+            "catalogued_name": catalogued_name,
+            **transform.params(),
+        },
+        sort_keys=True,
+    )
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def make_variant(
+    variant: Variant,
+    cache_dir: str | Path | None = None,
+    *,
+    root: str | Path | None = None,
+    catalogued_name: bool = False,
+) -> VariantFiles:
+    """The variant's log and relations, generated into the cache unless already there.
+
+    Parameters
+    ----------
+    variant
+        A row of :data:`VARIANTS` (or any :class:`Variant`).
+    cache_dir
+        Folder of generated variants (default :func:`default_cache_dir`); one sub-folder per
+        variant and source checksum.
+    root
+        Data root for the catalogued name (default: the catalogue's).
+    catalogued_name
+        Name the variant log as its source (the catalogue's facts then apply to it); by
+        default it is named after the variant, a log the catalogue does not know.
+
+    Raises
+    ------
+    DatasetError
+        The dataset is unknown or missing.
+    InputError
+        It has no relations file.
+    """
+    resolved = resolve_log(variant.dataset, root=root)
+    if resolved.relations is None:
+        raise InputError(f"{variant.dataset}: no relations file, cannot score its variants")
+    if variant.transform is None:
+        return VariantFiles(variant, resolved.log, resolved.relations, resolved.log)
+    transform = variant.transform
+    cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    key = _cache_key(sha256_file(resolved.log), transform, catalogued_name)
+    folder = cache / f"{variant.name}-{key}"
+    if catalogued_name:
+        log, relations = folder / resolved.log.name, folder / resolved.relations.name
+    else:
+        log, relations = folder / f"{variant.name}.clf", folder / f"{variant.name}.relations"
+    if (folder / "variant.json").is_file():
+        return VariantFiles(variant, log, relations, resolved.log)
+    cache.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{variant.name}-", dir=cache))
+    try:
+        source = str(resolved.log)
+        with (tmp / log.name).open("w", encoding="utf-8") as out:
+            out.write(f"# lineslam variant {variant.name}: {json.dumps(transform.params())}\n")
+            out.writelines(transform.rewrite(iter_text_lines(resolved.log), source))
+        if type(transform).relations is LogTransform.relations:
+            shutil.copyfile(resolved.relations, tmp / relations.name)
+        else:
+            rel = transform.relations(read_relations(resolved.relations))
+            write_relations(tmp / relations.name, rel.t1, rel.t2, rel.poses)
+        info = {**variant.params(), "source": source, "key": key, "log": log.name}
+        (tmp / "variant.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
+        try:
+            tmp.rename(folder)
+        except OSError:  # made meanwhile by another process: keep theirs
+            if not (folder / "variant.json").is_file():
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return VariantFiles(variant, log, relations, resolved.log)
+
+
+# ---------------------------------------------------------------------------------------------
+# Scoring
+# ---------------------------------------------------------------------------------------------
+def fill_dropped_scans(trajectory: Trajectory, odometry: Trajectory) -> Trajectory:
+    """A pose for every scan of ``odometry``: the trajectory's, else carried by odometry.
+
+    Parameters
+    ----------
+    trajectory
+        Estimated poses of (some of) the scans, matched to ``odometry`` by exact time stamp.
+    odometry
+        The odometry pose of every scan of the full log, in file order, in the trajectory's
+        frame.
+
+    Returns
+    -------
+    Trajectory
+        ``odometry``'s time stamps; a scan in ``trajectory`` keeps its estimated pose, any
+        other scan ``i`` gets ``pose(k) ∘ odom(k)⁻¹ ∘ odom(i)`` with ``k`` the last scan before it
+        (file order) that the trajectory has, or the first one after it when there is none
+        before.
+
+    Raises
+    ------
+    EvaluationError
+        No scan of the trajectory is in ``odometry``, or one of its time stamps is not.
+    """
+    idx, found = match_timestamps(trajectory.timestamps, odometry.timestamps, _STAMP_TOL_S)
+    if not found.all():
+        first = int(np.flatnonzero(~found)[0])
+        raise EvaluationError(
+            f"{int((~found).sum())} trajectory time stamps are not scans of the log "
+            f"(e.g. {trajectory.timestamps[first]:.6f}): trajectory of another log?"
+        )
+    n = len(odometry)
+    kept = np.zeros(n, dtype=bool)
+    kept[idx] = True
+    if not kept.any():
+        raise EvaluationError("the trajectory has no pose to fill in from")
+    estimate = np.empty((n, 3))
+    estimate[idx] = trajectory.poses
+    positions = np.arange(n)
+    last = np.maximum.accumulate(np.where(kept, positions, -1))
+    first_kept = int(np.flatnonzero(kept)[0])
+    anchor = np.where(last >= 0, last, first_kept)
+    dropped = ~kept
+    if dropped.any():
+        k = anchor[dropped]
+        step = pose_between(odometry.poses[k], odometry.poses[dropped])
+        estimate[dropped] = pose_compose(estimate[k], step)
+    return Trajectory(odometry.timestamps.copy(), estimate)
+
+
+@dataclass(frozen=True)
+class RunScore:
+    """Relations errors of a run and of the odometry of the same variant.
+
+    Attributes
+    ----------
+    lineslam, odometry : RelationsMetric
+        On every relation.
+    lineslam_short, odometry_short : RelationsMetric or None
+        On the relations with ``|t2 − t1| <`` :data:`SHORT_RELATION_S` (``None`` if there are
+        none).
+    frame : str
+        Frame of the run's trajectory (as it reported it).
+    odometry_frame : str
+        Frame of the odometry baseline (that of the relations).
+    scans_estimated, scans_filled : int
+        Scans with an estimated pose, and dropped scans filled in by odometry.
+    odometry_sign : str
+        How the odometry was read (``"logged"`` or ``"velocity"``).
+    """
+
+    lineslam: RelationsMetric
+    odometry: RelationsMetric
+    lineslam_short: RelationsMetric | None
+    odometry_short: RelationsMetric | None
+    frame: str
+    odometry_frame: str
+    scans_estimated: int
+    scans_filled: int
+    odometry_sign: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary."""
+
+        def m(metric: RelationsMetric | None) -> dict[str, Any] | None:
+            return None if metric is None else metric.to_dict()
+
+        return {
+            "lineslam": m(self.lineslam),
+            "odometry": m(self.odometry),
+            "lineslam_short": m(self.lineslam_short),
+            "odometry_short": m(self.odometry_short),
+            "short_relation_s": SHORT_RELATION_S,
+            "frame": self.frame,
+            "odometry_frame": self.odometry_frame,
+            "scans_estimated": self.scans_estimated,
+            "scans_filled": self.scans_filled,
+            "odometry_sign": self.odometry_sign,
+        }
+
+
+def score_run(
+    trajectory: Trajectory, frame: str, files: VariantFiles, *, odometry_sign: str = "logged"
+) -> RunScore:
+    """Score a run's trajectory and the variant's odometry (module docstring).
+
+    Parameters
+    ----------
+    trajectory
+        The run's ``trajectory.tum``, as written.
+    frame
+        The frame the run reports (``summary.json`` ``"frame"``: ``"laser"`` or ``"base"``).
+    files
+        The variant it ran on.
+    odometry_sign
+        How the odometry of the fill-in and of the baseline is read (``"logged"`` or
+        ``"velocity"``, :func:`slam.io.carmen.iter_log_scans`).
+
+    Raises
+    ------
+    EvaluationError
+        A relation time stamp that is not a scan of the source log.
+    """
+    if frame not in ("laser", "base"):
+        raise ConfigError(f"frame must be laser or base, got {frame!r}")
+    relations = read_relations(files.relations)
+
+    def _odometry(log: Path, frame: str) -> Trajectory:
+        return scan_trajectory(log, frame=frame, odometry_sign=odometry_sign)
+
+    full_log_odometry = _odometry(files.source_log, frame)
+    filled = fill_dropped_scans(trajectory, full_log_odometry)
+    odometry_frame = (
+        files.variant.transform.relations_frame if files.variant.transform is not None else "laser"
+    )
+    odometry = _odometry(files.log, odometry_frame)
+    if len(odometry) < len(full_log_odometry):  # dropped scans: the source's odometry
+        odometry = fill_dropped_scans(odometry, _odometry(files.source_log, odometry_frame))
+    short = np.abs(relations.t2 - relations.t1) < SHORT_RELATION_S
+    short_relations = relations.subset(short) if short.any() else None
+
+    def metric(t: Trajectory, r: Relations | None) -> RelationsMetric | None:
+        return None if r is None else relations_metric(t, r, max_unmatched_fraction=0.0)
+
+    lineslam = relations_metric(filled, relations, max_unmatched_fraction=0.0)
+    odo = relations_metric(odometry, relations, max_unmatched_fraction=0.0)
+    return RunScore(
+        lineslam=lineslam,
+        odometry=odo,
+        lineslam_short=metric(filled, short_relations),
+        odometry_short=metric(odometry, short_relations),
+        frame=frame,
+        odometry_frame=odometry_frame,
+        scans_estimated=len(trajectory),
+        scans_filled=len(filled) - len(trajectory),
+        odometry_sign=odometry_sign,
+    )

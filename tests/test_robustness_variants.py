@@ -1,0 +1,418 @@
+"""The log variants of the robustness table and their scoring, on small constructed logs."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from carmen_lines import flaser, odom
+
+from slam.errors import ConfigError, EvaluationError, LogFormatError
+from slam.experiments.robustness import (
+    VARIANTS,
+    BiasOdometry,
+    ClipRanges,
+    DecimateBeams,
+    DecimateScans,
+    MoveOdometryToCentre,
+    Variant,
+    fill_dropped_scans,
+    make_variant,
+    rewrite_lines,
+    score_run,
+)
+from slam.geometry import pose_compose
+from slam.io.carmen import CarmenReader, iter_odometry, iter_scans
+from slam.io.catalog import load_catalog
+from slam.io.relations import read_relations, relations_from_trajectory, write_relations
+from slam.io.trajectory import Trajectory
+
+ZERO = (0.0, 0.0, 0.0)
+
+
+def _log(n_scans: int, poses: np.ndarray | None = None, ranges=None) -> list[str]:
+    """ODOM, FLASER, ODOM, FLASER, ... with scan ``i`` at ``t = 10 + i`` and ODOM 0.5 s before."""
+    lines = ["# CARMEN Logfile", "# test log"]
+    for i in range(n_scans):
+        pose = poses[i] if poses is not None else (0.1 * i, 0.0, 0.0)
+        r = ranges if ranges is not None else [1.0 + 0.01 * i] * 4
+        lines.append(odom(pose, 9.5 + i))
+        lines.append(flaser(r, pose, pose, 10.0 + i))
+    return lines
+
+
+def _write(path: Path, lines: list[str]) -> Path:
+    path.write_text("".join(line if line.endswith("\n") else line + "\n" for line in lines))
+    return path
+
+
+def _laser_stamps(lines: list[str]) -> list[float]:
+    return [float(line.split()[-3]) for line in lines if line.startswith("FLASER")]
+
+
+# --------------------------------------------------------------------------------------------
+# decimation of laser lines
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("every", "start"), [(3, 0), (4, 1), (4, 3), (1, 0)])
+def test_decimation_keeps_every_kth_laser_line_from_start_and_all_odometry(every, start):
+    src = _log(11)
+    out = rewrite_lines(DecimateScans(every, start), src)
+    kept = _laser_stamps(out)
+    assert kept == [10.0 + i for i in range(start, 11, every)]
+    odom_in = [line.split() for line in src if line.startswith("ODOM")]
+    odom_out = [line.split() for line in out if line.startswith("ODOM")]
+    assert odom_out == odom_in  # all 11, unchanged
+    # kept laser lines are the source's lines, field for field
+    src_lasers = {float(s.split()[-3]): s.split() for s in src if s.startswith("FLASER")}
+    for line in out:
+        if line.startswith("FLASER"):
+            assert line.split() == src_lasers[float(line.split()[-3])]
+    assert out[0] == "# CARMEN Logfile\n"
+
+
+def test_decimation_rejects_a_start_outside_the_period():
+    with pytest.raises(ConfigError):
+        DecimateScans(4, 4)
+
+
+def test_transforms_refuse_other_laser_messages():
+    line = "ROBOTLASER1 0 -1.5 3.1 0.01 80 0 0 1 1.0 0 0 0 0 0 0 0 0 0 0 0 0 10.0 nohost 10.0"
+    with pytest.raises(LogFormatError, match=":1"):
+        rewrite_lines(DecimateScans(2), [line])
+
+
+# --------------------------------------------------------------------------------------------
+# readings above 8 m
+# --------------------------------------------------------------------------------------------
+def test_clipping_changes_exactly_the_readings_above_the_limit(tmp_path):
+    ranges = np.array([0.5, 7.99, 8.0, 8.01, 12.34, 50.0, 3.0])
+    poses = _wavy_poses(3)
+    src = _log(3, poses, ranges=list(ranges))
+    clip = ClipRanges(8.0, 50.0, -math.pi / 2, math.radians(30.0))
+    path = _write(tmp_path / "clipped.clf", rewrite_lines(clip, src))
+    reader = CarmenReader(path)
+    scans = list(reader.scans())
+    assert reader.stats.laser_type == "ROBOTLASER1" and reader.stats.odometry == 3
+    expected = np.where(ranges > 8.0, 50.0, ranges)
+    for i, scan in enumerate(scans):
+        np.testing.assert_array_equal(scan.ranges, expected)
+        assert scan.max_range_m == 50.0  # the log states its no-return value
+        np.testing.assert_array_equal(scan.valid_mask(), ranges <= 8.0)
+        np.testing.assert_allclose(scan.bearings, np.radians(-90.0 + 30.0 * np.arange(7)))
+        assert scan.timestamp == 10.0 + i
+        np.testing.assert_allclose(scan.pose_odom_laser, poses[i], atol=1e-6)
+        np.testing.assert_allclose(scan.pose_odom_base, poses[i], atol=1e-6)
+    # the ODOM lines pass unchanged
+    assert [x for x in src if x.startswith("ODOM")] == [
+        x.rstrip("\n") for x in rewrite_lines(clip, src) if x.startswith("ODOM")
+    ]
+
+
+# --------------------------------------------------------------------------------------------
+# biased odometry
+# --------------------------------------------------------------------------------------------
+def _odometry_poses(lines: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    odo, base, laser = [], [], []
+    for line in lines:
+        t = line.split()
+        if t[0] == "ODOM":
+            odo.append([float(v) for v in t[1:4]])
+        elif t[0] == "FLASER":
+            n = int(t[1])
+            laser.append([float(v) for v in t[2 + n : 5 + n]])
+            base.append([float(v) for v in t[5 + n : 8 + n]])
+    return np.array(odo), np.array(base), np.array(laser)
+
+
+def test_bias_on_a_straight_line_scales_the_distance():
+    poses = np.array([[1.0, 2.0, 0.0], [2.0, 2.0, 0.0], [4.0, 2.0, 0.0]])
+    lines = [flaser([1.0], p, p, 10.0 + i) for i, p in enumerate(poses)]
+    _, base, laser = _odometry_poses(rewrite_lines(BiasOdometry(1.02, 0.02), lines))
+    np.testing.assert_allclose(base, [[1.0, 2.0, 0.0], [2.02, 2.0, 0.0], [4.06, 2.0, 0.0]])
+    np.testing.assert_allclose(laser, base)
+
+
+def test_bias_on_a_turn_adds_two_percent_of_each_heading_increment():
+    # turn in place +0.1, +0.1, then -0.3 (bias +0.02*0.3 makes it -0.294), then 1 m forward
+    poses = np.array(
+        [[0.0, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, 0.0, 0.2], [0.0, 0.0, -0.1], [1.0, 0.0, -0.1]]
+    )
+    poses[4, :2] = [math.cos(-0.1), math.sin(-0.1)]  # 1 m along heading -0.1
+    lines = [odom(p, 10.0 + i, tv=0.5, rv=-0.2) for i, p in enumerate(poses)]
+    odo, _, _ = _odometry_poses(rewrite_lines(BiasOdometry(1.02, 0.02), lines))
+    heading = [0.0, 0.102, 0.204, 0.204 - 0.294]
+    np.testing.assert_allclose(odo[:4, 2], heading, atol=2e-6)
+    np.testing.assert_allclose(odo[:4, :2], 0.0, atol=1e-6)
+    # the forward step has no heading change: 1.02 m along the biased heading
+    h = heading[3]
+    np.testing.assert_allclose(odo[4], [1.02 * math.cos(h), 1.02 * math.sin(h), h], atol=2e-6)
+
+
+def test_bias_on_an_arc_by_hand():
+    # a quarter turn while moving 1 m forward, then 1 m straight on
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, math.pi / 2], [1.0, 1.0, math.pi / 2]])
+    lines = [flaser([1.0], p, p, 10.0 + i) for i, p in enumerate(poses)]
+    _, base, _ = _odometry_poses(rewrite_lines(BiasOdometry(1.02, 0.02), lines))
+    th = 1.02 * math.pi / 2
+    p1 = [1.02, 0.0, th]
+    p2 = [1.02 + 1.02 * math.cos(th), 1.02 * math.sin(th), th]
+    np.testing.assert_allclose(base, [[0.0, 0.0, 0.0], p1, p2], atol=2e-6)
+
+
+def test_bias_chains_odom_lines_and_hangs_laser_lines_on_the_last_one():
+    # ODOM 0, FLASER +0.1, ODOM 0: the ODOM chain turns by 0 (not +0.102 - 0.098)
+    lines = [odom(ZERO, 9.0), flaser([1.0], (0, 0, 0.1), (0, 0, 0.1), 10.0), odom(ZERO, 11.0)]
+    odo, base, laser = _odometry_poses(rewrite_lines(BiasOdometry(1.02, 0.02), lines))
+    np.testing.assert_allclose(odo, np.zeros((2, 3)), atol=1e-9)
+    np.testing.assert_allclose(base, [[0.0, 0.0, 0.102]], atol=1e-9)
+    np.testing.assert_allclose(laser, base, atol=1e-9)
+
+
+def test_bias_keeps_the_laser_offset_and_scales_the_velocities():
+    offset = np.array([0.1, 0.0, 0.0])
+    base = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    lines = [odom(base[0], 9.0), flaser([1.0], pose_compose(base[1], offset), base[1], 10.0)]
+    lines.append(odom(base[2], 11.0, tv=1.0, rv=-0.5))
+    out = rewrite_lines(BiasOdometry(1.02, 0.02), lines)
+    odo, b, laser = _odometry_poses(out)
+    np.testing.assert_allclose(odo, [[0.0, 0.0, 0.0], [1.02, 0.0, 0.0]], atol=1e-9)
+    np.testing.assert_allclose(b, [[0.51, 0.0, 0.0]], atol=1e-9)
+    np.testing.assert_allclose(laser, [[0.61, 0.0, 0.0]], atol=1e-9)
+    tv, rv = (float(v) for v in out[-1].split()[4:6])
+    assert (tv, rv) == (pytest.approx(1.02), pytest.approx(-0.49))
+
+
+# --------------------------------------------------------------------------------------------
+# laser ahead of the robot centre
+# --------------------------------------------------------------------------------------------
+def _wavy_poses(n: int) -> np.ndarray:
+    k = np.arange(n)
+    return np.column_stack([0.3 * k, 0.5 * np.sin(0.4 * k), 0.35 * np.sin(0.3 * k) + 0.2])
+
+
+def test_mount_moves_odometry_to_the_centre_and_keeps_the_laser_pose():
+    t = np.array([-0.2, 0.0, 0.0])
+    laser = _wavy_poses(6)
+    out = rewrite_lines(MoveOdometryToCentre((-0.2, 0.0, 0.0)), _log(6, laser))
+    odo, base, laser_out = _odometry_poses(out)
+    centre = pose_compose(laser, np.broadcast_to(t, laser.shape))
+    np.testing.assert_allclose(laser_out, laser, atol=1e-6)  # as logged (6 decimals)
+    np.testing.assert_allclose(base, centre, atol=1e-6)
+    np.testing.assert_allclose(odo, centre, atol=1e-6)  # ODOM lines carried the laser pose
+    # 0.2 m behind the laser, along its heading
+    np.testing.assert_allclose(np.hypot(*(laser[:, :2] - base[:, :2]).T), 0.2, atol=1e-6)
+
+
+def test_mount_relations_round_trip_equals_relations_of_the_centre_trajectory():
+    transform = MoveOdometryToCentre((-0.2, 0.0, 0.0))
+    t = np.array([-0.2, 0.0, 0.0])
+    laser = _wavy_poses(12)
+    centre = pose_compose(laser, np.broadcast_to(t, laser.shape))
+    stamps = 10.0 + np.arange(12)
+    pairs = [(0, 1), (0, 5), (3, 11), (7, 2), (10, 11)]
+    rel_laser = relations_from_trajectory(stamps, laser, pairs)
+    rel_centre = relations_from_trajectory(stamps, centre, pairs)
+    rewritten = transform.relations(rel_laser)
+    np.testing.assert_allclose(rewritten.poses, rel_centre.poses, atol=1e-12)
+    np.testing.assert_array_equal(rewritten.t1, rel_laser.t1)
+    # and they differ from the laser relations (the lever arm matters on turns)
+    assert np.abs(rel_laser.poses - rel_centre.poses).max() > 0.01
+
+
+def test_mount_refuses_a_log_whose_laser_pose_is_not_its_odometry():
+    line = flaser([1.0], (0.1, 0.0, 0.0), ZERO, 10.0)
+    with pytest.raises(LogFormatError, match="differ"):
+        rewrite_lines(MoveOdometryToCentre((-0.2, 0.0, 0.0)), [line])
+
+
+# --------------------------------------------------------------------------------------------
+# fewer beams, written as ROBOTLASER1
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("every", "n_kept"), [(4, 90), (2, 180)])
+def test_beam_decimation_reads_back_with_its_geometry(tmp_path, every, n_kept):
+    ranges = [1.0 + 0.01 * i for i in range(360)]
+    laser = _wavy_poses(3)
+    src = _log(3, laser, ranges=ranges)
+    step = math.radians(0.5)
+    transform = DecimateBeams(every, -math.pi / 2, step, 81.91)
+    path = _write(tmp_path / "beams.clf", rewrite_lines(transform, src))
+    reader = CarmenReader(path)
+    scans = list(reader.scans())
+    assert reader.stats.laser_type == "ROBOTLASER1"
+    assert reader.stats.odometry == 3
+    assert len(scans) == 3
+    for i, scan in enumerate(scans):
+        assert scan.n_beams == n_kept
+        assert scan.bearings[0] == pytest.approx(-math.pi / 2, abs=1e-12)
+        np.testing.assert_allclose(np.diff(scan.bearings), every * step, atol=1e-12)
+        np.testing.assert_allclose(scan.ranges, np.round(ranges, 2)[::every])
+        assert scan.max_range_m == 81.91
+        assert scan.timestamp == 10.0 + i
+        np.testing.assert_allclose(scan.pose_odom_laser, laser[i], atol=1e-6)
+        np.testing.assert_allclose(scan.pose_odom_base, laser[i], atol=1e-6)
+    assert scans[0].bearings[-1] == pytest.approx(math.radians(-90 + every * 0.5 * (n_kept - 1)))
+
+
+# --------------------------------------------------------------------------------------------
+# scoring: dropped scans filled in by odometry
+# --------------------------------------------------------------------------------------------
+def test_fill_in_reproduces_the_trajectory_when_odometry_is_perfect():
+    truth = _wavy_poses(20)
+    # perfect odometry in another frame: a fixed transform of the truth
+    origin = np.array([5.0, -3.0, 1.2])
+    odometry = pose_compose(np.broadcast_to(origin, truth.shape), truth)
+    stamps = 100.0 + np.arange(20) * 0.25
+    kept = np.arange(2, 20, 4)  # the first two scans come before any kept scan
+    estimate = Trajectory(stamps[kept], truth[kept])
+    filled = fill_dropped_scans(estimate, Trajectory(stamps, odometry))
+    np.testing.assert_array_equal(filled.timestamps, stamps)
+    np.testing.assert_allclose(filled.poses, truth, atol=1e-12)
+
+
+def test_fill_in_carries_the_last_kept_scan_on_by_odometry():
+    odometry = Trajectory(np.array([1.0, 2.0, 3.0]), np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.5]]))
+    estimate = Trajectory(np.array([1.0]), np.array([[10.0, 0.0, math.pi / 2]]))
+    filled = fill_dropped_scans(estimate, odometry)
+    np.testing.assert_allclose(
+        filled.poses,
+        [[10, 0, math.pi / 2], [10, 1, math.pi / 2], [10, 2, math.pi / 2 + 0.5]],
+        atol=1e-12,
+    )
+
+
+def test_fill_in_rejects_a_trajectory_of_another_log():
+    odometry = Trajectory(np.array([1.0, 2.0]), np.zeros((2, 3)))
+    with pytest.raises(EvaluationError, match="not scans of the log"):
+        fill_dropped_scans(Trajectory(np.array([1.5]), np.zeros((1, 3))), odometry)
+
+
+# --------------------------------------------------------------------------------------------
+# making and scoring a variant of a (small, fake) catalogued log
+# --------------------------------------------------------------------------------------------
+@pytest.fixture
+def fake_root(tmp_path):
+    """A data root whose ``aces`` is a 30-scan log with perfect odometry and its relations."""
+    root = tmp_path / "data"
+    (root / "aces").mkdir(parents=True)
+    truth = _wavy_poses(30)
+    stamps = 10.0 + np.arange(30)
+    _write(root / "aces" / "aces.clf", _log(30, truth, ranges=[2.0] * 180))
+    pairs = [(i, j) for i in range(30) for j in (i + 1, i + 13) if j < 30]
+    rel = relations_from_trajectory(stamps, truth, pairs)
+    write_relations(root / "aces" / "aces.relations", rel.t1, rel.t2, rel.poses)
+    return root, stamps, truth
+
+
+def _rotated(poses: np.ndarray) -> np.ndarray:
+    """The same trajectory in another world frame (the metric is relative)."""
+    frame = np.array([-2.0, 7.0, 2.5])
+    return pose_compose(np.broadcast_to(frame, poses.shape), poses)
+
+
+def test_decimated_variant_is_cached_and_scored_on_every_relation(fake_root, tmp_path):
+    root, stamps, truth = fake_root
+    variant = Variant("aces-every4", "aces", 0.08, DecimateScans(4, 1))
+    files = make_variant(variant, tmp_path / "cache", root=root)
+    assert files.log.name == "aces-every4.clf"  # not a name the catalogue knows
+    assert files.source_log == root / "aces" / "aces.clf"
+    assert len(list(iter_scans(files.log))) == 8  # scans 1, 5, ..., 29
+    assert len(list(iter_odometry(files.log))) == 30
+    mtime = files.log.stat().st_mtime_ns
+    again = make_variant(variant, tmp_path / "cache", root=root)
+    assert again.log == files.log and again.log.stat().st_mtime_ns == mtime
+    named = make_variant(variant, tmp_path / "cache", root=root, catalogued_name=True)
+    assert named.log.name == "aces.clf" and named.log.parent != files.log.parent
+
+    kept = np.arange(1, 30, 4)
+    score = score_run(Trajectory(stamps[kept], _rotated(truth[kept])), "laser", files)
+    n_rel = len(read_relations(files.relations))
+    assert score.lineslam.n_used == n_rel and score.lineslam.n_unmatched == 0
+    assert score.lineslam.abs_trans_m.mean == pytest.approx(0.0, abs=1e-5)
+    assert score.odometry.abs_trans_m.mean == pytest.approx(0.0, abs=1e-5)
+    assert score.scans_filled == 22
+    assert score.lineslam_short is not None and score.lineslam_short.n_used == 29
+
+    # a wrong pose of one kept scan shows up in its relations and the scans filled from it
+    bad = truth[kept].copy()
+    bad[3, 0] += 0.5
+    worse = score_run(Trajectory(stamps[kept], bad), "laser", files)
+    assert worse.lineslam.abs_trans_m.mean > 0.01
+
+
+def test_mount_variant_penalises_a_trajectory_in_the_wrong_frame(fake_root, tmp_path):
+    root, stamps, truth = fake_root
+    variant = Variant("aces-mount", "aces", 0.05, MoveOdometryToCentre((-0.2, 0.0, 0.0)))
+    files = make_variant(variant, tmp_path / "cache", root=root)
+    centre = pose_compose(truth, np.broadcast_to([-0.2, 0.0, 0.0], truth.shape))
+    right = score_run(Trajectory(stamps, _rotated(centre)), "base", files)
+    assert right.lineslam.abs_trans_m.mean == pytest.approx(0.0, abs=1e-5)
+    assert right.odometry_frame == "base"
+    assert right.odometry.abs_trans_m.mean == pytest.approx(0.0, abs=1e-5)
+    wrong = score_run(Trajectory(stamps, _rotated(truth)), "laser", files)
+    assert wrong.lineslam.abs_trans_m.mean > 0.01
+
+
+def test_relations_of_other_variants_are_the_sources(fake_root, tmp_path):
+    root, _, _ = fake_root
+    variant = Variant("aces-max8m", "aces", 0.08, ClipRanges(8.0, 50.0, -math.pi / 2, 0.01))
+    files = make_variant(variant, tmp_path / "cache", root=root)
+    assert files.relations.read_bytes() == (root / "aces" / "aces.relations").read_bytes()
+
+
+def test_unmodified_rows_use_the_source_log(fake_root, tmp_path):
+    root, _, _ = fake_root
+    files = make_variant(Variant("aces", "aces", 0.045, None), tmp_path / "cache", root=root)
+    assert files.log == root / "aces" / "aces.clf"
+    assert not (tmp_path / "cache").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# the table's parameters agree with the catalogue
+# --------------------------------------------------------------------------------------------
+def test_table_parameters_match_the_catalogue():
+    catalog = load_catalog()
+    names = [v.name for v in VARIANTS]
+    assert len(set(names)) == len(names)
+    for v in VARIANTS:
+        laser = catalog[v.dataset].laser
+        t = v.transform
+        if isinstance(t, ClipRanges):
+            assert t.no_return_m == laser.max_range_m
+            assert t.limit_m == 8.0
+        if isinstance(t, ClipRanges | DecimateBeams):
+            assert t.first_angle_rad == pytest.approx(math.radians(laser.first_angle_deg))
+            assert t.step_rad == pytest.approx(math.radians(laser.step_deg))
+        if isinstance(t, DecimateBeams):
+            assert t.max_range_m == laser.max_range_m
+            assert laser.beams % t.every == 0
+    assert {v.name for v in VARIANTS if v.transform is None} == {"intel", "aces", "fr079"}
+
+
+# --------------------------------------------------------------------------------------------
+# the real logs
+# --------------------------------------------------------------------------------------------
+@pytest.mark.realdata
+def test_real_decimated_variant_keeps_its_odometry_baseline(shared_data, tmp_path):
+    variant = next(v for v in VARIANTS if v.name == "aces-every4")
+    files = make_variant(variant, tmp_path / "cache", root=shared_data)
+    reader = CarmenReader(files.log)
+    assert sum(1 for _ in reader.scans()) == 1844  # ceil(7374 / 4)
+    assert reader.stats.odometry == 7375
+    odometry = Trajectory(
+        np.array([s.timestamp for s in iter_scans(files.source_log)]),
+        np.array([s.pose_odom_laser for s in iter_scans(files.source_log)]),
+    )
+    kept = iter_scans(files.log)
+    first = [s for _, s in zip(range(3), kept, strict=False)]
+    assert [s.timestamp for s in first] == list(odometry.timestamps[[0, 4, 8]])
+    # the odometry itself as the "run": every relation matched, the README's odometry error
+    ours = Trajectory(
+        np.array([s.timestamp for s in iter_scans(files.log)]),
+        np.array([s.pose_odom_laser for s in iter_scans(files.log)]),
+    )
+    score = score_run(ours, "laser", files)
+    assert score.lineslam.n_used == 1279
+    assert score.lineslam.abs_trans_m.mean == pytest.approx(0.5636, abs=1e-4)
+    assert score.odometry.abs_trans_m.mean == pytest.approx(0.5636, abs=1e-4)
