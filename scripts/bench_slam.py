@@ -5,9 +5,9 @@ exactly as ``lineslam slam LOG --out DIR`` does, once per back-end, side by side
 and prints for each a table of wall-clock seconds whose rows **partition** the run's total:
 
 * every stage of the pipeline's clock (:class:`slam.line_slam.clock.StageClock`) is counted
-  *exclusive* of the stages nested in it: ``judge`` and ``backend (in loop_closure)`` run
-  inside loop closing and are their own rows, ``loop_closure`` is what remains; ``fusion (in
-  optimize)`` is the final fusion inside ``optimize``;
+  *exclusive* of the stages nested in it: ``judge (in loop_closure)`` and ``backend (in
+  loop_closure)`` run inside loop closing and are their own rows, ``loop_closure`` is what
+  remains; ``fusion (in optimize)`` is the final fusion inside ``optimize``;
 * ``extract`` is all the line extraction the pipeline does (it extracts keyframe scans only;
   their number is printed);
 * ``read`` and ``write`` are the runner's; ``estimate (other)`` is the rest of feeding the
@@ -59,7 +59,7 @@ ROWS = (
     "backend",
     "fusion",
     "loop_closure",
-    "judge",
+    "judge (in loop_closure)",
     "backend (in loop_closure)",
     "estimate (other)",
     "optimize",
