@@ -68,16 +68,18 @@ class Interrupted(BaseException):
 
 
 @contextmanager
-def _signals_interrupt() -> Iterator[None]:
+def _signals_interrupt() -> Iterator[list[int]]:
     """While the command runs, the first SIGINT or SIGTERM raises :class:`Interrupted`.
 
     Later signals are ignored while the run cleans up (it takes well under a second; a stuck
-    process still yields to ``SIGKILL``).  The previous handlers come back afterwards.
+    process still yields to ``SIGKILL``).  The previous handlers come back afterwards.  Yields
+    the signals received (compiled code, e.g. numba's, may turn the exception raised inside it
+    into a ``SystemError``: the caller then knows it was the signal).
     """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
     seen: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield seen
+        return
 
     def handler(signum: int, _frame: FrameType | None) -> None:
         if seen:
@@ -87,7 +89,7 @@ def _signals_interrupt() -> Iterator[None]:
 
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        yield
+        yield seen
     finally:
         for s, old in previous.items():
             signal.signal(s, old)
@@ -115,11 +117,16 @@ def main(argv: list[str] | None = None) -> None:
     (SIGTERM) with a one-line ``lineslam: interrupted ...`` when a signal stops the run.
     ``LINESLAM_DEBUG=1`` shows the traceback of an operating-system error instead.
     """
-    with _signals_interrupt():
+    with _signals_interrupt() as signals:
         try:
             status = app(args=argv, standalone_mode=False)
         except Interrupted as exc:
             _error(_interrupted_message(exc), exc.exit_status)
+        except SystemError:
+            if not signals:
+                raise
+            exc_sig = Interrupted(signals[0])
+            _error(_interrupted_message(exc_sig), exc_sig.exit_status)
         except KeyboardInterrupt:
             _error("interrupted (SIGINT)", 130)
         except LineslamError as exc:
