@@ -2,8 +2,8 @@
 
 Implements Pfister, Roumeliotis & Burdick, *Weighted Line Fitting Algorithms for Mobile Robot Map
 Building and Efficient Data Representation* (ICRA 2003), Sections II-IV.  The one call is
-:func:`extract_lines`.  This package depends only on numpy and scipy (no gtsam, filterpy,
-matplotlib or CLI code).
+:func:`extract_lines`.  This package depends only on numpy, scipy and numba (no gtsam,
+filterpy, matplotlib or CLI code).
 """
 
 from linefit.config import LineFitConfig, SensorNoiseConfig

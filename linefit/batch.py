@@ -1,10 +1,16 @@
 """The batch driver: lines of many scans at once (:func:`extract_lines_batch`).
 
-Runs the steps of :mod:`linefit.extract` on the points of all the scans of a batch as flat
-arrays with a scan id: valid readings and their points (:mod:`linefit.readings`), grouping
+Valid readings and their points (:mod:`linefit.readings`) are computed in numpy for the whole
+batch; the rest of :mod:`linefit.extract`'s steps run in the compiled kernel
+(:mod:`linefit.kernel`), scan by scan, and the :class:`~linefit.line.Line` objects are built
+from its flat arrays.
+
+:func:`extract_lines_batch_numpy` is the reference implementation of the same steps in numpy,
+on the points of all the scans of a batch as flat arrays with a scan id: grouping
 (:mod:`linefit.hough` or :mod:`linefit.split_merge`), fit, rejection and segments
 (:mod:`linefit.refine`), Hough recovery, collinear merge (:mod:`linefit.collinear`) and the
-:class:`~linefit.line.Line` objects (:mod:`linefit.assemble`).
+:class:`~linefit.line.Line` objects (:mod:`linefit.assemble`).  Both give the same lines, values
+to rounding (``tests/test_kernel.py``).
 """
 
 from __future__ import annotations
@@ -15,15 +21,17 @@ from numpy.typing import ArrayLike, NDArray
 from linefit.assemble import lines_from_fit
 from linefit.collinear import merge_collinear
 from linefit.config import LineFitConfig
+from linefit.errors import ConfigError
 from linefit.fitted import Fitted, Groups
 from linefit.hough import hough_groups
+from linefit.kernel import extract_kernel, kernel_params
 from linefit.line import Line
 from linefit.noise import SigmaRangeFn
-from linefit.readings import check_batch, scan_points, valid_readings
+from linefit.readings import check_batch, check_reach, scan_points, valid_readings
 from linefit.refine import refine
 from linefit.split_merge import split_merge_groups
 
-__all__ = ["extract_lines_batch"]
+__all__ = ["extract_lines_batch", "extract_lines_batch_numpy"]
 
 IntArray = NDArray[np.intp]
 
@@ -56,10 +64,92 @@ def extract_lines_batch(
     Returns
     -------
     list of list of Line
-        The lines of each scan (see :func:`extract_lines`).
+        The lines of each scan (see :func:`extract_lines`).  A scan's lines do not depend on
+        the other scans of the batch.
+
+    Raises
+    ------
+    InputError
+        Bad arrays (:func:`linefit.readings.check_batch`), or readings beyond any laser's
+        reach without a range limit (:func:`linefit.readings.check_reach`).
+    ConfigError
+        ``config`` is not a :class:`LineFitConfig`.
     """
+    if config is not None and not isinstance(config, LineFitConfig):
+        raise ConfigError(f"config must be a LineFitConfig, got {type(config).__name__}")
     cfg = config if config is not None else LineFitConfig()
     d, phi, mr = check_batch(ranges, bearings, max_range_m)
+    check_reach(d, mr, cfg)
+    n_scans, n_beams = d.shape
+    valid = valid_readings(d, mr, cfg)
+    # scans with too few valid readings hold no line
+    valid &= (valid.sum(axis=1) >= max(2, cfg.min_points))[:, None]
+    flat = np.flatnonzero(valid.ravel())
+    out: list[list[Line]] = [[] for _ in range(n_scans)]
+    if flat.shape[0] == 0:
+        return out
+    beam_of = flat % n_beams
+    pts = scan_points(d.ravel()[flat], phi.ravel()[flat], beam_of, cfg, sigma_range_fn)
+    assert pts.var_range is not None and pts.var_perp is not None
+    assert pts.dvar_range is not None
+    pt = np.stack(
+        [
+            pts.x,
+            pts.y,
+            pts.q11,
+            pts.q12,
+            pts.q22,
+            pts.var_range,
+            pts.var_perp,
+            pts.dvar_range,
+            np.sqrt(pts.var_range),
+            np.hypot(pts.x, pts.y),
+            np.arctan2(pts.y, pts.x),
+        ]
+    )
+    scan_start = np.zeros(n_scans + 1, dtype=np.int64)
+    np.cumsum(valid.sum(axis=1), out=scan_start[1:])
+    scan, ras, cov, lin, seg, idx = extract_kernel(
+        pt, beam_of.astype(np.int64), scan_start, *kernel_params(cfg)
+    )
+    segs = np.ascontiguousarray(seg[:, :2])
+    svar = np.ascontiguousarray(seg[:, 2:])
+    for q, (k, (r, alpha, s), (s0, ns, i0, npts)) in enumerate(
+        zip(scan.tolist(), ras.tolist(), lin.tolist(), strict=True)
+    ):
+        out[k].append(
+            Line._trusted(
+                r,
+                alpha,
+                s,
+                cov[q],
+                segs[s0 : s0 + ns],
+                svar[s0 : s0 + ns],
+                npts,
+                idx[i0 : i0 + npts],
+            )
+        )
+    return out
+
+
+def extract_lines_batch_numpy(
+    ranges: ArrayLike,
+    bearings: ArrayLike,
+    config: LineFitConfig | None = None,
+    *,
+    max_range_m: ArrayLike | None = None,
+    sigma_range_fn: SigmaRangeFn | None = None,
+) -> list[list[Line]]:
+    """:func:`extract_lines_batch` in numpy, vectorised over the batch (the reference path).
+
+    Same parameters and result as :func:`extract_lines_batch` (values to rounding; in the last
+    bits they may depend on the other scans of the batch).
+    """
+    if config is not None and not isinstance(config, LineFitConfig):
+        raise ConfigError(f"config must be a LineFitConfig, got {type(config).__name__}")
+    cfg = config if config is not None else LineFitConfig()
+    d, phi, mr = check_batch(ranges, bearings, max_range_m)
+    check_reach(d, mr, cfg)
     n_scans, n_beams = d.shape
     valid = valid_readings(d, mr, cfg)
     # scans with too few valid readings hold no line

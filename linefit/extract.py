@@ -4,10 +4,11 @@
 once (:mod:`linefit.batch`), :func:`fit_line` and :func:`fit_scan_line` for a given set of
 points (:mod:`linefit.one_line`).
 
-Every step works on all the scans of a batch together (the points, candidate lines and
-segments of all scans are flat arrays with a scan id, :mod:`linefit.fitted`);
-:func:`extract_lines` is a batch of one.  Batches amortise numpy's per-call overhead:
-``scripts/bench_extract.py`` measures both.
+Steps 1-2 below run in numpy for all the scans of a batch at once; steps 3-7 run in a compiled
+kernel (:mod:`linefit.kernel`), scan by scan, so :func:`extract_lines` costs about as much per
+scan as a batch.  The modules named below are the reference implementation of those steps in
+numpy (:func:`linefit.batch.extract_lines_batch_numpy`), which the kernel reproduces to rounding
+(``tests/test_kernel.py``); ``scripts/bench_extract.py`` measures both APIs.
 
 Pipeline of :func:`extract_lines`
 ---------------------------------
@@ -32,8 +33,9 @@ Pipeline of :func:`extract_lines`
    covariances (:mod:`linefit.covariance`) and segment ends; normal form; sorted by their
    first beam index (:mod:`linefit.assemble`).
 
-Lines that are not changed by a later step are never refitted, so a scan's result does not
-depend on the other scans of its batch (tested).
+Lines that are not changed by a later step are never refitted, and the kernel computes
+everything per scan, so a scan's result does not depend on the other scans of its batch, to the
+last bit (tested).
 """
 
 from __future__ import annotations
@@ -96,7 +98,10 @@ def extract_lines(
     ------
     InputError
         Mismatched or non-1-D arrays, non-numeric values, non-finite or non-monotonic
-        bearings.
+        bearings, bearings sweeping more than a full turn (degrees given for radians),
+        readings beyond any laser's reach (over 1e5 m) when nothing limits the range.
+    ConfigError
+        ``config`` is not a :class:`LineFitConfig`.
 
     Examples
     --------

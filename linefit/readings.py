@@ -74,7 +74,8 @@ def check_batch(
     ------
     InputError
         Non-numeric values, wrong shapes, non-finite or non-monotonic bearings (per scan;
-        wrapping past ±π is allowed), non-positive maximum range.
+        wrapping past ±π is allowed), bearings sweeping more than a full turn (degrees given
+        for radians), non-positive maximum range.
     """
     try:
         d = np.asarray(ranges, dtype=float)
@@ -101,6 +102,13 @@ def check_batch(
             raise InputError(
                 f"bearings must be strictly increasing or strictly decreasing (scan {bad})"
             )
+        sweep = np.abs(step.sum(axis=1))
+        if np.any(sweep > 2.0 * np.pi + 1e-9):
+            bad = int(np.flatnonzero(sweep > 2.0 * np.pi + 1e-9)[0])
+            raise InputError(
+                f"bearings sweep {float(sweep[bad]):.4g} rad in scan {bad}, more than a full "
+                f"turn: degrees given for radians?"
+            )
     if mr.ndim == 0:
         mr = np.full(d.shape[0], float(mr))
     if mr.shape != (d.shape[0],):
@@ -108,6 +116,41 @@ def check_batch(
     if np.any(np.isnan(mr) | (mr <= 0.0)):
         raise InputError("max_range_m must be positive")
     return d, phi, mr
+
+
+MAX_READING_M = 1.0e5
+"""Largest range reading (m) taken as a measurement; beyond any laser's reach."""
+
+
+def check_reach(ranges: FloatArray, max_range_m: FloatArray, config: LineFitConfig) -> None:
+    """Refuse readings beyond :data:`MAX_READING_M` that the range limits would let through.
+
+    Such values (e.g. ``1e300``, a corrupted or sentinel "no return") overflow the fit; a scan
+    with a range limit (``max_range_m``, or ``config.max_range_m``) treats them as "no return"
+    and is never refused here.
+
+    Raises
+    ------
+    InputError
+        Naming the scan, the reading and its value.
+    """
+    limit = max_range_m
+    if config.max_range_m is not None:
+        limit = np.minimum(limit, config.max_range_m)
+    open_rows = np.flatnonzero(~(limit <= MAX_READING_M))
+    if open_rows.size == 0:
+        return
+    sub = ranges[open_rows]
+    with np.errstate(invalid="ignore"):
+        bad = np.isfinite(sub) & (sub > MAX_READING_M)
+    if bad.any():
+        row, beam = (int(v[0]) for v in np.nonzero(bad))
+        raise InputError(
+            f"ranges: reading {beam} of scan {int(open_rows[row])} is "
+            f"{float(sub[row, beam]):g} m, beyond any laser's reach ({MAX_READING_M:g} m); "
+            "give max_range_m (readings at or above it are no returns) or mark no returns "
+            "with inf"
+        )
 
 
 def valid_readings(

@@ -12,6 +12,7 @@ dropped, any other value keeps its meaning).
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -23,7 +24,7 @@ from slam.inputs import ScannerConfig, migrate_slam_keys
 from slam.line_slam.config import SlamConfig
 from slam.lines.config import MapConfig
 
-__all__ = ["RunConfig"]
+__all__ = ["RunConfig", "check_run_config"]
 
 
 @dataclass(frozen=True)
@@ -56,8 +57,22 @@ class RunConfig:
     ekf: EkfConfig = field(default_factory=EkfConfig)
 
     def __post_init__(self) -> None:
+        if isinstance(self.seed, bool) or not isinstance(self.seed, numbers.Integral):
+            raise ConfigError(f"seed must be a whole number, got {self.seed!r}")
         if self.seed < 0:
             raise ConfigError(f"seed must be >= 0, got {self.seed}")
+        for name, kind in (
+            ("scanner", ScannerConfig),
+            ("linefit", LineFitConfig),
+            ("map", MapConfig),
+            ("slam", SlamConfig),
+            ("ekf", EkfConfig),
+        ):
+            value = getattr(self, name)
+            if not isinstance(value, kind):
+                raise ConfigError(
+                    f"RunConfig.{name} must be a {kind.__name__}, got {type(value).__name__}"
+                )
 
     @classmethod
     def from_toml(cls, path: str | Path) -> RunConfig:
@@ -94,3 +109,10 @@ class RunConfig:
             sigma_bearing_rad=noise.sigma_bearing_rad if sigma_phi is None else sigma_phi,
         )
         return replace(self, linefit=replace(self.linefit, noise=noise))
+
+
+def check_run_config(config: object, name: str = "config") -> RunConfig:
+    """``config`` if it is a :class:`RunConfig`, else a :class:`ConfigError` naming ``name``."""
+    if not isinstance(config, RunConfig):
+        raise ConfigError(f"{name} must be a RunConfig, got {type(config).__name__}")
+    return config

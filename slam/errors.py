@@ -13,6 +13,7 @@ __all__ = [
     "InputError",
     "LineslamError",
     "LogFormatError",
+    "OutputError",
 ]
 
 
@@ -30,3 +31,20 @@ class EstimationError(LineslamError):
 
 class EvaluationError(LineslamError):
     """An evaluation cannot be trusted (e.g. too many relation timestamps not in the trajectory)."""
+
+
+class OutputError(LineslamError):
+    """A results path cannot be written: it is the input, not a folder, read-only, full, ...
+
+    Parameters
+    ----------
+    path
+        The path that cannot be written.
+    message
+        Why, in one line.
+    """
+
+    def __init__(self, path: str, message: str) -> None:
+        self.path = path
+        self.reason = message
+        super().__init__(f"{path}: {message}")

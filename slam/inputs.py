@@ -18,6 +18,14 @@ Formats
 A ROS 1 ``.bag`` file or a ROS 2 bag folder (:mod:`slam.io.rosbag`), else a CARMEN log
 (:mod:`slam.io.carmen`).  A name that is not a file is looked up in the dataset catalogue.
 
+Log anomalies
+-------------
+A CARMEN log is checked while it is read (:mod:`slam.io.anomalies`: time going backwards,
+repeated time stamps, odometry jumps, a last line cut short, unknown messages):
+``log.scans(stats=CarmenStats(...))`` counts them in ``stats.anomalies`` over the part of the
+log read, ``strict=True`` makes the first one an error.  A bag is not checked: its messages
+are typed and time-stamped by the recorder, and its ``stats`` stay empty.
+
 Geometry and range limits (first match wins)
 --------------------------------------------
 1. What ``[scanner]`` states (``first_angle_deg``, ``step_deg`` or ``fov_deg``, ``beams``,
@@ -75,6 +83,7 @@ from slam.types import Scan
 from slam.validate import require
 
 if TYPE_CHECKING:
+    from slam.io.carmen import CarmenStats
     from slam.io.catalog import DatasetManifest, ResolvedLog
 
 __all__ = [
@@ -516,37 +525,55 @@ class LogInput:
             return max_scans
         return self.n_scans if max_scans is None else min(self.n_scans, max_scans)
 
-    def raw_scans(self) -> Iterator[Scan]:
-        """The scans as the reader gives them, odometry sign applied, nothing else."""
+    def raw_scans(
+        self, *, stats: CarmenStats | None = None, strict: bool = False
+    ) -> Iterator[Scan]:
+        """The scans as the reader gives them, odometry sign applied, nothing else.
+
+        A CARMEN log's reader fills ``stats`` (its counts and log anomalies,
+        :mod:`slam.io.anomalies`) while reading; ``strict`` makes the first anomaly an error.
+        A bag is read without anomaly checks (``stats`` stays as it is).
+        """
         if self.format == "rosbag":
             yield from self._reader.scans()
             return
         from slam.io.carmen import velocity_signed_scans
 
-        reader = self._carmen_reader()
+        reader = self._carmen_reader(strict)
+        if stats is not None:
+            reader.stats = stats
         if self.policy.odometry_sign == "velocity":
             yield from velocity_signed_scans(reader.messages())
         else:
             yield from reader.scans()
 
-    def _carmen_reader(self) -> Any:
+    def _carmen_reader(self, strict: bool = False) -> Any:
         from slam.io.carmen import CarmenReader
 
-        return CarmenReader(self.log, geometry=self._reader)
+        return CarmenReader(self.log, geometry=self._reader, strict=strict)
 
-    def scans(self, max_scans: int | None = None, *, need_odometry: bool = True) -> Iterator[Scan]:
+    def scans(
+        self,
+        max_scans: int | None = None,
+        *,
+        need_odometry: bool = True,
+        stats: CarmenStats | None = None,
+        strict: bool = False,
+    ) -> Iterator[Scan]:
         """The scans with the stated geometry and range limits applied, in log order.
 
         A bag's scans outside the odometry's time span (:mod:`slam.io.rosbag`) are left out
         when ``need_odometry`` (an :class:`InputWarning` counts them); the indices stay
-        contiguous.
+        contiguous.  ``stats`` and ``strict``: the log anomalies of a CARMEN log, counted in
+        ``stats.anomalies`` over the part of the log read, or an error at the first one
+        (:meth:`raw_scans`; bags are not checked).
         """
         scanner = self.scanner
         k = 0
         skipped = 0
-        for scan in self.raw_scans():
-            if max_scans is not None and k >= max_scans:
-                break
+        if max_scans is not None and max_scans <= 0:
+            return
+        for scan in self.raw_scans(stats=stats, strict=strict):
             if (
                 need_odometry
                 and self.format == "rosbag"
@@ -560,6 +587,8 @@ class LogInput:
                 self._note_geometry(scan)
             k += 1
             yield scan
+            if max_scans is not None and k >= max_scans:
+                break  # not one message more is read (anomalies cover the part read)
         if skipped:
             self._skipped_without_odometry = skipped
             warnings.warn(
@@ -888,9 +917,19 @@ def policy_for_log(policy: InputPolicy, log: str | Path, mount_source: str) -> I
     return replace(policy, pose_base_laser=mount, laser_odometry="base", output_frame="base")
 
 
-def read_log_scans(log: str | Path, policy: InputPolicy) -> Iterator[Scan]:
-    """The scans of a log file (or catalogued name), odometry read by the policy's sign rule."""
+def read_log_scans(
+    log: str | Path,
+    policy: InputPolicy,
+    *,
+    stats: CarmenStats | None = None,
+    strict: bool = False,
+) -> Iterator[Scan]:
+    """The scans of a log file (or catalogued name), odometry read by the policy's sign rule.
+
+    ``stats`` is filled while reading (with the log's anomalies); ``strict`` makes the first
+    anomaly an error (:func:`slam.io.carmen.iter_log_scans`).
+    """
     from slam.io.carmen import iter_log_scans
     from slam.io.catalog import resolve_log
 
-    return iter_log_scans(resolve_log(log).log, policy.odometry_sign)
+    return iter_log_scans(resolve_log(log).log, policy.odometry_sign, stats=stats, strict=strict)

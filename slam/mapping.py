@@ -4,8 +4,10 @@ The poses are the log's own estimates (CARMEN: the laser pose logged with each s
 odometry, as logged; a bag: the base odometry composed with the laser mounting,
 :mod:`slam.inputs`), each with the fixed covariance of ``[map]`` (``pose_sigma_xy_m``,
 ``pose_sigma_theta_rad``).  Results folder (INTERFACES.md): ``map.json`` (world = the log's
-odometry frame), ``summary.json``, ``config.toml`` and, unless disabled, figures in the style of
-the paper's Figs. 3-8 under ``figures/``.
+odometry frame), ``summary.json`` (with the log's anomalies, ``log_anomalies``),
+``config.toml`` and, unless disabled, figures in the style of the paper's Figs. 3-8 under
+``figures/``.  The folder is written into a temporary folder and put in place whole when
+complete (:func:`slam.io.atomic.staged_dir`).
 """
 
 from __future__ import annotations
@@ -287,42 +289,69 @@ def run_map(
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     tally: WarningTally | None = None,
+    strict: bool = False,
 ) -> dict[str, Any]:
     """``lineslam map``: open ``log`` (:func:`slam.inputs.open_log`), build the map, write.
 
     The poses are the logged laser poses with the odometry as logged (no sign repair), or,
     where a scan has no laser pose (bags), the base odometry composed with the mounting.
+    ``config`` is written as ``config.toml``; the log's anomalies are counted in
+    ``summary.json`` (a CARMEN log; ``strict``: the first one is an error).
+
+    Raises
+    ------
+    InputError
+        The log has no laser scans with a pose, or a malformed line.
+    OutputError
+        ``out`` cannot be written, or is or holds the log.
     """
     from contextlib import nullcontext
 
+    from slam.config import check_run_config
     from slam.diagnostics import tally_warnings
     from slam.inputs import open_log
+    from slam.io.atomic import staged_dir
+    from slam.io.carmen import CarmenStats
     from slam.io.results import write_summary
 
+    config = check_run_config(config)
     source = (
         log if isinstance(log, LogInput) else open_log(log, config.scanner, max_scans=max_scans)
     )
     source.policy = replace(
         source.policy, laser_odometry="logged", odometry_sign="logged", output_frame="laser"
     )
-    with nullcontext(tally) if tally is not None else tally_warnings() as tallied:
+    stats = CarmenStats(path=str(source.log))
+    with (
+        nullcontext(tally) if tally is not None else tally_warnings() as tallied,
+        staged_dir(out, inputs=[source.log]) as work,
+    ):
+        config.to_toml(work / "config.toml")
         t0 = time.perf_counter()
         run = build_map(
-            source.scans(max_scans),
+            source.scans(max_scans, stats=stats, strict=strict),
             config,
             max_scans=max_scans,
             collect_figures=plot,
             progress=progress,
             policy=source.policy,
         )
+        if run.summary["scans"] == 0:
+            odometry = f" ({stats.odometry} ODOM messages)" if stats.odometry else ""
+            without = run.summary["scans_without_pose"]
+            what = (
+                f"no laser scans with a pose ({without} without)" if without else "no laser scans"
+            )
+            raise InputError(f"the log contains {what}{odometry}", str(source.log))
         run.summary.update(source.run_summary(run.summary["scans"], max_scans))
         t1 = time.perf_counter()
         title = f"{source.name}: {run.summary['scans']} scans"
-        _write_map_files(out, run, title=title, plot=plot)
+        _write_map_files(work, run, title=title, plot=plot)
         run.summary["runtime_s"]["write"] = time.perf_counter() - t1
         run.summary["runtime_s"]["total"] = time.perf_counter() - t0
         run.summary["warnings"] = tallied.as_list()
-    write_summary(out, run.summary)
+        run.summary["log_anomalies"] = stats.anomalies.to_dict()
+        write_summary(work, run.summary)
     return run.summary
 
 

@@ -12,8 +12,13 @@ frame, log time stamps), ``trajectory_covariance.txt``, ``map.json``, ``summary.
 once, at the end, with ``runtime_s`` per stage: ``read``, ``extract`` (when the runner extracts
 the lines), ``estimate``, ``optimize``, ``write``, ``total``; ``input``, what was read and
 assumed, :meth:`slam.inputs.LogInput.describe`; ``scans_in_log`` and ``partial`` for a run over
-the first scans; ``warnings``, counted, :mod:`slam.diagnostics`), ``config.toml`` (written by the
-CLI before the run) and, with ``plot``, ``figures/``.
+the first scans; ``warnings``, counted, :mod:`slam.diagnostics`; the log's anomalies,
+``log_anomalies``, :mod:`slam.io.anomalies`, for a CARMEN log), ``config.toml`` (the
+configuration used) and, with ``plot``, ``figures/``; ``lineslam slam`` adds ``graph.g2o``.
+
+The folder is written into a temporary folder beside ``out`` and put in place whole when the
+run is complete (:func:`slam.io.atomic.staged_dir`): a failed or interrupted run leaves
+``out`` as it was, a successful one replaces an earlier results folder whole.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from slam.config import RunConfig
+from slam.config import RunConfig, check_run_config
 from slam.diagnostics import WarningTally, tally_warnings
 from slam.errors import InputError
 from slam.inputs import InputPolicy, LogInput, open_log
@@ -33,6 +38,7 @@ from slam.types import Scan
 
 if TYPE_CHECKING:
     from linefit.config import LineFitConfig
+    from slam.io.carmen import CarmenStats
 
 __all__ = ["ScanEstimator", "feed_scans", "run_ekf", "run_estimator_on_log", "run_slam"]
 
@@ -117,8 +123,17 @@ def feed_scans(
     if buffer:
         flush()
     if n == 0:
-        raise InputError("the log contains no laser scans")
+        raise _NoScansError("the log contains no laser scans")
     return clock
+
+
+class _NoScansError(InputError):
+    """The scans fed were none."""
+
+
+def _no_scans(log: Path, stats: CarmenStats) -> InputError:
+    odometry = f" ({stats.odometry} ODOM messages)" if stats.odometry else ""
+    return InputError(f"the log contains no laser scans{odometry}", str(log))
 
 
 def _feed_with_lines(
@@ -143,7 +158,7 @@ def _feed_with_lines(
         if getattr(estimator, "stopped", False):
             break
     if n == 0:
-        raise InputError("the log contains no laser scans")
+        raise _NoScansError("the log contains no laser scans")
     clock["extract"] -= clock["read"]  # reading happened inside the extraction's iterator
     return clock
 
@@ -170,6 +185,8 @@ def run_estimator_on_log(
     linefit_config: LineFitConfig | None = None,
     min_observations: int = 1,
     tally: WarningTally | None = None,
+    config: RunConfig | None = None,
+    strict: bool = False,
 ) -> dict[str, Any]:
     """Run ``estimator`` on a log (an opened :class:`~slam.inputs.LogInput`, a file or a name).
 
@@ -177,32 +194,50 @@ def run_estimator_on_log(
     opened with the default :class:`~slam.inputs.ScannerConfig`; ``policy`` is then only
     documentation: the estimator holds its own) and fed by :func:`feed_scans`
     (``linefit_config``: the runner extracts the lines).  The result's files are written with
-    the map lines of at least ``min_observations`` measurements, then ``summary.json`` once,
-    with the run's times and the warnings counted.  Returns that summary.
+    the map lines of at least ``min_observations`` measurements, ``config.toml`` (with
+    ``config``), then ``summary.json`` once, with the run's times, the warnings counted and
+    the log's anomalies (``strict``: the first anomaly is an error; a bag is not checked).
+    The folder appears at ``out`` only when complete (module docstring).  Returns the summary.
+
+    Raises
+    ------
+    OutputError
+        ``out`` cannot be written, or is or holds the log (:mod:`slam.io.atomic`).
+    InputError
+        The log has no laser scans, or a malformed line (``LogFormatError``; with
+        ``strict``, an anomaly).
     """
+    from slam.io.atomic import staged_dir
+    from slam.io.carmen import CarmenStats
     from slam.io.results import write_summary
 
     source = log if isinstance(log, LogInput) else open_log(log, max_scans=max_scans)
-    with _tallying(tally) as tallied:
+    stats = CarmenStats(path=str(source.log))
+    with _tallying(tally) as tallied, staged_dir(out, inputs=[source.log]) as work:
+        if config is not None:
+            config.to_toml(work / "config.toml")
         t_start = time.perf_counter()
-        clock = feed_scans(
-            estimator,
-            source.scans(max_scans),
-            max_scans=max_scans,
-            progress=progress,
-            linefit_config=linefit_config,
-        )
+        try:
+            clock = feed_scans(
+                estimator,
+                source.scans(max_scans, stats=stats, strict=strict),
+                max_scans=max_scans,
+                progress=progress,
+                linefit_config=linefit_config,
+            )
+        except _NoScansError:
+            raise _no_scans(source.log, stats) from None
         t0 = time.perf_counter()
         estimator.optimize()
         clock["optimize"] = time.perf_counter() - t0
         result = estimator.result()
         t0 = time.perf_counter()
-        result.write_files(out, min_observations)
+        result.write_files(work, min_observations)
         graph = getattr(estimator, "graph", None)
         if graph is not None:
             from slam.io.g2o import write_line_graph_g2o
 
-            write_line_graph_g2o(out / "graph.g2o", graph, result)
+            write_line_graph_g2o(work / "graph.g2o", graph, result)
         if plot:
             from slam.plotting.trajectory_map import plot_slam_result, raw_points_world
 
@@ -211,7 +246,7 @@ def run_estimator_on_log(
                 result.poses_world_laser,
                 result.is_keyframe,
             )
-            plot_slam_result(result, out / "figures", title=source.name, points_world=points)
+            plot_slam_result(result, work / "figures", title=source.name, points_world=points)
         clock["write"] = time.perf_counter() - t0
         clock["total"] = time.perf_counter() - t_start
         summary: dict[str, Any] = result.summary_dict(min_observations)
@@ -220,7 +255,8 @@ def run_estimator_on_log(
         runtime.update({f"{k}": float(v) for k, v in clock.items()})
         summary["runtime_s"] = runtime
         summary["warnings"] = tallied.as_list()
-    write_summary(out, summary)
+        summary["log_anomalies"] = stats.anomalies.to_dict()
+        write_summary(work, summary)
     return summary
 
 
@@ -233,14 +269,17 @@ def run_slam(
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
     tally: WarningTally | None = None,
+    strict: bool = False,
 ) -> dict[str, Any]:
     """``lineslam slam``: factor-graph line SLAM on a log (see the module docstring).
 
     Besides the common files it writes ``graph.g2o``, the final factor graph
-    (:func:`slam.io.g2o.write_line_graph_g2o`).
+    (:func:`slam.io.g2o.write_line_graph_g2o`), and ``config`` as ``config.toml``;
+    ``strict``: a log anomaly is an error.
     """
     from slam.line_slam import LineSlam
 
+    config = check_run_config(config)
     with _tallying(tally) as tallied:
         source = _source(log, config, max_scans)
         slam = LineSlam(config.slam, config.linefit, source.policy)
@@ -253,6 +292,8 @@ def run_slam(
             progress=progress,
             plot=plot,
             tally=tallied,
+            config=config,
+            strict=strict,
         )
 
 
@@ -265,6 +306,7 @@ def run_ekf(
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
     tally: WarningTally | None = None,
+    strict: bool = False,
 ) -> dict[str, Any]:
     """``lineslam ekf``: the EKF baseline on a log (see the module docstring).
 
@@ -274,10 +316,12 @@ def run_ekf(
     ``ekf.min_landmark_observations`` measurements.  When a guard stops the filter
     (``ekf.max_landmarks``, ``ekf.max_runtime_s``), the trajectory covers the scans processed
     and ``summary.json`` says at which scan and why (``stopped_at_scan``, ``stop_reason``).
+    ``config`` is written as ``config.toml``; ``strict``: a log anomaly is an error.
     """
     from slam.ekf import EkfSlam
     from slam.ekf.threads import blas_threads
 
+    config = check_run_config(config)
     with _tallying(tally) as tallied:
         source = _source(log, config, max_scans)
         ekf = EkfSlam(config.ekf, config.linefit, source.policy)
@@ -293,4 +337,6 @@ def run_ekf(
                 linefit_config=config.linefit,
                 min_observations=config.ekf.min_landmark_observations,
                 tally=tallied,
+                config=config,
+                strict=strict,
             )

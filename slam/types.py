@@ -8,19 +8,61 @@ scanner).
 
 from __future__ import annotations
 
+import math
+import numbers
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Scan"]
+from linefit.errors import InputError
+from linefit.line import Line
+
+__all__ = ["Scan", "check_lines", "check_scan"]
 
 FloatArray = NDArray[np.float64]
+
+
+def _vector(value: Any, what: str, fail: Any) -> FloatArray:
+    """``value`` as a 1-D float array (float arrays pass through unchanged)."""
+    if not (isinstance(value, np.ndarray) and value.dtype.kind == "f"):
+        try:
+            value = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise fail(f"{what} must be an array of numbers") from None
+    if value.ndim != 1:
+        raise fail(f"{what} must be one-dimensional, got shape {value.shape}")
+    return value
+
+
+def _good_pose(value: Any) -> bool:
+    return value is None or (
+        type(value) is np.ndarray and value.shape == (3,) and value.dtype.kind == "f"
+    )
+
+
+def _pose(value: Any, what: str, fail: Any) -> FloatArray | None:
+    if value is None:
+        return None
+    if not (isinstance(value, np.ndarray) and value.dtype.kind == "f"):
+        try:
+            value = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise fail(f"{what} must be three numbers (x, y, theta)") from None
+    if value.shape != (3,):
+        raise fail(f"{what} must have shape (3,) (x, y, theta), got {value.shape}")
+    return value
 
 
 @dataclass(frozen=True, eq=False)
 class Scan:
     """One laser scan with the odometry that came with it.
+
+    Lists are accepted for the arrays (converted to float arrays); wrong types, shapes, a
+    non-finite time stamp or a non-positive range limit raise :class:`InputError` naming the
+    field (and the scan's ``source``).
 
     Attributes
     ----------
@@ -53,6 +95,64 @@ class Scan:
     pose_odom_laser: FloatArray | None = None
     source: str = ""
 
+    def __post_init__(self) -> None:
+        """Check the fields (lists become float arrays); raise :class:`InputError` naming them."""
+        r, b, t = self.ranges, self.bearings, self.timestamp
+        if (  # the common case, cheaply: float arrays, a finite float stamp, proper poses
+            type(r) is np.ndarray
+            and type(b) is np.ndarray
+            and r.ndim == 1
+            and r.shape == b.shape
+            and r.dtype.kind == "f"
+            and b.dtype.kind == "f"
+            and type(t) is float
+            and math.isfinite(t)
+            and type(self.index) is int
+            and _good_pose(self.pose_odom_base)
+            and _good_pose(self.pose_odom_laser)
+            and isinstance(self.max_range_m, float)
+            and self.max_range_m > 0.0
+        ):
+            return
+        self._check_fields()
+
+    def _check_fields(self) -> None:
+        where = self.source or None
+
+        def fail(message: str) -> InputError:
+            return InputError(f"Scan {self.index!r}: {message}", where)
+
+        if isinstance(self.index, bool) or not isinstance(self.index, numbers.Integral):
+            raise fail(f"index must be a whole number, got {type(self.index).__name__}")
+        try:
+            finite = math.isfinite(self.timestamp)
+        except TypeError:
+            raise fail(f"timestamp must be a number, got {type(self.timestamp).__name__}") from None
+        if not finite:
+            raise fail(f"timestamp must be finite, got {float(self.timestamp)}")
+        ranges = _vector(self.ranges, "ranges", fail)
+        bearings = _vector(self.bearings, "bearings", fail)
+        if ranges.shape != bearings.shape:
+            raise fail(
+                f"ranges ({ranges.shape[0]}) and bearings ({bearings.shape[0]}) differ in length"
+            )
+        try:
+            limit_ok = float(self.max_range_m) > 0.0
+        except (TypeError, ValueError):
+            raise fail("max_range_m must be a number") from None
+        if not limit_ok:
+            raise fail(f"max_range_m must be > 0 (inf: no limit), got {self.max_range_m}")
+        base = _pose(self.pose_odom_base, "pose_odom_base", fail)
+        laser = _pose(self.pose_odom_laser, "pose_odom_laser", fail)
+        for name, value in (
+            ("ranges", ranges),
+            ("bearings", bearings),
+            ("pose_odom_base", base),
+            ("pose_odom_laser", laser),
+        ):
+            if value is not getattr(self, name):
+                object.__setattr__(self, name, value)
+
     @property
     def n_beams(self) -> int:
         """Number of beams in the scan."""
@@ -68,3 +168,35 @@ class Scan:
         return np.stack(
             [self.ranges * np.cos(self.bearings), self.ranges * np.sin(self.bearings)], 1
         )
+
+
+def check_scan(scan: object, name: str = "scan") -> Scan:
+    """``scan`` if it is a :class:`~slam.types.Scan`, else :class:`InputError` naming ``name``.
+
+    A ``Scan`` checks its own fields when it is made (finite time stamp, shapes, ...).
+    """
+    if not isinstance(scan, Scan):
+        raise InputError(f"{name} must be a slam.types.Scan, got {type(scan).__name__}")
+    return scan
+
+
+def check_lines(lines: object, scan: Scan, name: str = "lines") -> list[Line]:
+    """``lines`` as a list of :class:`linefit.Line`, else :class:`InputError` naming the scan.
+
+    ``None`` is not accepted here (callers extract the lines themselves then).
+    """
+    where = scan.source or None
+    if isinstance(lines, str | bytes) or not isinstance(lines, Iterable):
+        raise InputError(
+            f"scan {scan.index}: {name} must be a sequence of linefit.Line, got "
+            f"{type(lines).__name__}",
+            where,
+        )
+    out = list(lines)
+    for k, line in enumerate(out):
+        if not isinstance(line, Line):
+            raise InputError(
+                f"scan {scan.index}: {name}[{k}] must be a linefit.Line, got {type(line).__name__}",
+                where,
+            )
+    return out

@@ -29,7 +29,8 @@ from slam.cli.common import (
     SigmaDOpt,
     SigmaPhiOpt,
     build_config,
-    prepare_out_dir,
+    check_out_dir,
+    results_dir,
     task_progress,
 )
 from slam.cli.scanner_opts import (
@@ -119,6 +120,7 @@ def compare(
     from slam.experiments.compare import run_compare
     from slam.experiments.report import write_report
     from slam.experiments.variants import default_variants, parse_source, parse_variants
+    from slam.io.catalog import resolve_log
 
     run_config = build_config(config, sigma_d, sigma_phi, seed)
     run_config = with_scanner_options(
@@ -152,8 +154,16 @@ def compare(
         if not time_budget > 0.0:
             raise ConfigError(f"--time-budget must be > 0, got {time_budget}")
         selected = tuple(replace(v, time_budget_s=time_budget) for v in selected)
-    prepare_out_dir(out, run_config)
-    with task_progress(len(selected), "variants", "variant", quiet) as progress:
+    check_out_dir(out)
+    inputs: list[Path] = []
+    if data.kind == "log":
+        from slam.io.rosbag import is_rosbag
+
+        inputs = [Path(data.name) if is_rosbag(data.name) else resolve_log(data.name).log]
+    with (
+        results_dir(out, run_config, inputs, reuse=(".cache",)) as work,
+        task_progress(len(selected), "variants", "variant", quiet) as progress,
+    ):
         report = run_compare(
             data,
             selected,
@@ -161,10 +171,10 @@ def compare(
             workers,
             dask,
             progress,
-            cache_dir=out / ".cache",
+            cache_dir=work / ".cache",
             max_scans=max_scans,
         )
-    write_report(report, out, figures=figures)
+        write_report(report, work, figures=figures)
     if not quiet:
         typer.echo(report.markdown_table())
 

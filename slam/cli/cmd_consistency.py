@@ -24,7 +24,8 @@ from slam.cli.common import (
     SigmaDOpt,
     SigmaPhiOpt,
     build_config,
-    prepare_out_dir,
+    check_out_dir,
+    results_dir,
     task_progress,
 )
 
@@ -63,24 +64,25 @@ def consistency(
         estimators=tuple(e.strip() for e in estimators.split(",") if e.strip()),
         seed=run_config.seed,
     )
-    prepare_out_dir(out, run_config)
-    with task_progress(runs, "runs", "run", quiet) as progress:
-        result = run_consistency(study, run_config, workers, dask, progress)
-    (out / "consistency.json").write_text(json.dumps(result.to_dict(), indent=1))
-    from slam.plotting.compare import plot_errors_over_time, plot_nees_over_time
+    check_out_dir(out)
+    with results_dir(out, run_config) as work:
+        with task_progress(runs, "runs", "run", quiet) as progress:
+            result = run_consistency(study, run_config, workers, dask, progress)
+        (work / "consistency.json").write_text(json.dumps(result.to_dict(), indent=1))
+        from slam.plotting.compare import plot_errors_over_time, plot_nees_over_time
 
-    plot_nees_over_time(
-        {k: v.anees for k, v in result.estimators.items()},
-        next(iter(result.estimators.values())).bounds,
-        out / "nees.png",
-        n_runs=runs,
-        title=f"Pose NEES over time, {world} x{loops:g}, {runs} runs",
-    )
-    plot_errors_over_time(
-        {k: v.pos_rmse_over_time for k, v in result.estimators.items()},
-        out / "error.png",
-        ylabel="position RMSE over runs (m)",
-        title=f"Position error over time, {world} x{loops:g}",
-    )
+        plot_nees_over_time(
+            {k: v.anees for k, v in result.estimators.items()},
+            next(iter(result.estimators.values())).bounds,
+            work / "nees.png",
+            n_runs=runs,
+            title=f"Pose NEES over time, {world} x{loops:g}, {runs} runs",
+        )
+        plot_errors_over_time(
+            {k: v.pos_rmse_over_time for k, v in result.estimators.items()},
+            work / "error.png",
+            ylabel="position RMSE over runs (m)",
+            title=f"Position error over time, {world} x{loops:g}",
+        )
     if not quiet:
         typer.echo(result.table())

@@ -26,9 +26,11 @@ from slam.cli.common import (
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
+    StrictOpt,
     build_config,
     check_max_scans,
-    prepare_out_dir,
+    check_out_dir,
+    warn_log_anomalies,
 )
 from slam.cli.scanner_opts import (
     BaseFrameOpt,
@@ -63,6 +65,7 @@ def ekf(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    strict: StrictOpt = False,
     first_angle: FirstAngleOpt = None,
     step: StepOpt = None,
     fov: FovOpt = None,
@@ -108,14 +111,21 @@ def ekf(
         ekf_cfg = replace(ekf_cfg, association=replace(ekf_cfg.association, method=method))
         run_config = replace(run_config, ekf=ekf_cfg)
     check_max_scans(max_scans)
+    check_out_dir(out)
     with tally_warnings() as tally:
         source = open_log(log, run_config.scanner, max_scans=max_scans)
-        prepare_out_dir(out, run_config)
         with tqdm(desc="ekf", unit="scan", disable=quiet, total=source.total(max_scans)) as bar:
             summary = run_ekf(
-                source, out, run_config, max_scans=max_scans, progress=bar.update, tally=tally
+                source,
+                out,
+                run_config,
+                max_scans=max_scans,
+                progress=bar.update,
+                tally=tally,
+                strict=strict,
             )
     echo_warnings(tally)
+    warn_log_anomalies(summary["log"], summary.get("log_anomalies"))
     if not quiet:
         rt = summary.get("runtime_s", {})
         msg = (

@@ -91,7 +91,7 @@ def evaluate(
         sources=sources,
         partial=partial,
     )
-    path = write_metrics(results_dir, report.to_dict())
+    path = write_metrics(results_dir, report.to_dict())  # whole or not at all
     if not quiet:
         typer.echo(report.format_table())
         typer.echo(f"wrote {path}")

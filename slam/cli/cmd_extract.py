@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator
+from contextlib import nullcontext
 from dataclasses import replace
 from itertools import islice
 from pathlib import Path
@@ -25,7 +26,17 @@ import typer
 
 from linefit import Line
 from slam.cli._app import app
-from slam.cli.common import ConfigOpt, QuietOpt, SeedOpt, SigmaDOpt, SigmaPhiOpt, build_config
+from slam.cli.common import (
+    ConfigOpt,
+    QuietOpt,
+    SeedOpt,
+    SigmaDOpt,
+    SigmaPhiOpt,
+    StrictOpt,
+    build_config,
+    out_path,
+    warn_log_anomalies,
+)
 from slam.cli.scanner_opts import (
     BaseFrameOpt,
     BeamsOpt,
@@ -43,8 +54,11 @@ from slam.cli.scanner_opts import (
     with_scanner_options,
 )
 from slam.config import RunConfig
+from slam.errors import InputError
 from slam.extraction import extract_lines_of_scans
 from slam.inputs import LogInput
+from slam.io.atomic import check_output_file, staged_files, staged_into
+from slam.io.carmen import CarmenStats
 from slam.types import Scan
 
 __all__ = ["config_path_for", "extract", "scan_record"]
@@ -87,7 +101,10 @@ def extract(
         ),
     ],
     out: Annotated[
-        Path, typer.Option("--out", help="Output FILE.jsonl (one JSON object per scan).")
+        Path,
+        typer.Option(
+            "--out", parser=out_path, help="Output FILE.jsonl (one JSON object per scan)."
+        ),
     ],
     plot: Annotated[
         Path | None, typer.Option("--plot", help="Directory for paper-style figures of some scans.")
@@ -108,6 +125,7 @@ def extract(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    strict: StrictOpt = False,
     first_angle: FirstAngleOpt = None,
     step: StepOpt = None,
     fov: FovOpt = None,
@@ -121,7 +139,12 @@ def extract(
     odometry: OdometryOpt = None,
     base_frame: BaseFrameOpt = None,
 ) -> None:
-    """Fit lines to every scan of LOG (Pfister et al. 2003, Secs. II-IV) and write FILE.jsonl."""
+    """Fit lines to every scan of LOG (Pfister et al. 2003, Secs. II-IV) and write FILE.jsonl.
+
+    FILE.jsonl and FILE.config.toml are written under temporary names beside them and renamed
+    into place when every scan is done: a failed or interrupted run leaves earlier files as
+    they were.
+    """
     from slam.diagnostics import tally_warnings
     from slam.inputs import open_log
 
@@ -143,10 +166,20 @@ def extract(
     )
     if grouping is not None:
         config = replace(config, linefit=replace(config.linefit, grouping=grouping))
+    check_output_file(out)
     with tally_warnings() as tally:
         source = open_log(log, config.scanner, max_scans=limit)
-        _extract(source, out, config, plot, plot_every, limit, quiet)
+        n_scans, n_lines, stats = _extract(
+            source, out, config, plot, plot_every, limit, quiet, strict
+        )
     echo_warnings(tally)
+    warn_log_anomalies(source.log, stats.anomalies.to_dict())
+    if not quiet:
+        per_scan = n_lines / max(n_scans, 1)
+        typer.echo(
+            f"{n_scans} scans, {n_lines} lines ({per_scan:.2f} per scan) -> {out}; "
+            f"configuration: {config_path_for(out)}"
+        )
 
 
 def _extract(
@@ -157,42 +190,46 @@ def _extract(
     plot_every: int,
     limit: int | None,
     quiet: bool,
-) -> None:
-    out.parent.mkdir(parents=True, exist_ok=True)
-    config.to_toml(config_path_for(out))
+    strict: bool,
+) -> tuple[int, int, CarmenStats]:
+    """Write ``out`` and its configuration (and figures under ``plot``); return the counts."""
     total = source.total(limit)
     every = plot_every if plot_every > 0 else max(1, (total or 1200) // 12)
-    scans: Iterator[Scan] = source.scans(limit, need_odometry=False)
+    stats = CarmenStats(path=str(source.log))
 
     from tqdm import tqdm
 
     n_scans = n_lines = 0
     with (
-        out.open("w", encoding="utf-8") as handle,
-        tqdm(total=total, unit="scan", desc="extract", disable=quiet) as bar,
+        staged_files([out, config_path_for(out)], inputs=[source.log]) as (lines_tmp, cfg_tmp),
+        staged_into(plot, inputs=[source.log]) if plot is not None else nullcontext() as figs,
     ):
-        for chunk in _batches(scans, BATCH_SCANS):
-            results = extract_lines_of_scans(chunk, config.linefit)
-            for scan, lines in zip(chunk, results, strict=True):
-                handle.write(json.dumps(scan_record(scan, lines)) + "\n")
-                n_lines += len(lines)
-                if plot is not None and scan.index % every == 0:
-                    from slam.plotting.scan import save_scan_figure
+        config.to_toml(cfg_tmp)
+        scans: Iterator[Scan] = source.scans(limit, need_odometry=False, stats=stats, strict=strict)
+        with (
+            lines_tmp.open("w", encoding="utf-8") as handle,
+            tqdm(total=total, unit="scan", desc="extract", disable=quiet) as bar,
+        ):
+            for chunk in _batches(scans, BATCH_SCANS):
+                results = extract_lines_of_scans(chunk, config.linefit)
+                for scan, lines in zip(chunk, results, strict=True):
+                    handle.write(json.dumps(scan_record(scan, lines)) + "\n")
+                    n_lines += len(lines)
+                    if figs is not None and scan.index % every == 0:
+                        from slam.plotting.scan import save_scan_figure
 
-                    save_scan_figure(
-                        plot / f"scan_{scan.index:06d}.png",
-                        scan.ranges,
-                        scan.bearings,
-                        lines,
-                        config.linefit,
-                        max_range_m=scan.max_range_m,
-                        title=f"{source.name} scan {scan.index}: {len(lines)} lines",
-                    )
-            n_scans += len(chunk)
-            bar.update(len(chunk))
-    if not quiet:
-        per_scan = n_lines / max(n_scans, 1)
-        typer.echo(
-            f"{n_scans} scans, {n_lines} lines ({per_scan:.2f} per scan) -> {out}; "
-            f"configuration: {config_path_for(out)}"
-        )
+                        save_scan_figure(
+                            figs / f"scan_{scan.index:06d}.png",
+                            scan.ranges,
+                            scan.bearings,
+                            lines,
+                            config.linefit,
+                            max_range_m=scan.max_range_m,
+                            title=f"{source.name} scan {scan.index}: {len(lines)} lines",
+                        )
+                n_scans += len(chunk)
+                bar.update(len(chunk))
+        if n_scans == 0:
+            odometry = f" ({stats.odometry} ODOM messages)" if stats.odometry else ""
+            raise InputError(f"the log contains no laser scans{odometry}", str(source.log))
+    return n_scans, n_lines, stats

@@ -17,9 +17,11 @@ from slam.cli.common import (
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
+    StrictOpt,
     build_config,
     check_max_scans,
-    prepare_out_dir,
+    check_out_dir,
+    warn_log_anomalies,
 )
 from slam.cli.scanner_opts import (
     BaseFrameOpt,
@@ -50,6 +52,7 @@ def map_command(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    strict: StrictOpt = False,
     pose_sigma_xy: Annotated[
         float | None,
         typer.Option("--pose-sigma-xy", help="σ (m) of each scan pose's x and y in the map."),
@@ -117,9 +120,9 @@ def map_command(
     if overrides:
         config = replace(config, map=replace(config.map, **overrides))
     check_max_scans(max_scans)
+    check_out_dir(out)
     with tally_warnings() as tally:
         source = open_log(log, config.scanner, max_scans=max_scans)
-        prepare_out_dir(out, config)
         with tqdm(desc="map", unit="scan", disable=quiet, total=source.total(max_scans)) as bar:
             summary = run_map(
                 source,
@@ -129,8 +132,10 @@ def map_command(
                 max_scans=max_scans,
                 progress=bar.update,
                 tally=tally,
+                strict=strict,
             )
     echo_warnings(tally)
+    warn_log_anomalies(summary["log"], summary.get("log_anomalies"))
     if not quiet:
         typer.echo(
             f"{summary['scans']} scans, {summary['points']} points -> {summary['lines_fit']} lines"

@@ -10,8 +10,9 @@ import numpy as np
 import typer
 
 from slam.cli._app import app
-from slam.cli.common import ConfigOpt, QuietOpt, SeedOpt, SigmaDOpt, SigmaPhiOpt
+from slam.cli.common import ConfigOpt, QuietOpt, SeedOpt, SigmaDOpt, SigmaPhiOpt, out_path
 from slam.errors import ConfigError
+from slam.io.atomic import check_output_dir, staged_dir
 from slam.sim.config import LaserConfig, SimConfig
 from slam.sim.simulate import simulate
 from slam.sim.worlds import WORLD_NAMES, load_world
@@ -76,7 +77,14 @@ def build_sim_config(
 
 @app.command("simulate")
 def simulate_command(
-    out: Annotated[Path, typer.Option("--out", help="Output folder (created).")],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            parser=out_path,
+            help="Output folder (created, or an earlier one replaced whole).",
+        ),
+    ],
     world: Annotated[
         str | None,
         typer.Argument(
@@ -154,6 +162,7 @@ def simulate_command(
         heading_drift,
         scale_bias,
     )
+    check_output_dir(out)
     from slam.experiments.linesim import ray_world
 
     the_world = ray_world(config.world) or load_world(config.world)
@@ -173,7 +182,9 @@ def simulate_command(
     finally:
         if bar is not None:
             bar.close()
-    paths = write_simulation(log, out, beam_hits=not no_beam_hits)
+    with staged_dir(out) as work:
+        written = write_simulation(log, work, beam_hits=not no_beam_hits, final_dir=out)
+    paths = {role: out / path.name for role, path in written.items()}
     if not quiet:
         no_return = float(np.mean(log.hit_ids < 0))
         drift = float(np.linalg.norm(log.poses_odom_base[-1, :2] - log.poses_world_base[-1, :2]))

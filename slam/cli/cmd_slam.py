@@ -17,9 +17,11 @@ from slam.cli.common import (
     SeedOpt,
     SigmaDOpt,
     SigmaPhiOpt,
+    StrictOpt,
     build_config,
     check_max_scans,
-    prepare_out_dir,
+    check_out_dir,
+    warn_log_anomalies,
 )
 from slam.cli.scanner_opts import (
     BaseFrameOpt,
@@ -54,6 +56,7 @@ def slam_command(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    strict: StrictOpt = False,
     max_scans: MaxScansOpt = None,
     plot: Annotated[
         bool, typer.Option("--plot/--no-plot", help="Draw the trajectory and the line map.")
@@ -104,9 +107,9 @@ def slam_command(
             raise typer.BadParameter("--backend must be batch or isam2")
         config = replace(config, slam=replace(config.slam, backend=backend))  # type: ignore[arg-type]
     check_max_scans(max_scans)
+    check_out_dir(out)
     with tally_warnings() as tally:
         source = open_log(log, config.scanner, max_scans=max_scans)
-        prepare_out_dir(out, config)
         with tqdm(
             desc=f"slam ({config.slam.backend})",
             unit="scan",
@@ -121,8 +124,10 @@ def slam_command(
                 progress=bar.update,
                 plot=plot,
                 tally=tally,
+                strict=strict,
             )
     echo_warnings(tally)
+    warn_log_anomalies(summary["log"], summary.get("log_anomalies"))
     if not quiet:
         rt = summary.get("runtime_s", {})
         typer.echo(

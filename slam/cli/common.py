@@ -1,8 +1,11 @@
 """Options and chores shared by the ``lineslam`` commands.
 
-Every command that writes results: takes ``--out``, creates it, writes ``config.toml`` (the full
-:class:`~slam.config.RunConfig` used), honours ``--config``, ``--sigma-d``, ``--sigma-phi``,
-``--seed`` and ``--quiet``.  Values given on the command line override the file.
+Every command that writes results: takes ``--out``, writes ``config.toml`` (the full
+:class:`~slam.config.RunConfig` used) with its results, honours ``--config``, ``--sigma-d``,
+``--sigma-phi``, ``--seed`` and ``--quiet``.  Values given on the command line override the
+file.  The results folder is written beside ``--out`` and put in place whole when complete
+(:mod:`slam.io.atomic`): a bad ``--out`` is refused before anything is read, and a failed or
+interrupted run leaves ``--out`` as it was.
 
 The ``*Opt`` / ``*Arg`` aliases are typer parameter declarations used as type annotations
 (``out: OutDirOpt``); a command whose option has other help text declares its own.
@@ -10,15 +13,17 @@ The ``*Opt`` / ``*Arg`` aliases are typer parameter declarations used as type an
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+import sys
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from slam.config import RunConfig
+from slam.errors import ConfigError, OutputError
 
 __all__ = [
     "ConfigOpt",
@@ -30,14 +35,33 @@ __all__ = [
     "SeedOpt",
     "SigmaDOpt",
     "SigmaPhiOpt",
+    "StrictOpt",
     "build_config",
     "check_max_scans",
-    "prepare_out_dir",
+    "check_out_dir",
+    "out_path",
+    "results_dir",
     "task_progress",
+    "warn_log_anomalies",
 ]
 
+
+def out_path(value: str) -> Path:
+    """Parse an ``--out`` value: an empty one is refused (it would mean the current folder)."""
+    if not value.strip():
+        raise OutputError(repr(value), "empty path given to --out")
+    return Path(value)
+
+
 LogArg = Annotated[str, typer.Argument(help="Log file, or a dataset name (intel, aces, fr079).")]
-OutDirOpt = Annotated[Path, typer.Option("--out", help="Results folder (created).")]
+OutDirOpt = Annotated[
+    Path,
+    typer.Option(
+        "--out",
+        parser=out_path,
+        help="Results folder (created, or an earlier results folder replaced whole).",
+    ),
+]
 MaxScansOpt = Annotated[int | None, typer.Option("--max-scans", help="Use only the first N scans.")]
 DaskOpt = Annotated[
     str | None, typer.Option("--dask", help="Dask scheduler address (tcp://host:port).")
@@ -57,6 +81,14 @@ SigmaPhiOpt = Annotated[
 ]
 SeedOpt = Annotated[int | None, typer.Option("--seed", help="Seed for every random choice.")]
 QuietOpt = Annotated[bool, typer.Option("--quiet", help="No progress bars or tables.")]
+StrictOpt = Annotated[
+    bool,
+    typer.Option(
+        "--strict",
+        help="Stop at the first log anomaly (time going backwards, odometry jumps, a cut-short "
+        "last line, unknown messages) instead of warning about it.",
+    ),
+]
 
 
 def build_config(
@@ -66,6 +98,8 @@ def build_config(
     seed: int | None = None,
 ) -> RunConfig:
     """Load ``--config`` (or the defaults) and apply the command-line overrides."""
+    if config_path is not None and config_path.is_dir():
+        raise ConfigError(f"{config_path}: is a folder; --config takes a TOML file")
     config = RunConfig.from_toml(config_path) if config_path is not None else RunConfig()
     config = config.with_sensor_noise(sigma_d, sigma_phi)
     if seed is not None:
@@ -73,11 +107,35 @@ def build_config(
     return config
 
 
-def prepare_out_dir(out: Path, config: RunConfig) -> Path:
-    """Create ``out`` (and parents) and write ``out/config.toml``; return ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    config.to_toml(out / "config.toml")
-    return out
+def check_out_dir(out: Path, inputs: Iterable[str | Path] = ()) -> Path:
+    """Refuse a bad ``--out`` before any work (:func:`slam.io.atomic.check_output_dir`)."""
+    from slam.io.atomic import check_output_dir
+
+    return check_output_dir(out, inputs)
+
+
+@contextmanager
+def results_dir(
+    out: Path, config: RunConfig, inputs: Iterable[str | Path] = (), reuse: tuple[str, ...] = ()
+) -> Iterator[Path]:
+    """A temporary results folder holding ``config.toml``; put at ``out`` when the block ends.
+
+    Yields the folder to write into; if the block fails or is interrupted it is removed and
+    ``out`` stays as it was (:func:`slam.io.atomic.staged_dir`).
+    """
+    from slam.io.atomic import staged_dir
+
+    with staged_dir(out, inputs, reuse=reuse) as work:
+        config.to_toml(work / "config.toml")
+        yield work
+
+
+def warn_log_anomalies(log: str | Path, anomalies: Mapping[str, Any] | None) -> None:
+    """Print one ``lineslam: warning:`` line per kind of log anomaly (``summary.json``)."""
+    from slam.io.anomalies import anomaly_messages
+
+    for line in anomaly_messages(str(log), dict(anomalies or {})):
+        print(f"lineslam: warning: {line}", file=sys.stderr)
 
 
 def check_max_scans(max_scans: int | None) -> None:

@@ -56,6 +56,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from linefit.config import LineFitConfig
 from linefit.line import Line, wrap_angle
 from slam.association import associate, build_problem, candidate_landmarks, overlap_mask
 from slam.ekf.augment import augment_state
@@ -72,13 +73,11 @@ from slam.inputs import InputPolicy
 from slam.lines import chi2_gate
 from slam.lines.lineset import LineSet, supported_lines
 from slam.models import landmarks_normal_form, moved_enough
-from slam.types import Scan
+from slam.types import Scan, check_lines, check_scan
+from slam.validate import check_config
 
 if TYPE_CHECKING:
     from slam.result import SlamResult
-
-if TYPE_CHECKING:
-    from linefit.config import LineFitConfig
 
 __all__ = ["EkfSlam", "ScanReport"]
 
@@ -117,9 +116,13 @@ class EkfSlam:
         policy: InputPolicy | None = None,
         initial_pose_world_laser: FloatArray | Sequence[float] | None = None,
     ) -> None:
-        self.config = config or EkfConfig()
-        self.linefit_config = linefit_config
-        self.policy = policy if policy is not None else InputPolicy()
+        self.config = check_config(config, EkfConfig, "config")
+        self.linefit_config = (
+            None
+            if linefit_config is None
+            else check_config(linefit_config, LineFitConfig, "linefit_config")
+        )
+        self.policy = check_config(policy, InputPolicy, "policy")
         self._initial_pose = (
             None
             if initial_pose_world_laser is None
@@ -405,7 +408,6 @@ class EkfSlam:
         if isinstance(lines, LineSet):
             return lines
         if lines is None:
-            from linefit.config import LineFitConfig
             from slam.extraction import extract_scan_lines
 
             lines = extract_scan_lines(scan, self.linefit_config or LineFitConfig())
@@ -433,8 +435,12 @@ class EkfSlam:
         EstimationError
             When an update is indeterminate (innovation covariance not positive definite).
         InputError
-            When the scan has no (finite) odometry pose.
+            ``scan`` is not a :class:`Scan`, ``lines`` not a sequence of :class:`Line` (or a
+            :class:`LineSet`), or the scan has no (finite) odometry pose.
         """
+        check_scan(scan)
+        if lines is not None and not isinstance(lines, LineSet):
+            lines = check_lines(lines, scan)
         if self.stopped:
             # a guard tripped earlier: the scan is not processed and gets no pose (runners
             # built for the graph keep feeding; the result says where and why it stopped)

@@ -8,13 +8,20 @@ runs in this process (no Dask at all), which is also the reference the parallel 
 Determinism: tasks carry everything they need, their seeds included (derive them with
 :func:`task_seed`), and results come back in task order, so a run gives the same numbers
 serially, on a process pool, or on a cluster.
+
+Interruption: when the waiting is interrupted (``KeyboardInterrupt``, or the command line's
+SIGINT/SIGTERM exception), the tasks not finished are cancelled and the local cluster's worker
+processes are killed at once (their tasks are lost anyway), so that the run stops within a
+second or two, without Dask's shutdown warnings; the exception then propagates.
 """
 
 from __future__ import annotations
 
+import logging
 import os
+import signal
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from typing import Any, TypeVar
 
 import numpy as np
@@ -74,9 +81,42 @@ def _client(workers: int, dask_address: str | None, timeout_s: float) -> Iterato
     client = Client(cluster)
     try:
         yield client
+    except BaseException as exc:
+        if not isinstance(exc, Exception):  # interrupted: no graceful shutdown
+            _mute_dask()
+            _kill_workers(cluster)
+        raise
     finally:
         client.close()
         cluster.close()
+        _unmute_dask()
+
+
+_MUTED: dict[str, int] = {}
+
+
+def _mute_dask() -> None:
+    """Silence Dask's warnings about tasks and workers stopped on purpose."""
+    for name in ("distributed", "tornado"):
+        log = logging.getLogger(name)
+        _MUTED.setdefault(name, log.level)
+        log.setLevel(logging.CRITICAL)
+
+
+def _unmute_dask() -> None:
+    while _MUTED:
+        name, level = _MUTED.popitem()
+        logging.getLogger(name).setLevel(level)
+
+
+def _kill_workers(cluster: Any) -> None:
+    """Kill a local cluster's worker processes (their tasks are abandoned)."""
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        process = getattr(getattr(nanny, "process", None), "process", None)
+        pid = getattr(process, "pid", None)
+        if isinstance(pid, int) and pid > 0:
+            with suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
 
 
 def map_tasks(
@@ -123,8 +163,15 @@ def map_tasks(
         futures = client.map(fn, list(tasks), pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * total
-        for done, future in enumerate(as_completed(futures), start=1):
-            results[index[future.key]] = future.result()
-            if progress is not None:
-                progress(done, total)
+        try:
+            for done, future in enumerate(as_completed(futures), start=1):
+                results[index[future.key]] = future.result()
+                if progress is not None:
+                    progress(done, total)
+        except BaseException as exc:
+            if not isinstance(exc, Exception):  # interrupted: drop the tasks not finished
+                _mute_dask()
+                with suppress(Exception):
+                    client.cancel(futures, force=True)
+            raise
     return results

@@ -64,7 +64,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from itertools import islice
 from pathlib import Path
 from typing import Any
@@ -74,6 +74,7 @@ from numpy.typing import NDArray
 
 from slam.errors import ConfigError, LogFormatError
 from slam.io._text import iter_text_lines
+from slam.io.anomalies import LogAnomalies
 from slam.io.laser import DEFAULT_MAX_RANGE_M, LaserGeometry, beam_bearings, guess_laser_geometry
 from slam.io.trajectory import Trajectory
 from slam.types import Scan
@@ -171,6 +172,9 @@ class CarmenStats:
         ``(line_number, reason)``.
     laser_type : str or None
         The laser message type read.
+    anomalies : LogAnomalies
+        Anomalies met (time going backwards, odometry jumps, a truncated last line, unknown
+        messages, ...; :mod:`slam.io.anomalies`).
     """
 
     path: str = ""
@@ -185,17 +189,22 @@ class CarmenStats:
     malformed: int = 0
     malformed_lines: list[tuple[int, str]] = field(default_factory=list)
     laser_type: str | None = None
+    anomalies: LogAnomalies = field(default_factory=LogAnomalies)
 
     def reset(self, path: str) -> None:
-        """Zero every count (a new pass starts)."""
+        """Zero every count (a new pass starts); the anomalies keep their ``strict``."""
         fresh = CarmenStats(path=path)
-        for name, value in asdict(fresh).items():
-            setattr(self, name, value)
+        for f in fields(fresh):
+            if f.name != "anomalies":
+                setattr(self, f.name, getattr(fresh, f.name))
+        self.anomalies.reset(path)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready copy."""
-        out = asdict(self)
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["unknown_types"] = dict(self.unknown_types)
         out["malformed_lines"] = [list(item) for item in self.malformed_lines]
+        out["anomalies"] = self.anomalies.to_dict()
         return out
 
 
@@ -213,6 +222,31 @@ def _floats(tokens: list[str], what: str) -> FloatArray:
         return np.array(tokens, dtype=np.float64)
     except ValueError:
         raise _LineError(_bad_token(tokens, what)) from None
+
+
+def _first_bad(tokens: list[str]) -> int:
+    for i, token in enumerate(tokens):
+        try:
+            float(token)
+        except ValueError:
+            return i
+    return -1  # pragma: no cover - np.array failed, float() did not
+
+
+def _laser_floats(tokens: list[str], start: int, stop: int, n: int, kind: str) -> FloatArray:
+    """``tokens[start:stop]`` as numbers: ``n`` readings first (at ``start``), then more."""
+    try:
+        return np.array(tokens[start:stop], dtype=np.float64)
+    except ValueError:
+        pass
+    i = start + _first_bad(tokens[start:stop])
+    if i < start + n:
+        raise _LineError(f"{kind}: range reading {i - start} is {tokens[i]!r}, not a number")
+    raise _LineError(
+        f"{kind}: field {i + 1} is {tokens[i]!r}, not a number; {kind} says {n} readings, "
+        f"so fields {start + n + 1} to {stop} must be numbers (poses, time stamp): fewer "
+        f"readings than num_readings?"
+    )
 
 
 def _count(token: str, what: str) -> int:
@@ -243,7 +277,9 @@ def _check_ranges(ranges: FloatArray, kind: str) -> None:
     # min() is NaN if any reading is NaN, and NaN >= 0 is False; +inf (no return) passes
     if ranges.size and not ranges.min() >= 0.0:
         i = int(np.flatnonzero(~(ranges >= 0.0))[0])
-        raise _LineError(f"{kind}: range reading {i} is {ranges[i]!r} (must be >= 0 m, not NaN)")
+        raise _LineError(
+            f"{kind}: range reading {i} is {float(ranges[i])} (must be >= 0 m, not NaN)"
+        )
 
 
 def _check_finite(values: FloatArray, kind: str, what: str) -> None:
@@ -260,6 +296,7 @@ class _Parsed:
     timestamp: float
     pose_odom_base: FloatArray | None
     pose_odom_laser: FloatArray | None
+    tail: int  # fields after ipc_timestamp (hostname, logger_timestamp)
 
 
 def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Parsed:
@@ -267,6 +304,8 @@ def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
     if len(tokens) < 2:
         raise _LineError(f"{kind}: no beam count (truncated line)")
     n = _count(tokens[1], f"{kind} num_readings")
+    if n == 0:
+        raise _LineError(f"{kind} has 0 readings (num_readings must be >= 1)")
     need = n + 9
     if len(tokens) < need:
         raise _LineError(
@@ -274,7 +313,7 @@ def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
             "(truncated line or wrong beam count)"
         )
     _check_tail(tokens, need, kind, need)
-    values = _floats(tokens[2:need], kind)
+    values = _laser_floats(tokens, 2, need, n, kind)
     ranges = values[:n]
     _check_ranges(ranges, kind)
     _check_finite(values[n:], kind, "poses and ipc_timestamp")
@@ -289,6 +328,7 @@ def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
         timestamp=float(values[n + 6]),
         pose_odom_base=values[n + 3 : n + 6],
         pose_odom_laser=values[n : n + 3],
+        tail=len(tokens) - need,
     )
 
 
@@ -316,7 +356,7 @@ def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
             f"found {len(tokens)} (truncated line?)"
         )
     _check_tail(tokens, need, kind, need)
-    ranges = _floats(tokens[9 : 9 + n], kind)
+    ranges = _laser_floats(tokens, 9, 9 + n, n, kind)
     _check_ranges(ranges, kind)
     rest = _floats(tokens[after:need], kind)
     _check_finite(rest, kind, "poses and ipc_timestamp")
@@ -331,10 +371,11 @@ def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
         timestamp=float(rest[-1]),
         pose_odom_base=rest[3:6] if robot else None,
         pose_odom_laser=rest[0:3] if robot else None,
+        tail=len(tokens) - need,
     )
 
 
-def _parse_odom(tokens: list[str]) -> tuple[FloatArray, float, float, float]:
+def _parse_odom(tokens: list[str]) -> tuple[FloatArray, float, float, float, int]:
     if len(tokens) < 8:
         raise _LineError(f"ODOM needs at least 8 fields, found {len(tokens)} (truncated line?)")
     _check_tail(tokens, 8, "ODOM", 8)
@@ -346,7 +387,7 @@ def _parse_odom(tokens: list[str]) -> tuple[FloatArray, float, float, float]:
         values = [x, y, theta, tv, rv, accel, stamp]
         if not all(map(math.isfinite, values)):
             raise _LineError(f"ODOM: x y theta tv rv accel ipc_timestamp must be finite: {values}")
-    return np.array([x, y, theta]), tv, rv, stamp
+    return np.array([x, y, theta]), tv, rv, stamp, len(tokens) - 8
 
 
 def _sniff_laser_type(path: str | Path) -> str | None:
@@ -382,6 +423,9 @@ class CarmenReader:
         guess (module docstring).
     laser
         ``"auto"`` or one of :data:`LASER_MESSAGES`.
+    strict
+        Raise :class:`LogFormatError` at the first log anomaly (:mod:`slam.io.anomalies`)
+        instead of counting it in ``stats.anomalies``.
 
     Examples
     --------
@@ -399,6 +443,7 @@ class CarmenReader:
         lenient: bool = False,
         geometry: LaserGeometry | None = None,
         laser: str = "auto",
+        strict: bool = False,
     ) -> None:
         if laser != "auto" and laser not in LASER_MESSAGES:
             raise ConfigError(
@@ -409,6 +454,7 @@ class CarmenReader:
         self._geometry = geometry
         self._geometry_resolved = geometry is not None
         self.laser = laser
+        self.strict = strict
         self.stats = CarmenStats(path=str(path))
 
     @property
@@ -436,6 +482,9 @@ class CarmenReader:
         path = str(self.path)
         stats = self.stats
         stats.reset(path)
+        anomalies = stats.anomalies
+        anomalies.strict = self.strict
+        tails: dict[str, int] = {}  # fields after ipc_timestamp in the last line of each type
         geometry = self.geometry
         laser = self.laser if self.laser != "auto" else _sniff_laser_type(self.path)
         stats.laser_type = laser
@@ -451,10 +500,17 @@ class CarmenReader:
             if kind[0] == "#":
                 stats.comments += 1
                 continue
+            last = not line.endswith("\n")  # only the last line of a file can lack one
             try:
                 if kind == "ODOM":
                     known += 1
-                    pose, tv, rv, stamp = _parse_odom(tokens)
+                    pose, tv, rv, stamp, tail = _parse_odom(tokens)
+                    if last and tail < tails.get(kind, tail):
+                        raise _LineError(
+                            f"ODOM has {tail} fields after ipc_timestamp, the line before "
+                            f"{tails[kind]} (no newline at the end)"
+                        )
+                    tails[kind] = tail
                     odom = Odometry(stats.odometry, stamp, pose, tv, rv, f"{path}:{line_number}")
                     stats.odometry += 1
                     yield odom
@@ -469,6 +525,19 @@ class CarmenReader:
                         parsed = _parse_old_laser(tokens, geometry)
                     else:
                         parsed = _parse_new_laser(tokens, geometry)
+                    if last and parsed.tail < tails.get(kind, parsed.tail):
+                        raise _LineError(
+                            f"{kind} has {parsed.tail} fields after ipc_timestamp, the line "
+                            f"before {tails[kind]} (no newline at the end)"
+                        )
+                    tails[kind] = parsed.tail
+                    anomalies.scan(
+                        parsed.timestamp,
+                        parsed.pose_odom_base
+                        if parsed.pose_odom_base is not None
+                        else parsed.pose_odom_laser,
+                        line_number,
+                    )
                     scan = Scan(
                         index=stats.scans,
                         timestamp=parsed.timestamp,
@@ -484,12 +553,17 @@ class CarmenReader:
                 else:
                     stats.unknown += 1
                     stats.unknown_types[kind] = stats.unknown_types.get(kind, 0) + 1
+                    anomalies.unknown(kind, line_number, line)
             except _LineError as exc:
+                if last:  # a log cut while it was written: skip its last line, say so
+                    anomalies.add("truncated_lines", line_number, str(exc))
+                    continue
                 if not lenient:
                     raise LogFormatError(str(exc), path, line_number) from None
                 stats.malformed += 1
                 if len(stats.malformed_lines) < _KEEP_MALFORMED:
                     stats.malformed_lines.append((line_number, str(exc)))
+                anomalies.add("malformed_lines", line_number, str(exc))
         if known == 0:
             raise LogFormatError(
                 f"no CARMEN message (FLASER, ROBOTLASER1, RAWLASER1..4, ODOM) in "
@@ -505,6 +579,7 @@ def iter_scans(
     geometry: LaserGeometry | None = None,
     stats: CarmenStats | None = None,
     laser: str = "auto",
+    strict: bool = False,
 ) -> Iterator[Scan]:
     """Yield the laser scans of a CARMEN log in file order (streaming).
 
@@ -522,6 +597,8 @@ def iter_scans(
         unknown and malformed lines).
     laser
         ``"auto"`` or the laser message type to read (see the module docstring).
+    strict
+        Raise at the first log anomaly instead of counting it (``stats.anomalies``).
 
     Yields
     ------
@@ -532,9 +609,10 @@ def iter_scans(
     Raises
     ------
     LogFormatError
-        A malformed line (file and line named), an empty or binary file, no CARMEN message.
+        A malformed line (file and line named), an empty or binary file, no CARMEN message;
+        with ``strict``, a log anomaly.
     """
-    reader = CarmenReader(path, lenient=lenient, geometry=geometry, laser=laser)
+    reader = CarmenReader(path, lenient=lenient, geometry=geometry, laser=laser, strict=strict)
     if stats is not None:
         reader.stats = stats
     yield from reader.scans()
@@ -596,18 +674,27 @@ def velocity_signed_scans(messages: Iterator[Scan | Odometry]) -> Iterator[Scan]
 
 
 def iter_log_scans(
-    path: str | Path, odometry_sign: str = "velocity", *, lenient: bool = False
+    path: str | Path,
+    odometry_sign: str = "velocity",
+    *,
+    lenient: bool = False,
+    stats: CarmenStats | None = None,
+    strict: bool = False,
 ) -> Iterator[Scan]:
     """The scans of a log as the estimators read them.
 
     ``odometry_sign = "velocity"``: through :func:`velocity_signed_scans` (reversing logged as
     forward motion is repaired; logs without negative ``tv`` are unchanged); ``"logged"``: as
-    :func:`iter_scans` reads them.
+    :func:`iter_scans` reads them.  ``stats`` is filled while iterating (its ``anomalies``
+    too); ``strict`` raises at the first log anomaly.
     """
     if odometry_sign == "velocity":
-        return velocity_signed_scans(CarmenReader(path, lenient=lenient).messages())
+        reader = CarmenReader(path, lenient=lenient, strict=strict)
+        if stats is not None:
+            reader.stats = stats
+        return velocity_signed_scans(reader.messages())
     if odometry_sign == "logged":
-        return iter_scans(path, lenient=lenient)
+        return iter_scans(path, lenient=lenient, stats=stats, strict=strict)
     raise ConfigError(f"odometry_sign must be velocity or logged, got {odometry_sign!r}")
 
 

@@ -39,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from slam.errors import InputError, LogFormatError
 from slam.io._table import read_numeric_table
+from slam.io.atomic import write_text_atomic
 from slam.io.trajectory import Trajectory
 from slam.io.tum import read_tum, write_tum
 
@@ -207,7 +208,11 @@ def read_results(out_dir: str | Path) -> Results:
 
 
 def write_metrics(out_dir: str | Path, metrics: Mapping[str, Any]) -> Path:
-    """Write ``metrics.json`` into ``out_dir``; returns its path."""
+    """Write ``metrics.json`` into ``out_dir``; returns its path.
+
+    Written through a temporary file and a rename: an earlier ``metrics.json`` is replaced
+    whole or not at all.
+    """
     path = Path(out_dir) / METRICS_FILE
-    path.write_text(json.dumps(to_jsonable(metrics), indent=2) + "\n")
+    write_text_atomic(path, json.dumps(to_jsonable(metrics), indent=2) + "\n")
     return path

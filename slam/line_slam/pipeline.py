@@ -64,7 +64,8 @@ from slam.line_slam.loop_closer import LoopCloser
 from slam.line_slam.observations import usable_lines
 from slam.line_slam.report import ScanReport, SlamWarning, degradation
 from slam.result import SlamResult
-from slam.types import Scan
+from slam.types import Scan, check_lines, check_scan
+from slam.validate import check_config
 
 FloatArray = NDArray[np.float64]
 
@@ -141,8 +142,9 @@ class LineSlam:
         linefit_config: LineFitConfig | None = None,
         policy: InputPolicy | None = None,
     ) -> None:
-        self.config = config or SlamConfig()
-        self.linefit_config = linefit_config or LineFitConfig()
+        self.config = check_config(config, SlamConfig, "config")
+        self.linefit_config = check_config(linefit_config, LineFitConfig, "linefit_config")
+        policy = None if policy is None else check_config(policy, InputPolicy, "policy")
         self.policy = policy if policy is not None else InputPolicy.of(self.config)
         cfg = self.config
         self.counters: dict[str, int] = dict.fromkeys(COUNTERS, 0)
@@ -171,6 +173,7 @@ class LineSlam:
         The lines of those that become keyframes are extracted together
         (:func:`slam.extraction.extract_lines_of_scans`, the vectorised fast path).
         """
+        scans = [check_scan(s, f"scans[{k}]") for k, s in enumerate(scans)]
         odometry = [self.policy.pose_odom_laser(s) for s in scans]
         keyframes = [n for n, kf in enumerate(self.track.keyframe_mask(odometry)) if kf]
         with self.clock("extract"):
@@ -196,8 +199,12 @@ class LineSlam:
         Raises
         ------
         InputError
-            The scan has no (finite) odometry.
+            ``scan`` is not a :class:`Scan`, ``lines`` not a sequence of :class:`Line`, or
+            the scan has no (finite) odometry.
         """
+        check_scan(scan)
+        if lines is not None:
+            lines = check_lines(lines, scan)
         t_start = time.perf_counter()
         step = self.track.step(self.policy.pose_odom_laser(scan))
         scan_no = self.track.n_scans

@@ -43,7 +43,11 @@ SIM_FILES: dict[str, str] = {
 
 
 def write_simulation(
-    log: SimulatedLog, out_dir: str | Path, *, beam_hits: bool = True
+    log: SimulatedLog,
+    out_dir: str | Path,
+    *,
+    beam_hits: bool = True,
+    final_dir: str | Path | None = None,
 ) -> dict[str, Path]:
     """Write ``log`` to ``out_dir`` (created); return the paths written by role.
 
@@ -55,6 +59,9 @@ def write_simulation(
         Folder to write to (created with its parents).
     beam_hits : bool
         Also write ``beam_hits.npy`` (large for long logs).
+    final_dir
+        Where the folder will be read from, if it is written elsewhere first (a temporary
+        folder moved into place): ``config.toml`` then refers to ``final_dir/world.json``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -93,7 +100,8 @@ def write_simulation(
     write_world(log.world, paths["world"])
     if beam_hits:
         np.save(paths["beam_hits"], log.hit_ids.astype(np.int32))
-    world_ref = _world_reference(config.world, log.world, paths["world"])
+    world_json = Path(final_dir) / SIM_FILES["world"] if final_dir is not None else paths["world"]
+    world_ref = _world_reference(config.world, log.world, world_json)
     replace(config, world=world_ref).to_toml(paths["config"])
     return paths
 
