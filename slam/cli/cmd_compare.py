@@ -138,6 +138,7 @@ def compare(
         odometry=odometry,
         base_frame=base_frame,
     )
+    check_out_dir(out)
     rel_file = relations_path(relations) if relations is not None else None
     data = parse_source(log, seed=run_config.seed, relations=rel_file, ground_truth=ground_truth)
     if data.kind == "log" and rel_file is None and ground_truth is None:
@@ -154,7 +155,6 @@ def compare(
         if not time_budget > 0.0:
             raise ConfigError(f"--time-budget must be > 0, got {time_budget}")
         selected = tuple(replace(v, time_budget_s=time_budget) for v in selected)
-    check_out_dir(out)
     inputs: list[Path] = []
     if data.kind == "log":
         from slam.io.rosbag import is_rosbag
