@@ -22,10 +22,16 @@ Formats
     a documented extension.  EKF results have no graph.
 ``tum``
     The trajectory (``trajectory.tum``), in the frame ``summary.json`` names.
+
+The files are written under temporary names beside ``PATH`` and renamed into place when
+complete (:func:`slam.io.atomic.staged_files`): a failed or interrupted export leaves an
+earlier file at ``PATH`` as it was.  ``PATH`` must not be one of the results folder's files
+or the log (:class:`~slam.errors.OutputError`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 from pathlib import Path
@@ -67,24 +73,20 @@ def export_occupancy(
     results_dir: Path,
     out: Path,
     *,
+    into: tuple[Path, Path] | None = None,
     resolution_m: float = 0.05,
     log: str | Path | None = None,
     min_distance_m: float = 0.1,
     min_angle_rad: float = 0.1,
 ) -> list[Path]:
-    """The ``occupancy`` format (module docstring)."""
-    from slam.config import RunConfig
+    """The ``occupancy`` format (module docstring); ``into``: the files to write (temporary)."""
     from slam.inputs import open_log
     from slam.io.occupancy import occupancy_grid, select_scans, write_map_server
     from slam.io.results import read_results
 
     results = read_results(results_dir)
-    log = log if log is not None else results.summary.get("log")
-    if log is None:
-        raise InputError("summary.json names no log: give --log", str(results_dir))
-    config_path = results_dir / "config.toml"
-    config = RunConfig.from_toml(config_path) if config_path.is_file() else RunConfig()
-    source = open_log(log, config.scanner)
+    log = _log_of(results_dir, results.summary, log)
+    source = open_log(log, _config_of(results_dir).scanner)
     poses = laser_poses_of_results(results, source.policy.pose_base_laser)
     stamps = results.trajectory.timestamps
     keep = select_scans(poses, min_distance_m, min_angle_rad)
@@ -104,7 +106,47 @@ def export_occupancy(
     if n < len(stamps):
         raise InputError(f"{source.log} has {n} scans, the trajectory {len(stamps)}")
     grid = occupancy_grid(poses[keep], scans, resolution_m)
-    return list(write_map_server(grid, out))
+    return list(write_map_server(grid, out, into=into))
+
+
+def _log_of(results_dir: Path, summary: dict[str, Any], log: str | Path | None) -> str | Path:
+    log = log if log is not None else summary.get("log")
+    if log is None:
+        raise InputError("summary.json names no log: give --log", str(results_dir))
+    return log
+
+
+def _config_of(results_dir: Path) -> Any:
+    from slam.config import RunConfig
+
+    config_path = results_dir / "config.toml"
+    return RunConfig.from_toml(config_path) if config_path.is_file() else RunConfig()
+
+
+def _targets(fmt: str, out: Path) -> list[Path]:
+    """The files ``fmt`` writes for ``--out out``."""
+    if fmt == "occupancy":
+        from slam.io.occupancy import map_server_paths
+
+        return list(map_server_paths(out))
+    return [out]
+
+
+def _inputs(results_dir: Path, fmt: str, log: str | Path | None) -> list[Path]:
+    """What an export reads: the results folder's files and, for ``occupancy``, the log."""
+    from slam.io.results import TRAJECTORY_FILE
+
+    names = (TRAJECTORY_FILE, "trajectory_covariance.txt", "map.json", "graph.g2o")
+    out = [results_dir / name for name in (*names, "summary.json", "config.toml")]
+    if fmt == "occupancy":
+        summary_path = results_dir / "summary.json"
+        named = log
+        if named is None and summary_path.is_file():
+            with contextlib.suppress(ValueError, OSError):
+                named = json.loads(summary_path.read_text(encoding="utf-8")).get("log")
+        if named is not None and Path(named).exists():
+            out.append(Path(named))
+    return out
 
 
 def export_results(
@@ -125,36 +167,57 @@ def export_results(
     ------
     InputError
         An unknown format, or the folder lacks what the format needs.
+    OutputError
+        ``out`` cannot be written, or is one of the files the export reads.
     """
+    from slam.io.atomic import staged_files
+
     results_dir = Path(results_dir)
     out = Path(out)
     if not results_dir.is_dir():
         raise InputError("not a results folder (no such directory)", str(results_dir))
-    if out.parent != Path(""):
-        out.parent.mkdir(parents=True, exist_ok=True)
+    if fmt not in EXPORT_FORMATS:
+        raise InputError(f"unknown export format {fmt!r} (one of {', '.join(EXPORT_FORMATS)})")
+    targets = _targets(fmt, out)
+    with staged_files(targets, inputs=_inputs(results_dir, fmt, log)) as work:
+        _export(results_dir, fmt, out, work, resolution_m, log, min_distance_m, min_angle_rad)
+    return targets
+
+
+def _export(
+    results_dir: Path,
+    fmt: str,
+    out: Path,
+    work: list[Path],
+    resolution_m: float,
+    log: str | Path | None,
+    min_distance_m: float,
+    min_angle_rad: float,
+) -> None:
+    """Write ``fmt`` into the temporary files ``work`` (one per target of :func:`_targets`)."""
     if fmt == "occupancy":
-        return export_occupancy(
+        export_occupancy(
             results_dir,
             out,
+            into=(work[0], work[1]),
             resolution_m=resolution_m,
             log=log,
             min_distance_m=min_distance_m,
             min_angle_rad=min_angle_rad,
         )
-    if fmt == "geojson":
+    elif fmt == "geojson":
         from slam.io.geojson import write_geojson
 
-        write_geojson(out, _map_doc(results_dir))
-        return [out]
-    if fmt == "svg":
+        write_geojson(work[0], _map_doc(results_dir))
+    elif fmt == "svg":
         from slam.io.results import TRAJECTORY_FILE
         from slam.io.svg import write_svg
         from slam.io.tum import read_tum
 
         tum = results_dir / TRAJECTORY_FILE
         traj = read_tum(tum).poses if tum.is_file() else None
-        return [write_svg(out, _map_doc(results_dir), traj)]
-    if fmt == "g2o":
+        write_svg(work[0], _map_doc(results_dir), traj)
+    elif fmt == "g2o":
         graph = results_dir / "graph.g2o"
         if not graph.is_file():
             raise InputError(
@@ -162,14 +225,11 @@ def export_results(
                 "graph)",
                 str(results_dir),
             )
-        shutil.copyfile(graph, out)
-        return [out]
-    if fmt == "tum":
+        shutil.copyfile(graph, work[0])
+    else:  # tum
         from slam.io.results import TRAJECTORY_FILE
 
         tum = results_dir / TRAJECTORY_FILE
         if not tum.is_file():
             raise InputError(f"no {TRAJECTORY_FILE} in the results folder", str(results_dir))
-        shutil.copyfile(tum, out)
-        return [out]
-    raise InputError(f"unknown export format {fmt!r} (one of {', '.join(EXPORT_FORMATS)})")
+        shutil.copyfile(tum, work[0])

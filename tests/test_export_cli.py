@@ -184,6 +184,29 @@ def test_geojson_svg_tum_and_g2o_exports(demo_run, tmp_path):
     assert run(["export", str(ekf), "--format", "g2o", "--out", str(tmp_path / "e.g2o")]) == 2
 
 
+def test_export_is_whole_or_not_at_all_and_refuses_bad_targets(demo_run, tmp_path, capsys):
+    """A failed export leaves an earlier file as it was and no temporary file; an --out that is
+    a folder or one of the files the export reads is refused in one line, status 2."""
+    earlier = tmp_path / "map.g2o"
+    earlier.write_text("earlier\n")
+    no_graph = tmp_path / "no-graph"
+    no_graph.mkdir()
+    (no_graph / "map.json").write_text((demo_run / "map.json").read_text())
+    assert run(["export", str(no_graph), "--format", "g2o", "--out", str(earlier)]) == 2
+    assert earlier.read_text() == "earlier\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["map.g2o", "no-graph"]
+    capsys.readouterr()
+    trajectory = demo_run / "trajectory.tum"
+    before = trajectory.read_bytes()
+    for fmt, out in (("tum", trajectory), ("svg", tmp_path), ("geojson", "")):
+        assert run(["export", str(demo_run), "--format", fmt, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("lineslam: error: ") and err.count("\n") == 1, err
+    assert trajectory.read_bytes() == before
+    assert run(["export", str(demo_run), "--format", "tum", "--out", str(earlier)]) == 0
+    assert earlier.read_bytes() == before
+
+
 def test_evaluate_scores_a_partial_run_on_the_relations_inside_it(demo_run, tmp_path, capsys):
     assert json.loads((demo_run / "summary.json").read_text())["partial"] is True
     rel = DEMO / "relations.txt"

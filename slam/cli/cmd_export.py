@@ -3,7 +3,9 @@
 Formats (:mod:`slam.export`): ``occupancy`` (map_server ``PATH.pgm`` + ``PATH.yaml``,
 ray-traced from the run's log at the estimated poses, ``--resolution`` m per cell),
 ``geojson`` (the line map), ``svg`` (line map and trajectory), ``g2o`` (the factor graph of
-``lineslam slam``), ``tum`` (the trajectory).
+``lineslam slam``), ``tum`` (the trajectory).  The files are written under temporary names
+and renamed into place when complete: an interrupted or failed export leaves an earlier file
+as it was.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import Annotated
 import typer
 
 from slam.cli._app import app
+from slam.cli.common import out_path
 
 __all__ = ["export"]
 
@@ -27,7 +30,12 @@ def export(
     ],
     out: Annotated[
         Path,
-        typer.Option("--out", help="Output file (occupancy: PATH gives PATH.pgm and PATH.yaml)."),
+        typer.Option(
+            "--out",
+            parser=out_path,
+            help="Output file (occupancy: PATH gives PATH.pgm and PATH.yaml); written whole or "
+            "not at all.",
+        ),
     ],
     resolution: Annotated[
         float, typer.Option("--resolution", help="Occupancy grid cell size (m).")

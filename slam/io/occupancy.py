@@ -52,6 +52,7 @@ __all__ = [
     "OCCUPIED",
     "UNKNOWN",
     "OccupancyGrid",
+    "map_server_paths",
     "occupancy_grid",
     "read_map_server",
     "write_map_server",
@@ -209,26 +210,37 @@ def occupancy_grid(
     )
 
 
+def map_server_paths(path: str | Path) -> tuple[Path, Path]:
+    """``(PATH.pgm, PATH.yaml)`` for ``path`` with or without one of those suffixes."""
+    base = Path(path)
+    if base.suffix in (".yaml", ".pgm"):
+        base = base.with_suffix("")
+    return base.with_suffix(".pgm"), base.with_suffix(".yaml")
+
+
 def write_map_server(
     grid: OccupancyGrid,
     path: str | Path,
     *,
     occupied_thresh: float = 0.65,
     free_thresh: float = 0.196,
+    into: tuple[Path, Path] | None = None,
 ) -> tuple[Path, Path]:
-    """Write ``PATH.pgm`` and ``PATH.yaml`` (``path`` with or without a suffix); return both."""
+    """Write ``PATH.pgm`` and ``PATH.yaml`` (``path`` with or without a suffix); return both.
+
+    ``into``: write the two files there instead (temporary files renamed into place later,
+    :func:`slam.io.atomic.staged_files`); the YAML still names ``PATH.pgm``.
+    """
     if not 0.0 <= free_thresh < occupied_thresh <= 1.0:
         raise InputError("need 0 <= free_thresh < occupied_thresh <= 1")
-    base = Path(path)
-    if base.suffix in (".yaml", ".pgm"):
-        base = base.with_suffix("")
-    pgm, yaml = base.with_suffix(".pgm"), base.with_suffix(".yaml")
+    pgm, yaml = map_server_paths(path)
+    pgm_file, yaml_file = into if into is not None else (pgm, yaml)
     image = grid.image(occupied_thresh, free_thresh)
     rows, cols = image.shape
     header = f"P5\n# lineslam occupancy grid, {grid.resolution_m} m/cell\n{cols} {rows}\n255\n"
-    pgm.write_bytes(header.encode("ascii") + image.tobytes())
+    pgm_file.write_bytes(header.encode("ascii") + image.tobytes())
     x0, y0 = grid.origin_xy
-    yaml.write_text(
+    yaml_file.write_text(
         f"image: {pgm.name}\n"
         f"resolution: {grid.resolution_m!r}\n"
         f"origin: [{x0!r}, {y0!r}, 0.0]\n"
