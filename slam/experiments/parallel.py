@@ -9,10 +9,12 @@ Determinism: tasks carry everything they need, their seeds included (derive them
 :func:`task_seed`), and results come back in task order, so a run gives the same numbers
 serially, on a process pool, or on a cluster.
 
-Interruption: when the waiting is interrupted (``KeyboardInterrupt``, or the command line's
-SIGINT/SIGTERM exception), the tasks not finished are cancelled and the local cluster's worker
-processes are killed at once (their tasks are lost anyway), so that the run stops within a
-second or two, without Dask's shutdown warnings; the exception then propagates.
+Interruption: the waiting checks for a signal (:func:`slam.interrupts.check`) between tasks
+(serially) or every :data:`POLL_S` seconds (on a cluster).  When it is interrupted
+(:class:`~slam.interrupts.Interrupted`, or a ``KeyboardInterrupt``), the tasks not finished are
+cancelled and the local cluster's worker processes are killed at once (their tasks are lost
+anyway), so that the run stops within a second or two, without Dask's shutdown warnings; the
+exception then propagates.
 """
 
 from __future__ import annotations
@@ -20,15 +22,20 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, suppress
 from typing import Any, TypeVar
 
 import numpy as np
 
+from slam import interrupts
 from slam.errors import ConfigError
 
 __all__ = ["map_tasks", "task_seed"]
+
+POLL_S = 0.05
+"""How often (s) the wait for a cluster's results checks for a signal."""
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -153,6 +160,7 @@ def map_tasks(
     if dask_address is None and workers <= 1:
         out = []
         for i, task in enumerate(tasks):
+            interrupts.check()
             out.append(fn(task))
             if progress is not None:
                 progress(i + 1, total)
@@ -164,10 +172,18 @@ def map_tasks(
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * total
         try:
-            for done, future in enumerate(as_completed(futures), start=1):
-                results[index[future.key]] = future.result()
-                if progress is not None:
-                    progress(done, total)
+            waiting = as_completed(futures)
+            done = 0
+            while not waiting.is_empty():
+                interrupts.check()
+                if not waiting.has_ready():
+                    time.sleep(POLL_S)
+                    continue
+                for future in waiting.next_batch(block=False):
+                    results[index[future.key]] = future.result()
+                    done += 1
+                    if progress is not None:
+                        progress(done, total)
         except BaseException as exc:
             if not isinstance(exc, Exception):  # interrupted: drop the tasks not finished
                 _mute_dask()
