@@ -189,6 +189,77 @@ def test_signal_stops_the_run_cleanly(tmp_path, long_log, earlier, kind, signum,
     assert leftovers(tmp_path) == []
 
 
+# Runs lineslam with numba's object-cache hook (called by LLVM, through a ctypes callback,
+# while numba loads or compiles the kernel's machine code) patched to send the process SIGINT,
+# COUNT times, the first time it is called: the signal arrives inside compiled code's loading.
+SIGNAL_IN_FIRST_KERNEL_CALL = """
+import os, signal, sys
+from numba.core.codegen import JITCodeLibrary
+
+original = JITCodeLibrary._object_getbuffer_hook.__func__
+sent = []
+
+def getbuffer(cls, ll_module):
+    if not sent:
+        sent.append(1)
+        for _ in range({count}):
+            os.kill(os.getpid(), signal.SIGINT)
+    return original(cls, ll_module)
+
+JITCodeLibrary._object_getbuffer_hook = classmethod(getbuffer)
+from slam.cli import main
+main(sys.argv[1:])
+"""
+
+
+WARM_UP = (
+    "import numpy as np; from linefit import extract_lines; "
+    "extract_lines(np.full(61, 3.0), np.linspace(-1.5, 1.5, 61))"
+)
+
+
+@pytest.mark.parametrize(
+    ("kind", "cache", "count"),
+    [("extract", "warm", 1), ("slam-batch", "warm", 2), ("extract", "cold", 1)],
+)
+def test_signal_in_the_first_compiled_extraction(tmp_path, kind, cache, count):
+    """A signal while numba loads (warm cache) or compiles (cold) the kernel: 130, nothing left.
+
+    The kernel is loaded off the main thread (``slam.extraction.ensure_kernel``): the run stops
+    at once, not after the loading or the compilation (about 30 s), and no exception is raised
+    inside numba (no "Exception ignored" line, no crash).  Two signals: the second raises at
+    once, still outside numba.
+    """
+    target = tmp_path / ("lines.jsonl" if kind == "extract" else "run")
+    run_env = env()
+    if cache == "cold":
+        run_env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba-cache")  # empty: numba compiles
+    else:  # the kernel is in numba's cache (compiled here if not yet)
+        subprocess.run(
+            [sys.executable, "-c", WARM_UP],
+            env=run_env,
+            check=True,
+            timeout=600,
+        )
+    script = SIGNAL_IN_FIRST_KERNEL_CALL.format(count=count)
+    t0 = time.monotonic()
+    proc = subprocess.run(
+        [sys.executable, "-c", script, *command(kind, DEMO_LOG, target)[3:], "--quiet"],
+        env=run_env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    took = time.monotonic() - t0
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.splitlines() == [
+        "lineslam: interrupted (SIGINT); nothing written, earlier results unchanged"
+    ]
+    assert took < STOP_WITHIN_S + 10.0  # the start-up included; a compilation takes ~30 s more
+    assert not target.exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name != "numba-cache"] == []
+
+
 def test_sigint_stops_a_parallel_compare(tmp_path):
     target = tmp_path / "cmp"
     proc = subprocess.Popen(
