@@ -17,6 +17,9 @@ Signals, in order:
 3. Once :class:`Interrupted` has been raised, later signals are ignored while the run cleans up
    (temporary results are removed; a stuck process still yields to ``SIGKILL``).
 
+Inside an :func:`at_once` block (plain Python with nothing to clean up: the command line
+importing its commands at start-up) the first signal raises at once as well.
+
 :class:`Interrupted` is a ``BaseException``, not an ``Exception``: ``except Exception`` does
 not swallow it and every ``finally`` on the way runs.  A run stopped this way leaves its
 estimator (e.g. :class:`slam.line_slam.LineSlam`) part-way through; it is not to be used again.
@@ -38,6 +41,7 @@ from typing import TypeVar
 __all__ = [
     "Interrupted",
     "abandoned",
+    "at_once",
     "call_in_thread",
     "check",
     "deferred",
@@ -82,6 +86,7 @@ class _State:
     signum: int | None = None  # the first signal received (pending until raised)
     raised: bool = False  # Interrupted was raised: the run is cleaning up
     deferred: int = 0  # depth of deferred() blocks
+    at_once: int = 0  # depth of at_once() blocks
     active: bool = False  # inside handling_signals()
 
 
@@ -123,6 +128,16 @@ def deferred() -> Iterator[None]:
         yield
     finally:
         _STATE.deferred -= 1
+
+
+@contextmanager
+def at_once() -> Iterator[None]:
+    """A block during which even the first signal raises at once (no compiled code inside)."""
+    _STATE.at_once += 1
+    try:
+        yield
+    finally:
+        _STATE.at_once -= 1
 
 
 def call_in_thread(fn: Callable[[], T], name: str = "lineslam-call") -> T:
@@ -171,10 +186,11 @@ def _handler(signum: int, _frame: FrameType | None) -> None:
     state = _STATE
     if state.signum is None:
         state.signum = signum
+        if not state.at_once or state.deferred:
+            return
+    elif state.raised or state.deferred:
         return
-    if state.raised or state.deferred:
-        return
-    # a further signal while the first is pending: the user insists
+    # a further signal while the first is pending (the user insists), or inside at_once()
     state.raised = True
     raise Interrupted(state.signum)
 
@@ -202,5 +218,5 @@ def handling_signals() -> Iterator[None]:
 
 
 def _set_state(state: _State) -> None:
-    _STATE.signum, _STATE.raised = state.signum, state.raised
-    _STATE.deferred, _STATE.active = state.deferred, state.active
+    _STATE.signum, _STATE.raised, _STATE.active = state.signum, state.raised, state.active
+    _STATE.deferred, _STATE.at_once = state.deferred, state.at_once

@@ -58,6 +58,19 @@ def test_no_signal_raises_inside_a_deferred_block():
         assert info.value.exit_status == 130
 
 
+def test_the_first_signal_raises_at_once_inside_an_at_once_block():
+    with interrupts.handling_signals():
+        with pytest.raises(Interrupted), interrupts.at_once():
+            signal.raise_signal(signal.SIGTERM)
+        signal.raise_signal(signal.SIGINT)  # cleaning up: ignored
+        with pytest.raises(Interrupted) as info:
+            interrupts.check()
+        assert info.value.exit_status == 143
+    with interrupts.handling_signals(), interrupts.at_once(), interrupts.deferred():
+        signal.raise_signal(signal.SIGINT)  # deferred wins
+        assert interrupts.requested() == signal.SIGINT
+
+
 def test_handlers_and_state_are_restored():
     before = {s: signal.getsignal(s) for s in interrupts.SIGNALS}
     with interrupts.handling_signals():

@@ -5,9 +5,10 @@ typer application ``app`` (:mod:`slam.cli._app`); this module assembles them.  C
 files follow ``../shared/INTERFACES.md``.
 
 Importing this module is cheap: the commands (numpy, numba, GTSAM, ...) are imported by
-:func:`main` once the signal handlers are installed (:mod:`slam.interrupts`), so that a signal
-during the start-up also ends in the one line and the exit status 130/143; ``slam.cli.app``
-imports them on first use.
+:func:`main` once the signal handlers are installed (:mod:`slam.interrupts`), in an
+``at_once`` block, so that a signal during the start-up (a second or two on a loaded machine)
+stops it at once, with the one line and the exit status 130/143; ``slam.cli.app`` imports them
+on first use.
 """
 
 from __future__ import annotations
@@ -113,15 +114,16 @@ def main(argv: list[str] | None = None) -> None:
 
 def _run(argv: list[str] | None) -> Any:
     """Import the commands, run one; errors become one line and an exit status."""
-    import click
-    import typer
+    with interrupts.at_once():  # nothing to clean up yet: a signal stops the imports
+        import click
+        import typer
 
-    from slam.errors import LineslamError
+        from slam.errors import LineslamError
 
-    app = globals().get("app")  # set when a test replaced slam.cli.app
-    if app is None:
-        app = _commands()
-    check()  # a signal while the commands were imported
+        app = globals().get("app")  # set when a test replaced slam.cli.app
+        if app is None:
+            app = _commands()
+    check()
     # typer >= 0.2x vendors its own click: catch its classes as well as click's.
     exit_ = _unique(click.exceptions.Exit, typer.Exit)
     abort = _unique(click.exceptions.Abort, typer.Abort)
