@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import signal
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -48,6 +49,7 @@ __all__ = [
     "handling_signals",
     "request",
     "requested",
+    "wait_abandoned",
 ]
 
 T = TypeVar("T")
@@ -180,6 +182,18 @@ def call_in_thread(fn: Callable[[], T], name: str = "lineslam-call") -> T:
 def abandoned() -> bool:
     """A call left running by :func:`call_in_thread` is still running."""
     return any(t.is_alive() for t in _ABANDONED)
+
+
+def wait_abandoned(timeout_s: float) -> bool:
+    """Wait up to ``timeout_s`` for the calls left running by :func:`call_in_thread` to end.
+
+    For a caller that made such a call end early (e.g. killed the processes it was starting).
+    Returns True if none is left running.
+    """
+    deadline = time.monotonic() + timeout_s
+    for thread in _ABANDONED:
+        thread.join(max(0.0, deadline - time.monotonic()))
+    return not abandoned()
 
 
 def _handler(signum: int, _frame: FrameType | None) -> None:
