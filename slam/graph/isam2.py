@@ -302,6 +302,8 @@ class Isam2Solver:
             fs = np.concatenate([self._factors_of_pose[p] for p in rebuild]).astype(np.intp)
             touched_lms.update(np.unique(graph.factor_landmark[fs]).tolist())
         self.stats.time_s["build"] += time.perf_counter() - t0
+        if rebuild and len(rebuild) > 64:
+            interrupts.check()  # a restart: building and updating each take a while
         t0 = time.perf_counter()
         try:
             result = self.isam.update(nfg, values, remove, force_relinearize=force_relinearize)
