@@ -162,3 +162,20 @@ def test_a_request_while_writing_keeps_the_earlier_results(tmp_path, capsys, mon
     assert info.value.code == 143
     assert err == "lineslam: interrupted (SIGTERM); nothing written, earlier results unchanged\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_signal_after_the_results_are_in_place_says_so(tmp_path, capsys, monkeypatch):
+    import slam.cli.cmd_extract
+    from slam.cli import main
+
+    def signal_instead(*args, **kwargs):
+        signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(slam.cli.cmd_extract, "warn_log_anomalies", signal_instead)
+    target = tmp_path / "lines.jsonl"
+    with pytest.raises(SystemExit) as info:
+        main(["extract", str(DEMO_LOG), "--out", str(target), "--limit", "20", "--quiet"])
+    last = capsys.readouterr().err.splitlines()[-1]  # after the warnings of the run
+    assert info.value.code == 130
+    assert last == f"lineslam: interrupted (SIGINT) after writing {tmp_path}/lines.config.toml"
+    assert len(target.read_text().splitlines()) == 20

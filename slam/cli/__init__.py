@@ -57,14 +57,14 @@ def _error(message: str, status: int) -> NoReturn:
     sys.exit(status)
 
 
-def _stop(exc: Interrupted) -> NoReturn:
+def _stop(exc: Interrupted, before: int) -> NoReturn:
     """Report the interruption and exit 130/143 (the run has cleaned up by now).
 
     A call left running in a helper thread (:func:`slam.interrupts.call_in_thread`, e.g.
     numba compiling the kernel) may be inside compiled code: the process ends with
     ``os._exit`` then, so that Python's shutdown does not tear the runtime down under it.
     """
-    message = _interrupted_message(exc)
+    message = _interrupted_message(exc, before)
     if interrupts.abandoned():
         print(f"lineslam: {message}", file=sys.stderr)
         sys.stdout.flush()
@@ -73,9 +73,14 @@ def _stop(exc: Interrupted) -> NoReturn:
     _error(message, exc.exit_status)
 
 
-def _interrupted_message(exc: Interrupted) -> str:
-    atomic = sys.modules.get("slam.io.atomic")  # not imported yet: nothing written
-    written = atomic.committed_targets() if atomic is not None else []
+def _committed() -> list[Any]:
+    """What this process has put in place so far (``slam.io.atomic`` not imported: nothing)."""
+    atomic = sys.modules.get("slam.io.atomic")
+    return atomic.committed_targets() if atomic is not None else []
+
+
+def _interrupted_message(exc: Interrupted, before: int) -> str:
+    written = _committed()[before:]  # by this command
     if written:
         return f"interrupted ({exc}) after writing {written[-1]}"
     return f"interrupted ({exc}); nothing written, earlier results unchanged"
@@ -90,19 +95,20 @@ def main(argv: list[str] | None = None) -> None:
     (:mod:`slam.interrupts`: the run stops at its next check, within a second or two).
     ``LINESLAM_DEBUG=1`` shows the traceback of an operating-system error instead.
     """
+    before = len(_committed())
     with handling_signals():
         try:
             status = _run(argv)
             check()  # a signal received after the last check (e.g. while writing)
         except Interrupted as exc:
-            _stop(exc)
+            _stop(exc, before)
         except SystemError:
             # numba turns an exception raised inside its compiled code into a SystemError: only
             # a second signal can do that (the first is never raised there, slam.interrupts)
             signum = requested()
             if signum is None:
                 raise
-            _stop(Interrupted(signum))
+            _stop(Interrupted(signum), before)
         except KeyboardInterrupt:
             _error("interrupted (SIGINT)", 130)
     if isinstance(status, int) and status != 0:
