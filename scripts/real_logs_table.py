@@ -71,7 +71,7 @@ def main() -> None:
                 odo_traj = scan_trajectory(resolved.log, frame=summary["frame"])
                 odo = relations_metric(odo_traj, relations)
                 read = scan_trajectory(
-                    resolved.log, frame=summary["frame"], odometry_sign=config.slam.odometry_sign
+                    resolved.log, frame=summary["frame"], odometry_sign=config.scanner.odometry_sign
                 )
                 odo_read = relations_metric(read, relations)
                 target = TARGETS_M.get(name)

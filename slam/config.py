@@ -1,8 +1,13 @@
 """The configuration of a whole run: one frozen dataclass with one table per component.
 
 ``config.toml`` in every results folder is this dataclass dumped to TOML; ``--config FILE``
-loads it back.  Each component owns its own table (``[linefit]``, ``[map]``, ``[slam]``, ...);
-missing tables take their defaults, unknown keys are an error.
+loads it back.  Each component owns its own table (``[scanner]``, ``[linefit]``, ``[map]``,
+``[slam]``, ...); missing tables take their defaults, unknown keys are an error.
+
+Older files: the input keys that used to be in ``[slam]`` (``pose_base_laser``,
+``mount_source``, ``laser_odometry``, ``output_frame``, ``odometry_sign``) are moved to
+``[scanner]`` on loading (:func:`slam.inputs.migrate_slam_keys`: an old default value is
+dropped, any other value keeps its meaning).
 """
 
 from __future__ import annotations
@@ -13,8 +18,9 @@ from pathlib import Path
 
 from linefit.config import LineFitConfig
 from linefit.errors import ConfigError
-from linefit.tomlconfig import dump_toml, load_toml
+from linefit.tomlconfig import config_from_dict, dump_toml
 from slam.ekf.config import EkfConfig
+from slam.inputs import ScannerConfig, migrate_slam_keys
 from slam.line_slam.config import SlamConfig
 from slam.lines.config import MapConfig
 
@@ -29,6 +35,9 @@ class RunConfig:
     ----------
     seed : int
         Seed of every random choice of the run.
+    scanner : ScannerConfig
+        The log's scanner (beam geometry, range limits), laser mounting, odometry and the
+        reported frame (:mod:`slam.inputs`).
     linefit : LineFitConfig
         Per-scan line extraction.
     map : MapConfig
@@ -41,6 +50,7 @@ class RunConfig:
     """
 
     seed: int = 0
+    scanner: ScannerConfig = field(default_factory=ScannerConfig)
     linefit: LineFitConfig = field(default_factory=LineFitConfig)
     map: MapConfig = field(default_factory=MapConfig)
     slam: SlamConfig = field(default_factory=SlamConfig)
@@ -52,6 +62,7 @@ class RunConfig:
         if self.seed < 0:
             raise ConfigError(f"seed must be >= 0, got {self.seed}")
         for name, kind in (
+            ("scanner", ScannerConfig),
             ("linefit", LineFitConfig),
             ("map", MapConfig),
             ("slam", SlamConfig),
@@ -65,8 +76,23 @@ class RunConfig:
 
     @classmethod
     def from_toml(cls, path: str | Path) -> RunConfig:
-        """Load a run configuration written by :meth:`to_toml` (or by hand)."""
-        return load_toml(cls, path)
+        """Load a run configuration (:meth:`to_toml`'s, hand-written, or an older version's)."""
+        import tomllib
+
+        path = Path(path)
+        try:
+            with path.open("rb") as handle:
+                data = tomllib.load(handle)
+        except FileNotFoundError as exc:
+            raise ConfigError(f"{path}: configuration file not found") from exc
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{path}: not valid TOML ({exc})") from exc
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"{path}: not a text file") from exc
+        try:
+            return config_from_dict(cls, migrate_slam_keys(data))
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from exc
 
     def to_toml(self, path: str | Path) -> None:
         """Write the full configuration (every value, defaults included) to ``path``."""

@@ -1,54 +1,269 @@
-"""The input policy: how a log's odometry becomes the laser's motion, and which frame is reported.
+"""A log as the estimators read it: format, scanner geometry, laser mounting, odometry, frame.
 
-Every estimator and runner (the factor graph, the EKF, the map builder, the comparisons) reads
-its odometry and reports its poses through one :class:`InputPolicy`, so that all of them see
-the same motion and write the same frame.
+Main entry points::
 
-* **Laser odometry.**  The laser's odometry pose is the scan's logged laser pose
-  (``Scan.pose_odom_laser``), else the base's odometry composed with the mounting
-  (``Scan.pose_odom_base ∘ pose_base_laser``); with ``laser_odometry = "base"`` always the
-  latter (logs whose laser poses lack the mounting).
-* **Output frame.**  Poses are estimated for the laser; with ``output_frame = "base"`` they are
-  reported for the robot base, ``pose_world_base = pose_world_laser ∘ pose_base_laser⁻¹``, their
-  covariances carried along by the adjoint of the mounting.
-* **Odometry sign.**  ``odometry_sign = "velocity"`` reads a CARMEN log with the increments that
-  the logged speed says went backwards negated (:func:`slam.io.carmen.iter_log_scans`).
-* **Catalogued logs.**  :func:`policy_for_log` applies the mounting recorded in the dataset
-  catalogue to a catalogued log whose laser poses lack it.
+    log = open_log("run.bag", config.scanner)   # a CARMEN file, a bag, or a catalogue name
+    log.policy                                   # InputPolicy: laser odometry, mounting, frame
+    log.n_scans                                  # for progress bars (None if not cheap to know)
+    for scan in log.scans(max_scans=None): ...   # geometry and range limits applied
+    log.describe()                               # summary.json's "input" block
 
-The settings live in the ``[slam]`` table of the run configuration (``pose_base_laser``,
-``mount_source``, ``laser_odometry``, ``output_frame``, ``odometry_sign``); any object with those
-attributes builds a policy (:meth:`InputPolicy.of`).
+Every estimator and runner (the factor graph, the EKF, the map builder, the comparisons,
+``lineslam extract``) reads a log through :func:`open_log`, so that all of them see the same
+scans and motion and report the same frame.  The settings are the ``[scanner]`` table of the
+run configuration (:class:`ScannerConfig`); the command line sets the same keys.
+
+Formats
+-------
+A ROS 1 ``.bag`` file or a ROS 2 bag folder (:mod:`slam.io.rosbag`), else a CARMEN log
+(:mod:`slam.io.carmen`).  A name that is not a file is looked up in the dataset catalogue.
+
+Log anomalies
+-------------
+A CARMEN log is checked while it is read (:mod:`slam.io.anomalies`: time going backwards,
+repeated time stamps, odometry jumps, a last line cut short, unknown messages):
+``log.scans(stats=CarmenStats(...))`` counts them in ``stats.anomalies`` over the part of the
+log read, ``strict=True`` makes the first one an error.  A bag is not checked: its messages
+are typed and time-stamped by the recorder, and its ``stats`` stay empty.
+
+Geometry and range limits (first match wins)
+--------------------------------------------
+1. What ``[scanner]`` states (``first_angle_deg``, ``step_deg`` or ``fov_deg``, ``beams``,
+   ``min_range_m``, ``max_range_m``); parts not stated come from below.
+2. The dataset catalogue, for its own logs, recognised by content (size and SHA-256, not the
+   file name: :func:`slam.io.catalog.manifest_for_path`).
+3. What the log states: ``ROBOTLASER1``/``RAWLASER`` fields, a bag's ``angle_min``,
+   ``angle_increment``, ``range_min``, ``range_max``.
+4. For ``FLASER``/``RLASER`` lines, which carry only ranges: CARMEN's rule
+   (:func:`slam.io.laser.guess_laser_geometry`), with an :class:`InputWarning` that says so.
+
+Readings below ``min_range_m`` become NaN (not measurements); readings at or above the range
+limit are "no return" (:attr:`slam.types.Scan.max_range_m`).
+
+Laser mounting ``pose_base_laser`` (first match wins)
+----------------------------------------------------
+1. ``[scanner] pose_base_laser`` when stated (or ``mount_source = "config"``: it, else zero).
+2. The catalogue's recorded mounting, for its own logs (``datasets/catalog.toml``).
+3. The log: a CARMEN log whose laser lines state both the laser pose and the odometry pose
+   (``FLASER x y θ`` and ``odom_x odom_y odom_θ``; ``ROBOTLASER1`` laser and robot pose) gives
+   ``pose_odom_base⁻¹ ∘ pose_odom_laser``, which must be the same for every scan (within
+   :data:`MOUNT_TOLERANCE_M` and :data:`MOUNT_TOLERANCE_RAD`; otherwise an
+   :class:`InputWarning` and no mounting); a bag gives its ``/tf_static`` chain from the base
+   frame to the scan's frame.
+4. None known: the laser odometry is the base's, and the trajectory is reported for the laser.
+
+Laser odometry and output frame
+-------------------------------
+``laser_odometry = "auto"`` takes the logged laser pose where the mounting came from the log
+itself, and ``base odometry ∘ mounting`` where it was stated, catalogued (and not applied in
+the log's laser poses) or read from tf.  Poses are estimated for the laser and reported for
+the robot base (``output_frame = "base"``, the frame of the public relations:
+``pose_world_base = pose_world_laser ∘ pose_base_laser⁻¹``) unless ``output_frame = "laser"``
+or no mounting is known; ``summary.json``'s ``"frame"`` says which.  ``odometry_sign =
+"velocity"`` repairs CARMEN odometry that logs reversing as forward motion
+(:func:`slam.io.carmen.velocity_signed_scans`).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from itertools import islice
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.errors import ConfigError, InputError
-from slam.geometry import adjoint_pose2, pose_compose, pose_inverse
+from slam.errors import ConfigError, InputError, LogFormatError
+from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse
 from slam.types import Scan
+from slam.validate import require
 
 if TYPE_CHECKING:
     from slam.io.carmen import CarmenStats
+    from slam.io.catalog import DatasetManifest, ResolvedLog
 
-__all__ = ["InputPolicy", "InputSettings", "policy_for_log", "read_log_scans"]
+__all__ = [
+    "MOUNT_TOLERANCE_M",
+    "MOUNT_TOLERANCE_RAD",
+    "InputPolicy",
+    "InputSettings",
+    "InputWarning",
+    "LogInput",
+    "MountEstimate",
+    "ScannerConfig",
+    "derive_mount",
+    "open_log",
+    "policy_for_log",
+    "read_log_scans",
+]
 
 FloatArray = NDArray[np.float64]
 
+MOUNT_TOLERANCE_M = 0.01
+"""Largest spread (m) of ``pose_odom_base⁻¹ ∘ pose_odom_laser`` over a log for a mounting."""
+MOUNT_TOLERANCE_RAD = math.radians(0.5)
+"""Largest spread (rad) of its heading for a mounting."""
 
-class InputSettings(Protocol):
-    """Where the policy's settings come from (e.g. :class:`slam.line_slam.SlamConfig`)."""
+
+class InputWarning(UserWarning):
+    """Something about the input was assumed rather than stated (the message says what)."""
+
+
+@dataclass(frozen=True)
+class ScannerConfig:
+    """The ``[scanner]`` table: the log's scanner, odometry and mounting, and the reported frame.
+
+    ``None`` (a key left out of ``config.toml``) means "not stated": the value comes from the
+    catalogue or the log (module docstring).
+
+    Attributes
+    ----------
+    first_angle_deg : float, optional
+        Bearing of beam 0 in the laser frame (deg); default with ``fov_deg``: ``−fov/2``.
+    step_deg : float, optional
+        Angle between beams (deg, > 0).
+    fov_deg : float, optional
+        Angle from the first to the last beam (deg); the step is ``fov / (n − 1)``.  Give
+        ``step_deg`` or ``fov_deg``, not both.
+    beams : int, optional
+        Beams per scan; a scan with another count is an error.
+    min_range_m : float, optional
+        Readings below this (m) are not measurements.
+    max_range_m : float, optional
+        Readings at or above this (m) are "no return".
+    pose_base_laser : tuple of 3 floats, optional
+        The laser's pose on the robot base ``(x m, y m, θ rad)``; stated, it overrides the
+        catalogue and the log.
+    mount_source : {"auto", "config"}
+        ``"auto"``: module docstring; ``"config"``: ``pose_base_laser`` (zero if not stated)
+        and nothing else.
+    laser_odometry : {"auto", "logged", "base"}
+        ``"logged"``: the logged laser pose, else base odometry ∘ mounting; ``"base"``: always
+        base odometry ∘ mounting; ``"auto"``: module docstring.
+    output_frame : {"base", "laser"}
+        Frame of the reported trajectory (``"base"`` needs a known mounting).
+    odometry_sign : {"velocity", "logged"}
+        CARMEN odometry as logged, or with reversing repaired from the logged speed.
+    scan_topic, odom_topic : str, optional
+        Bag topics (needed when a bag has several of a type).
+    odometry : {"auto", "topic", "tf"}
+        Bags: the odometry topic, or the ``/tf`` transforms to the base frame.
+    base_frame : str, optional
+        Bags: the robot's base frame (default: the odometry's ``child_frame_id``).
+    """
+
+    first_angle_deg: float | None = None
+    step_deg: float | None = None
+    fov_deg: float | None = None
+    beams: int | None = None
+    min_range_m: float | None = None
+    max_range_m: float | None = None
+    pose_base_laser: tuple[float, float, float] | None = None
+    mount_source: Literal["auto", "config"] = "auto"
+    laser_odometry: Literal["auto", "logged", "base"] = "auto"
+    output_frame: Literal["base", "laser"] = "base"
+    odometry_sign: Literal["velocity", "logged"] = "velocity"
+    scan_topic: str | None = None
+    odom_topic: str | None = None
+    odometry: Literal["auto", "topic", "tf"] = "auto"
+    base_frame: str | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("first_angle_deg", "step_deg", "fov_deg", "min_range_m", "max_range_m"):
+            value = getattr(self, name)
+            require(value is None or math.isfinite(value), f"{name} must be a finite number")
+        require(self.step_deg is None or self.step_deg > 0.0, "step_deg must be > 0")
+        require(self.fov_deg is None or self.fov_deg > 0.0, "fov_deg must be > 0")
+        require(
+            self.step_deg is None or self.fov_deg is None,
+            "give step_deg or fov_deg, not both",
+        )
+        require(self.beams is None or self.beams >= 2, "beams must be >= 2")
+        require(self.min_range_m is None or self.min_range_m >= 0.0, "min_range_m must be >= 0")
+        require(self.max_range_m is None or self.max_range_m > 0.0, "max_range_m must be > 0")
+        require(
+            self.min_range_m is None
+            or self.max_range_m is None
+            or self.min_range_m < self.max_range_m,
+            "min_range_m must be below max_range_m",
+        )
+        if self.pose_base_laser is not None:
+            require(
+                len(self.pose_base_laser) == 3
+                and all(math.isfinite(v) for v in self.pose_base_laser),
+                "pose_base_laser must be three finite numbers (x m, y m, theta rad)",
+            )
+        require(self.mount_source in ("auto", "config"), "mount_source must be auto or config")
+        require(
+            self.laser_odometry in ("auto", "logged", "base"),
+            "laser_odometry must be auto, logged or base",
+        )
+        require(self.output_frame in ("base", "laser"), "output_frame must be base or laser")
+        require(
+            self.odometry_sign in ("velocity", "logged"),
+            "odometry_sign must be velocity or logged",
+        )
+        require(self.odometry in ("auto", "topic", "tf"), "odometry must be auto, topic or tf")
 
     @property
-    def pose_base_laser(self) -> tuple[float, float, float]:
+    def states_geometry(self) -> bool:
+        """Whether any beam-geometry key is stated."""
+        return any(
+            v is not None for v in (self.first_angle_deg, self.step_deg, self.fov_deg, self.beams)
+        )
+
+
+OLD_SLAM_KEYS: dict[str, Any] = {
+    "pose_base_laser": (0.0, 0.0, 0.0),
+    "mount_source": "catalog",
+    "laser_odometry": "logged",
+    "output_frame": "laser",
+    "odometry_sign": "velocity",
+}
+"""The input keys an older ``config.toml`` has in ``[slam]``, with their old defaults."""
+
+
+def migrate_slam_keys(data: dict[str, Any]) -> dict[str, Any]:
+    """Move an older ``config.toml``'s input keys from ``[slam]`` to ``[scanner]``.
+
+    A key whose value is the old default is dropped (the ``[scanner]`` default applies); any
+    other value moves with its meaning (``mount_source = "config"`` stays ``"config"``; a
+    non-zero ``pose_base_laser`` becomes the stated mounting).  A key given in both tables is
+    an error.  Returns a new dict; ``data`` is not changed.
+    """
+    slam = data.get("slam")
+    if not isinstance(slam, dict) or not any(k in slam for k in OLD_SLAM_KEYS):
+        return data
+    out = dict(data)
+    slam = dict(slam)
+    scanner = dict(out.get("scanner", {}))
+    for key, old_default in OLD_SLAM_KEYS.items():
+        if key not in slam:
+            continue
+        value = slam.pop(key)
+        if key in scanner:
+            raise ConfigError(f"{key} is given in [slam] (older files) and in [scanner]: keep one")
+        same = (
+            list(value) == list(old_default)
+            if isinstance(old_default, tuple)
+            else value == old_default
+        )
+        if not same:
+            scanner[key] = value
+    out["slam"] = slam
+    out["scanner"] = scanner
+    return out
+
+
+class InputSettings(Protocol):
+    """Where a policy's settings come from (e.g. a resolved :class:`ScannerConfig`)."""
+
+    @property
+    def pose_base_laser(self) -> Any:
         """Laser pose on the robot base (m, m, rad)."""
 
     @property
@@ -63,14 +278,10 @@ class InputSettings(Protocol):
     def odometry_sign(self) -> str:
         """``"velocity"`` or ``"logged"``."""
 
-    @property
-    def mount_source(self) -> str:
-        """``"catalog"`` or ``"config"``."""
-
 
 @dataclass(frozen=True)
 class InputPolicy:
-    """How scans' odometry is read and which frame poses are reported in (module docstring).
+    """How scans' odometry is read and which frame poses are reported in.
 
     Attributes
     ----------
@@ -103,13 +314,21 @@ class InputPolicy:
             raise ConfigError(f"odometry_sign must be velocity or logged: {self.odometry_sign!r}")
 
     @classmethod
-    def of(cls, settings: InputSettings) -> InputPolicy:
-        """The policy of a configuration holding the settings (e.g. ``RunConfig.slam``)."""
+    def of(cls, settings: Any) -> InputPolicy:
+        """The policy of an object holding the settings; missing or unresolved ones default.
+
+        Unresolved values of a :class:`ScannerConfig` (``pose_base_laser = None``,
+        ``laser_odometry = "auto"``) take the policy's defaults; :func:`open_log` resolves
+        them for a log.
+        """
+        default = cls()
+        mount = getattr(settings, "pose_base_laser", None)
+        laser_odometry = getattr(settings, "laser_odometry", default.laser_odometry)
         return cls(
-            tuple(float(v) for v in settings.pose_base_laser),  # type: ignore[arg-type]
-            settings.laser_odometry,  # type: ignore[arg-type]
-            settings.output_frame,  # type: ignore[arg-type]
-            settings.odometry_sign,  # type: ignore[arg-type]
+            default.pose_base_laser if mount is None else tuple(float(v) for v in mount),  # type: ignore[arg-type]
+            default.laser_odometry if laser_odometry == "auto" else laser_odometry,
+            getattr(settings, "output_frame", default.output_frame),
+            getattr(settings, "odometry_sign", default.odometry_sign),
         )
 
     @property
@@ -163,8 +382,8 @@ class InputPolicy:
         covariance becomes ``Ad P Adᵀ``.  For ``"laser"`` the inputs are returned unchanged.
         """
         poses = np.asarray(poses_world_laser, dtype=float)
-        if self.output_frame != "base" or poses.shape[0] == 0:
-            return poses, covariances
+        if self.output_frame != "base" or poses.shape[0] == 0 or not self.mount.any():
+            return poses, covariances  # a zero mounting: the laser's poses are the base's
         poses = pose_compose(poses, np.broadcast_to(pose_inverse(self.mount), poses.shape))
         if covariances is not None:
             F = adjoint_pose2(self.mount)
@@ -172,18 +391,521 @@ class InputPolicy:
         return poses, covariances
 
 
+# -- the mounting from a log's own poses -----------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MountEstimate:
+    """``pose_odom_base⁻¹ ∘ pose_odom_laser`` over the scans that state both poses.
+
+    Attributes
+    ----------
+    pose_base_laser : tuple of 3 floats or None
+        The median offset, or ``None`` if no scan states both poses.
+    n_scans : int
+        Scans that state both.
+    spread_m, spread_rad : float
+        Largest deviation from the median (position m, heading rad).
+    """
+
+    pose_base_laser: tuple[float, float, float] | None
+    n_scans: int
+    spread_m: float
+    spread_rad: float
+
+    @property
+    def consistent(self) -> bool:
+        """The offset is the same over the log (within the module's tolerances)."""
+        return (
+            self.pose_base_laser is not None
+            and self.spread_m <= MOUNT_TOLERANCE_M
+            and self.spread_rad <= MOUNT_TOLERANCE_RAD
+        )
+
+
+def derive_mount(scans: Iterable[Scan]) -> MountEstimate:
+    """The laser mounting that the scans' logged laser and base poses imply (module docstring)."""
+    acc = _MountAccumulator()
+    for scan in scans:
+        acc.add(scan)
+    return acc.result()
+
+
+class _MountAccumulator:
+    """:func:`derive_mount` fed one scan at a time (keeps only the offsets)."""
+
+    def __init__(self) -> None:
+        self._offsets: list[FloatArray] = []
+
+    def add(self, scan: Scan) -> None:
+        if scan.pose_odom_base is not None and scan.pose_odom_laser is not None:
+            base = np.asarray(scan.pose_odom_base, dtype=float)
+            self._offsets.append(pose_between(base, np.asarray(scan.pose_odom_laser, float)))
+
+    def result(self) -> MountEstimate:
+        if not self._offsets:
+            return MountEstimate(None, 0, math.nan, math.nan)
+        d = np.vstack(self._offsets)
+        med = np.median(d, axis=0)
+        dtheta = np.abs(np.angle(np.exp(1j * (d[:, 2] - med[2]))))
+        spread_m = float(np.max(np.hypot(d[:, 0] - med[0], d[:, 1] - med[1])))
+        # offsets at rounding level are no mounting: keep them exactly zero
+        med = np.where(np.abs(med) < 1e-9, 0.0, med)
+        mount = (float(med[0]), float(med[1]), float(med[2]))
+        return MountEstimate(mount, d.shape[0], spread_m, float(np.max(dtheta)))
+
+
+# -- opening a log ---------------------------------------------------------------------------
+
+
+@dataclass
+class _Geometry:
+    """What the run used: filled from the first scan read."""
+
+    first_angle_deg: float | None = None
+    step_deg: float | None = None
+    beams: int | None = None
+    max_range_m: float | None = None
+    min_range_m: float | None = None
+    source: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "first_angle_deg": self.first_angle_deg,
+            "step_deg": self.step_deg,
+            "beams": self.beams,
+            "min_range_m": self.min_range_m,
+            "max_range_m": self.max_range_m,
+            "source": self.source,
+        }
+
+
+@dataclass
+class LogInput:
+    """An opened log (see :func:`open_log`).
+
+    Attributes
+    ----------
+    log : Path
+        The log file or bag folder.
+    name : str
+        Dataset name, or the file's stem.
+    format : {"carmen", "rosbag"}
+    manifest : DatasetManifest or None
+        The catalogue entry, for a catalogued log.
+    relations : Path or None
+        The catalogue's relations file for a catalogued log.
+    policy : InputPolicy
+        Laser odometry, mounting, output frame, odometry sign (resolved).
+    n_scans : int or None
+        Laser scans in the log, where known without reading it.
+    mount_source : str
+        ``"config"``, ``"catalogue"``, ``"log"``, ``"tf"`` or ``"none"``.
+    details : dict
+        More about the input for ``summary.json``.
+    """
+
+    log: Path
+    name: str
+    format: str
+    manifest: DatasetManifest | None
+    relations: Path | None
+    policy: InputPolicy
+    n_scans: int | None
+    mount_source: str
+    scanner: ScannerConfig
+    details: dict[str, Any] = field(default_factory=dict)
+    geometry: _Geometry = field(default_factory=_Geometry)
+    _reader: Any = None
+    _skipped_without_odometry: int = 0
+
+    def total(self, max_scans: int | None = None) -> int | None:
+        """Scans a run over at most ``max_scans`` of them will read (None if unknown)."""
+        if self.n_scans is None:
+            return max_scans
+        return self.n_scans if max_scans is None else min(self.n_scans, max_scans)
+
+    def raw_scans(
+        self, *, stats: CarmenStats | None = None, strict: bool = False
+    ) -> Iterator[Scan]:
+        """The scans as the reader gives them, odometry sign applied, nothing else.
+
+        A CARMEN log's reader fills ``stats`` (its counts and log anomalies,
+        :mod:`slam.io.anomalies`) while reading; ``strict`` makes the first anomaly an error.
+        A bag is read without anomaly checks (``stats`` stays as it is).
+        """
+        if self.format == "rosbag":
+            yield from self._reader.scans()
+            return
+        from slam.io.carmen import velocity_signed_scans
+
+        reader = self._carmen_reader(strict)
+        if stats is not None:
+            reader.stats = stats
+        if self.policy.odometry_sign == "velocity":
+            yield from velocity_signed_scans(reader.messages())
+        else:
+            yield from reader.scans()
+
+    def _carmen_reader(self, strict: bool = False) -> Any:
+        from slam.io.carmen import CarmenReader
+
+        return CarmenReader(self.log, geometry=self._reader, strict=strict)
+
+    def scans(
+        self,
+        max_scans: int | None = None,
+        *,
+        need_odometry: bool = True,
+        stats: CarmenStats | None = None,
+        strict: bool = False,
+    ) -> Iterator[Scan]:
+        """The scans with the stated geometry and range limits applied, in log order.
+
+        A bag's scans outside the odometry's time span (:mod:`slam.io.rosbag`) are left out
+        when ``need_odometry`` (an :class:`InputWarning` counts them); the indices stay
+        contiguous.  ``stats`` and ``strict``: the log anomalies of a CARMEN log, counted in
+        ``stats.anomalies`` over the part of the log read, or an error at the first one
+        (:meth:`raw_scans`; bags are not checked).
+        """
+        scanner = self.scanner
+        k = 0
+        skipped = 0
+        if max_scans is not None and max_scans <= 0:
+            return
+        for scan in self.raw_scans(stats=stats, strict=strict):
+            if (
+                need_odometry
+                and self.format == "rosbag"
+                and scan.pose_odom_base is None
+                and self._reader.odometry is not None
+            ):
+                skipped += 1
+                continue
+            scan = _apply_scanner(scan, scanner, k)
+            if k == 0:
+                self._note_geometry(scan)
+            k += 1
+            yield scan
+            if max_scans is not None and k >= max_scans:
+                break  # not one message more is read (anomalies cover the part read)
+        if skipped:
+            self._skipped_without_odometry = skipped
+            warnings.warn(
+                f"{self.log}: {skipped} scan(s) lie more than 1 s outside the odometry's time "
+                "span and were left out",
+                InputWarning,
+                stacklevel=2,
+            )
+
+    def _note_geometry(self, scan: Scan) -> None:
+        g = self.geometry
+        b = np.asarray(scan.bearings)
+        g.first_angle_deg = math.degrees(float(b[0])) if b.size else None
+        g.step_deg = math.degrees(float(b[1] - b[0])) if b.size > 1 else None
+        g.beams = int(b.size)
+        g.max_range_m = float(scan.max_range_m)
+
+    def run_summary(self, n_scans: int, max_scans: int | None) -> dict[str, Any]:
+        """What ``summary.json`` says about the input of a run over ``n_scans`` scans.
+
+        ``log``, ``dataset``, ``scans_in_log`` (where known), ``partial`` (true when the run
+        stopped before the log's end: fewer scans than the log has, or, the count unknown,
+        ``max_scans`` reached; ``lineslam evaluate`` then scores the relations inside the run),
+        ``max_scans`` and ``input`` (:meth:`describe`).
+        """
+        out: dict[str, Any] = {"log": str(self.log), "dataset": self.name}
+        if self.n_scans is not None:
+            out["scans_in_log"] = self.n_scans
+            partial = n_scans < self.n_scans
+        else:
+            partial = max_scans is not None and n_scans >= max_scans
+        out["partial"] = bool(partial)
+        if max_scans is not None:
+            out["max_scans"] = int(max_scans)
+        out["input"] = self.describe()
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        """The ``"input"`` block of ``summary.json``: what was read and what was assumed."""
+        out: dict[str, Any] = {
+            "log": str(self.log),
+            "format": self.format,
+            "catalogue": self.manifest.name if self.manifest is not None else None,
+            "geometry": self.geometry.to_dict(),
+            "pose_base_laser": list(self.policy.pose_base_laser),
+            "mount_source": self.mount_source,
+            "laser_odometry": self.policy.laser_odometry,
+            "odometry_sign": self.policy.odometry_sign,
+            "frame": self.policy.output_frame,
+            **self.details,
+        }
+        if self._skipped_without_odometry:
+            out["scans_without_odometry_left_out"] = self._skipped_without_odometry
+        return out
+
+
+def _apply_scanner(scan: Scan, scanner: ScannerConfig, index: int) -> Scan:
+    """``scan`` with the stated geometry and range limits, re-indexed to ``index``."""
+    changes: dict[str, Any] = {}
+    if scan.index != index:
+        changes["index"] = index
+    if scanner.states_geometry:
+        n = scan.n_beams
+        if scanner.beams is not None and n != scanner.beams:
+            raise LogFormatError(
+                f"scan {scan.index} has {n} beams, [scanner] beams = {scanner.beams}",
+                scan.source or None,
+            )
+        b = np.asarray(scan.bearings)
+        if scanner.step_deg is not None:
+            step = math.radians(scanner.step_deg)
+        elif scanner.fov_deg is not None:
+            step = math.radians(scanner.fov_deg) / max(n - 1, 1)
+        else:
+            step = float(b[1] - b[0]) if n > 1 else 0.0
+        if scanner.first_angle_deg is not None:
+            first = math.radians(scanner.first_angle_deg)
+        elif scanner.fov_deg is not None:
+            first = -0.5 * math.radians(scanner.fov_deg)
+        else:
+            first = float(b[0])
+        from slam.io.laser import beam_bearings
+
+        changes["bearings"] = beam_bearings(first, step, n) if step > 0 else b
+    if scanner.max_range_m is not None:
+        changes["max_range_m"] = float(scanner.max_range_m)
+    if scanner.min_range_m:
+        r = np.asarray(scan.ranges, dtype=np.float64)
+        low = r < scanner.min_range_m
+        if low.any():
+            r = r.copy()
+            r[low] = np.nan
+            changes["ranges"] = r
+    return replace(scan, **changes) if changes else scan
+
+
+def _stated_mount(scanner: ScannerConfig) -> tuple[float, float, float] | None:
+    if scanner.pose_base_laser is not None:
+        return tuple(float(v) for v in scanner.pose_base_laser)  # type: ignore[return-value]
+    if scanner.mount_source == "config":
+        return (0.0, 0.0, 0.0)
+    return None
+
+
+def _policy(
+    scanner: ScannerConfig,
+    mount: tuple[float, float, float] | None,
+    mount_source: str,
+    logged_has_mount: bool,
+    where: str,
+) -> InputPolicy:
+    """The resolved policy (module docstring)."""
+    if scanner.laser_odometry != "auto":
+        laser_odometry = scanner.laser_odometry
+    else:
+        laser_odometry = "logged" if logged_has_mount else "base"
+    frame = scanner.output_frame
+    if frame == "base" and mount is None:
+        warnings.warn(
+            f"{where}: the laser's mounting on the robot is not known (not stated, not "
+            "catalogued, not derived from the log's poses, not in tf): the trajectory is "
+            "reported for the laser (state --mount X,Y,THETA_DEG)",
+            InputWarning,
+            stacklevel=3,
+        )
+        frame = "laser"
+    return InputPolicy(
+        mount if mount is not None else (0.0, 0.0, 0.0),
+        laser_odometry,
+        frame,
+        scanner.odometry_sign,
+    )
+
+
+def open_log(
+    log: str | Path, scanner: ScannerConfig | None = None, *, max_scans: int | None = None
+) -> LogInput:
+    """Open a log file, bag or catalogue name with the scanner settings (module docstring).
+
+    Parameters
+    ----------
+    log
+        A CARMEN file, a ROS 1 ``.bag`` file, a ROS 2 bag folder, or a catalogue name.
+    scanner
+        The ``[scanner]`` settings; default :class:`ScannerConfig()`.
+    max_scans
+        The run reads only the first scans: the mounting is derived from those.
+
+    Raises
+    ------
+    DatasetError, InputError, LogFormatError
+        No such log or name; a bag without scans; an unreadable first line.
+    """
+    from slam.io.catalog import resolve_log
+    from slam.io.rosbag import is_rosbag
+
+    scanner = scanner if scanner is not None else ScannerConfig()
+    path = Path(log)
+    if is_rosbag(path):
+        return _open_bag(path, scanner)
+    return _open_carmen(resolve_log(log), scanner, max_scans)
+
+
+def _open_bag(path: Path, scanner: ScannerConfig) -> LogInput:
+    from slam.io.catalog import manifest_for_path
+    from slam.io.rosbag import RosbagLog
+
+    bag = RosbagLog(
+        path,
+        scan_topic=scanner.scan_topic,
+        odom_topic=scanner.odom_topic,
+        odometry=scanner.odometry,
+        base_frame=scanner.base_frame,
+    )
+    manifest = manifest_for_path(path) if path.is_file() else None
+    where = str(path)
+    stated = _stated_mount(scanner)
+    details: dict[str, Any] = {"scan_topic": bag.scan_topic}
+    if stated is not None:
+        mount: tuple[float, float, float] | None = stated
+        source = "config"
+    else:
+        info = bag.mount()
+        mount = info.pose_base_laser if info is not None else None
+        source = "tf" if info is not None else "none"
+        if info is not None:
+            details["tf"] = f"{info.base_frame} -> {info.laser_frame} ({info.hops} static)"
+    details["odometry"] = bag.odometry_source or "none"
+    if bag.odometry is None:
+        warnings.warn(
+            f"{where}: no odometry (no nav_msgs/Odometry topic and no /tf to the base frame)",
+            InputWarning,
+            stacklevel=3,
+        )
+    policy = _policy(scanner, mount, source, False, where)
+    geometry = _Geometry(source="config" if scanner.states_geometry else "log")
+    return LogInput(
+        log=path,
+        name=manifest.name if manifest is not None else path.stem,
+        format="rosbag",
+        manifest=manifest,
+        relations=None,
+        policy=policy,
+        n_scans=bag.scan_count,
+        mount_source=source,
+        scanner=scanner,
+        details=details,
+        geometry=geometry,
+        _reader=bag,
+    )
+
+
+def _open_carmen(resolved: ResolvedLog, scanner: ScannerConfig, max_scans: int | None) -> LogInput:
+    from slam.io.carmen import CarmenReader, _sniff_laser_type
+    from slam.io.laser import guess_laser_geometry
+
+    where = str(resolved.log)
+    manifest = resolved.manifest
+    laser_type = _sniff_laser_type(resolved.log)
+    old_format = laser_type in ("FLASER", "RLASER")
+    reader_geometry = manifest.laser_geometry() if manifest is not None else None
+    if scanner.states_geometry:
+        geometry_source = "config"
+    elif manifest is not None:
+        geometry_source = "catalogue"
+    elif old_format:
+        geometry_source = "carmen-rule"
+    else:
+        geometry_source = "log"
+    details: dict[str, Any] = {"laser_message": laser_type}
+    n_scans = manifest.scans if manifest is not None else None
+    stated = _stated_mount(scanner)
+    mount: tuple[float, float, float] | None = None
+    logged_has_mount = False
+    if stated is not None:
+        mount, source = stated, "config"
+    elif manifest is not None:
+        facts = manifest.laser
+        mount = (facts.mount_x_m, facts.mount_y_m, math.radians(facts.mount_theta_deg))
+        source = "catalogue"
+        logged_has_mount = facts.mount_applied_in_log or not any(mount)
+    else:
+        source = "none"
+    needs_pass = manifest is None and (stated is None or n_scans is None)
+    if needs_pass:
+        # one pass: the scan count (progress bars) and, unless stated, the mounting
+        reader = CarmenReader(resolved.log, geometry=reader_geometry)
+        n = 0
+        first_beams = 0
+        offsets = _MountAccumulator()
+        for scan in islice(reader.scans(), max_scans):
+            first_beams = first_beams or scan.n_beams
+            n += 1
+            offsets.add(scan)
+        n_scans = n if max_scans is None else None
+        if stated is None:
+            estimate = offsets.result()
+            if estimate.pose_base_laser is not None:
+                details["mount_from_log"] = {
+                    "scans": estimate.n_scans,
+                    "spread_m": estimate.spread_m,
+                    "spread_rad": estimate.spread_rad,
+                }
+                if estimate.consistent:
+                    mount, source, logged_has_mount = estimate.pose_base_laser, "log", True
+                else:
+                    warnings.warn(
+                        f"{where}: the laser pose and the odometry pose of the log differ by an "
+                        f"offset that varies over the log (by {estimate.spread_m:.3f} m, "
+                        f"{math.degrees(estimate.spread_rad):.2f} deg): no mounting derived; "
+                        "state one with --mount X,Y,THETA_DEG",
+                        InputWarning,
+                        stacklevel=3,
+                    )
+                    logged_has_mount = True
+        if geometry_source == "carmen-rule" and first_beams:
+            guess = guess_laser_geometry(first_beams)
+            warnings.warn(
+                f"{where}: not a catalogued log and no beam geometry stated: CARMEN's rule for "
+                f"{guess.n_beams} beams (first beam at {math.degrees(guess.first_angle_rad):g} "
+                f"deg, step {math.degrees(guess.step_rad):.4g} deg); if the scanner differs, "
+                "state it (--step DEG or --fov DEG, --first-angle DEG)",
+                InputWarning,
+                stacklevel=3,
+            )
+    policy = _policy(scanner, mount, source, logged_has_mount, where)
+    return LogInput(
+        log=resolved.log,
+        name=resolved.name,
+        format="carmen",
+        manifest=manifest,
+        relations=resolved.relations,
+        policy=policy,
+        n_scans=n_scans,
+        mount_source=source,
+        scanner=scanner,
+        details=details,
+        geometry=_Geometry(source=geometry_source),
+        _reader=reader_geometry,
+    )
+
+
+# -- the older entry points -------------------------------------------------------------------
+
+
 def policy_for_log(policy: InputPolicy, log: str | Path, mount_source: str) -> InputPolicy:
     """The policy with the laser mounting of a catalogued log applied.
 
-    With ``mount_source == "catalog"`` and a log whose catalogue entry records a mounting that
-    the log's laser poses do not contain (``mount_applied_in_log = false``), the laser odometry
-    becomes ``base odometry ∘ mounting`` and the trajectory is reported for the base (the frame
-    of the poses as logged, which the relations refer to).  Otherwise ``policy`` is returned
-    unchanged.
+    With ``mount_source`` ``"catalog"`` or ``"auto"`` and a log whose catalogue entry records
+    a mounting that the log's laser poses do not contain (``mount_applied_in_log = false``),
+    the laser odometry becomes ``base odometry ∘ mounting`` and the trajectory is reported for
+    the base.  Otherwise ``policy`` is returned unchanged.  :func:`open_log` resolves the
+    whole policy of any log.
     """
     from slam.io.catalog import resolve_log
 
-    if mount_source != "catalog":
+    if mount_source not in ("catalog", "auto"):
         return policy
     manifest = resolve_log(log).manifest
     if manifest is None or manifest.laser is None:

@@ -1,7 +1,8 @@
 """Runner of ``lineslam map``: read a log, fit every scan, merge across poses, write results.
 
 The poses are the log's own estimates (CARMEN: the laser pose logged with each scan, i.e. the
-odometry), each with the fixed covariance of ``[map]`` (``pose_sigma_xy_m``,
+odometry, as logged; a bag: the base odometry composed with the laser mounting,
+:mod:`slam.inputs`), each with the fixed covariance of ``[map]`` (``pose_sigma_xy_m``,
 ``pose_sigma_theta_rad``).  Results folder (INTERFACES.md): ``map.json`` (world = the log's
 odometry frame), ``summary.json`` (with the log's anomalies, ``log_anomalies``),
 ``config.toml`` and, unless disabled, figures in the style of the paper's Figs. 3-8 under
@@ -13,9 +14,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,7 +25,7 @@ from linefit.line import Line
 from slam.config import RunConfig
 from slam.errors import InputError
 from slam.geometry import pose_compose
-from slam.inputs import InputPolicy
+from slam.inputs import InputPolicy, LogInput
 from slam.lines.mapbuilder import LineMap, MapBuilder
 from slam.lines.mapio import write_map_json
 from slam.lines.transform import line_to_world
@@ -39,6 +40,9 @@ __all__ = [
     "simulate_paper_sequence",
     "write_map_results",
 ]
+
+if TYPE_CHECKING:
+    from slam.diagnostics import WarningTally
 
 FloatArray = NDArray[np.float64]
 
@@ -153,6 +157,7 @@ def build_map(
     progress: Callable[[int], None] | None = None,
     fit: Callable[[Scan, RunConfig], tuple[list[Line], int]] | None = None,
     pose_covs: Sequence[FloatArray] | None = None,
+    policy: InputPolicy | None = None,
 ) -> MapRun:
     """Fit every scan and merge its lines into a map with the scans' own poses.
 
@@ -175,6 +180,8 @@ def build_map(
     pose_covs : sequence of ndarray (3, 3), optional
         One pose covariance per scan (right perturbation), e.g. odometry compounded from the
         first pose; default ``config.map.pose_cov`` for every scan.
+    policy : InputPolicy, optional
+        Reads each scan's laser pose (:func:`scan_pose`); default the log's own poses.
     """
     fit_fn = fit_scan if fit is None else fit
     builder = MapBuilder(config.map)
@@ -185,7 +192,7 @@ def build_map(
     for scan in scans:
         if max_scans is not None and n_scans + skipped >= max_scans:
             break
-        pose = scan_pose(scan)
+        pose = scan_pose(scan, policy)
         if pose is None:
             skipped += 1
             continue
@@ -274,18 +281,22 @@ def _draw(folder: Path, run: MapRun, title: str) -> dict[str, Path]:
 
 
 def run_map(
-    log: str | Path,
+    log: str | Path | LogInput,
     out: Path,
     config: RunConfig,
     *,
     plot: bool = True,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
+    tally: WarningTally | None = None,
     strict: bool = False,
 ) -> dict[str, Any]:
-    """``lineslam map``: resolve ``log``, build the map, write the results folder.
+    """``lineslam map``: open ``log`` (:func:`slam.inputs.open_log`), build the map, write.
 
-    ``config`` is written as ``config.toml``; ``strict``: a log anomaly is an error.
+    The poses are the logged laser poses with the odometry as logged (no sign repair), or,
+    where a scan has no laser pose (bags), the base odometry composed with the mounting.
+    ``config`` is written as ``config.toml``; the log's anomalies are counted in
+    ``summary.json`` (a CARMEN log; ``strict``: the first one is an error).
 
     Raises
     ------
@@ -294,24 +305,36 @@ def run_map(
     OutputError
         ``out`` cannot be written, or is or holds the log.
     """
+    from contextlib import nullcontext
+
     from slam.config import check_run_config
+    from slam.diagnostics import tally_warnings
+    from slam.inputs import open_log
     from slam.io.atomic import staged_dir
-    from slam.io.carmen import CarmenStats, iter_scans
-    from slam.io.catalog import resolve_log
+    from slam.io.carmen import CarmenStats
     from slam.io.results import write_summary
 
     config = check_run_config(config)
-    resolved = resolve_log(log)
-    stats = CarmenStats(path=str(resolved.log))
-    with staged_dir(out, inputs=[resolved.log]) as work:
+    source = (
+        log if isinstance(log, LogInput) else open_log(log, config.scanner, max_scans=max_scans)
+    )
+    source.policy = replace(
+        source.policy, laser_odometry="logged", odometry_sign="logged", output_frame="laser"
+    )
+    stats = CarmenStats(path=str(source.log))
+    with (
+        nullcontext(tally) if tally is not None else tally_warnings() as tallied,
+        staged_dir(out, inputs=[source.log]) as work,
+    ):
         config.to_toml(work / "config.toml")
         t0 = time.perf_counter()
         run = build_map(
-            iter_scans(resolved.log, stats=stats, strict=strict),
+            source.scans(max_scans, stats=stats, strict=strict),
             config,
             max_scans=max_scans,
             collect_figures=plot,
             progress=progress,
+            policy=source.policy,
         )
         if run.summary["scans"] == 0:
             odometry = f" ({stats.odometry} ODOM messages)" if stats.odometry else ""
@@ -319,13 +342,14 @@ def run_map(
             what = (
                 f"no laser scans with a pose ({without} without)" if without else "no laser scans"
             )
-            raise InputError(f"the log contains {what}{odometry}", str(resolved.log))
-        run.summary["log"] = str(resolved.log)
+            raise InputError(f"the log contains {what}{odometry}", str(source.log))
+        run.summary.update(source.run_summary(run.summary["scans"], max_scans))
         t1 = time.perf_counter()
-        title = f"{resolved.name}: {run.summary['scans']} scans"
+        title = f"{source.name}: {run.summary['scans']} scans"
         _write_map_files(work, run, title=title, plot=plot)
         run.summary["runtime_s"]["write"] = time.perf_counter() - t1
         run.summary["runtime_s"]["total"] = time.perf_counter() - t0
+        run.summary["warnings"] = tallied.as_list()
         run.summary["log_anomalies"] = stats.anomalies.to_dict()
         write_summary(work, run.summary)
     return run.summary

@@ -1,17 +1,20 @@
 """Runners: read a log, feed an estimator scan by scan, write the results folder.
 
 ``lineslam slam`` (:func:`run_slam`, the factor graph) and ``lineslam ekf`` (:func:`run_ekf`,
-the EKF baseline) run the same way (:func:`run_estimator_on_log`): the log is read with the input
-policy (:mod:`slam.inputs`: odometry sign, laser mounting of a catalogued log, output frame),
-the scans are fed to an estimator with ``add_scan``, ``optimize()`` and ``result()`` (a
+the EKF baseline) run the same way (:func:`run_estimator_on_log`): the log (a CARMEN file, a ROS
+bag, or a catalogue name) is opened with the run's ``[scanner]`` settings
+(:func:`slam.inputs.open_log`: beam geometry, range limits, laser mounting, odometry, output
+frame), the scans are fed to an estimator with ``add_scan``, ``optimize()`` and ``result()`` (a
 :class:`slam.result.SlamResult`), and the result's files are written.
 
 Results folder (``../shared/INTERFACES.md``): ``trajectory.tum`` (poses in the policy's output
 frame, log time stamps), ``trajectory_covariance.txt``, ``map.json``, ``summary.json`` (written
 once, at the end, with ``runtime_s`` per stage: ``read``, ``extract`` (when the runner extracts
-the lines), ``estimate``, ``optimize``, ``write``, ``total``, and the log's anomalies,
-``log_anomalies``, :mod:`slam.io.anomalies`), ``config.toml`` (the configuration used) and,
-with ``plot``, ``figures/``.
+the lines), ``estimate``, ``optimize``, ``write``, ``total``; ``input``, what was read and
+assumed, :meth:`slam.inputs.LogInput.describe`; ``scans_in_log`` and ``partial`` for a run over
+the first scans; ``warnings``, counted, :mod:`slam.diagnostics`; the log's anomalies,
+``log_anomalies``, :mod:`slam.io.anomalies`, for a CARMEN log), ``config.toml`` (the
+configuration used) and, with ``plot``, ``figures/``; ``lineslam slam`` adds ``graph.g2o``.
 
 The folder is written into a temporary folder beside ``out`` and put in place whole when the
 run is complete (:func:`slam.io.atomic.staged_dir`): a failed or interrupted run leaves
@@ -23,12 +26,14 @@ from __future__ import annotations
 import itertools
 import time
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from slam.config import RunConfig, check_run_config
+from slam.diagnostics import WarningTally, tally_warnings
 from slam.errors import InputError
-from slam.inputs import InputPolicy, policy_for_log, read_log_scans
+from slam.inputs import InputPolicy, LogInput, open_log
 from slam.types import Scan
 
 if TYPE_CHECKING:
@@ -158,28 +163,41 @@ def _feed_with_lines(
     return clock
 
 
+def _tallying(tally: WarningTally | None) -> AbstractContextManager[WarningTally]:
+    return nullcontext(tally) if tally is not None else tally_warnings()
+
+
+def _source(log: str | Path | LogInput, config: RunConfig, max_scans: int | None) -> LogInput:
+    if isinstance(log, LogInput):
+        return log
+    return open_log(log, config.scanner, max_scans=max_scans)
+
+
 def run_estimator_on_log(
-    log: str | Path,
+    log: str | Path | LogInput,
     out: Path,
     estimator: ScanEstimator,
-    policy: InputPolicy,
+    policy: InputPolicy | None = None,
     *,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
     linefit_config: LineFitConfig | None = None,
     min_observations: int = 1,
+    tally: WarningTally | None = None,
     config: RunConfig | None = None,
     strict: bool = False,
 ) -> dict[str, Any]:
-    """Resolve ``log`` (file or dataset name), run ``estimator`` on it, write ``out``.
+    """Run ``estimator`` on a log (an opened :class:`~slam.inputs.LogInput`, a file or a name).
 
-    The scans are read with ``policy``'s odometry sign (:func:`slam.inputs.read_log_scans`)
-    and fed by :func:`feed_scans` (``linefit_config``: the runner extracts the lines).  The
-    result's files are written with the map lines of at least ``min_observations``
-    measurements, ``config.toml`` (with ``config``), then ``summary.json`` once, with the
-    run's times and the log's anomalies (``strict``: the first anomaly is an error).  The
-    folder appears at ``out`` only when complete (module docstring).  Returns the summary.
+    The scans are read as the log was opened (:func:`slam.inputs.open_log`; a path or name is
+    opened with the default :class:`~slam.inputs.ScannerConfig`; ``policy`` is then only
+    documentation: the estimator holds its own) and fed by :func:`feed_scans`
+    (``linefit_config``: the runner extracts the lines).  The result's files are written with
+    the map lines of at least ``min_observations`` measurements, ``config.toml`` (with
+    ``config``), then ``summary.json`` once, with the run's times, the warnings counted and
+    the log's anomalies (``strict``: the first anomaly is an error; a bag is not checked).
+    The folder appears at ``out`` only when complete (module docstring).  Returns the summary.
 
     Raises
     ------
@@ -190,122 +208,135 @@ def run_estimator_on_log(
         ``strict``, an anomaly).
     """
     from slam.io.atomic import staged_dir
-    from slam.io.carmen import CarmenStats, iter_scans
-    from slam.io.catalog import resolve_log
+    from slam.io.carmen import CarmenStats
     from slam.io.results import write_summary
 
-    resolved = resolve_log(log)
-    stats = CarmenStats(path=str(resolved.log))
-    with staged_dir(out, inputs=[resolved.log]) as work:
+    source = log if isinstance(log, LogInput) else open_log(log, max_scans=max_scans)
+    stats = CarmenStats(path=str(source.log))
+    with _tallying(tally) as tallied, staged_dir(out, inputs=[source.log]) as work:
         if config is not None:
             config.to_toml(work / "config.toml")
         t_start = time.perf_counter()
-        scans = read_log_scans(resolved.log, policy, stats=stats, strict=strict)
         try:
             clock = feed_scans(
                 estimator,
-                scans,
+                source.scans(max_scans, stats=stats, strict=strict),
                 max_scans=max_scans,
                 progress=progress,
                 linefit_config=linefit_config,
             )
         except _NoScansError:
-            raise _no_scans(resolved.log, stats) from None
+            raise _no_scans(source.log, stats) from None
         t0 = time.perf_counter()
         estimator.optimize()
         clock["optimize"] = time.perf_counter() - t0
         result = estimator.result()
         t0 = time.perf_counter()
         result.write_files(work, min_observations)
+        graph = getattr(estimator, "graph", None)
+        if graph is not None:
+            from slam.io.g2o import write_line_graph_g2o
+
+            write_line_graph_g2o(work / "graph.g2o", graph, result)
         if plot:
             from slam.plotting.trajectory_map import plot_slam_result, raw_points_world
 
             points = raw_points_world(
-                iter_scans(resolved.log), result.poses_world_laser, result.is_keyframe
+                source.scans(max_scans, need_odometry=False),
+                result.poses_world_laser,
+                result.is_keyframe,
             )
-            plot_slam_result(result, work / "figures", title=resolved.name, points_world=points)
+            plot_slam_result(result, work / "figures", title=source.name, points_world=points)
         clock["write"] = time.perf_counter() - t0
         clock["total"] = time.perf_counter() - t_start
         summary: dict[str, Any] = result.summary_dict(min_observations)
-        summary["log"] = str(resolved.log)
-        summary["dataset"] = resolved.name
+        summary.update(source.run_summary(result.n_scans, max_scans))
         runtime = dict(summary.get("runtime_s", {}))
         runtime.update({f"{k}": float(v) for k, v in clock.items()})
         summary["runtime_s"] = runtime
+        summary["warnings"] = tallied.as_list()
         summary["log_anomalies"] = stats.anomalies.to_dict()
         write_summary(work, summary)
     return summary
 
 
 def run_slam(
-    log: str | Path,
+    log: str | Path | LogInput,
     out: Path,
     config: RunConfig,
     *,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
+    tally: WarningTally | None = None,
     strict: bool = False,
 ) -> dict[str, Any]:
     """``lineslam slam``: factor-graph line SLAM on a log (see the module docstring).
 
-    Writes ``config`` as ``config.toml`` with the results; ``strict``: a log anomaly is an
-    error.
+    Besides the common files it writes ``graph.g2o``, the final factor graph
+    (:func:`slam.io.g2o.write_line_graph_g2o`), and ``config`` as ``config.toml``;
+    ``strict``: a log anomaly is an error.
     """
     from slam.line_slam import LineSlam
 
     config = check_run_config(config)
-    policy = policy_for_log(InputPolicy.of(config.slam), log, config.slam.mount_source)
-    slam = LineSlam(config.slam, config.linefit, policy)
-    return run_estimator_on_log(
-        log,
-        out,
-        slam,
-        policy,
-        max_scans=max_scans,
-        progress=progress,
-        plot=plot,
-        config=config,
-        strict=strict,
-    )
+    with _tallying(tally) as tallied:
+        source = _source(log, config, max_scans)
+        slam = LineSlam(config.slam, config.linefit, source.policy)
+        return run_estimator_on_log(
+            source,
+            out,
+            slam,
+            source.policy,
+            max_scans=max_scans,
+            progress=progress,
+            plot=plot,
+            tally=tallied,
+            config=config,
+            strict=strict,
+        )
 
 
 def run_ekf(
-    log: str | Path,
+    log: str | Path | LogInput,
     out: Path,
     config: RunConfig,
     *,
     max_scans: int | None = None,
     progress: Callable[[int], None] | None = None,
     plot: bool = False,
+    tally: WarningTally | None = None,
     strict: bool = False,
 ) -> dict[str, Any]:
     """``lineslam ekf``: the EKF baseline on a log (see the module docstring).
 
-    Same input policy as :func:`run_slam` (the catalogue's laser mounting included); the
-    lines of every scan are extracted by the runner in batches of consecutive scans, the
-    filter runs with ``ekf.blas_threads`` BLAS threads, and the map keeps the landmarks with
-    at least ``ekf.min_landmark_observations`` measurements.  When a guard stops the filter
+    Same input as :func:`run_slam` (:func:`slam.inputs.open_log`); the lines of every scan are
+    extracted by the runner in batches of consecutive scans, the filter runs with
+    ``ekf.blas_threads`` BLAS threads, and the map keeps the landmarks with at least
+    ``ekf.min_landmark_observations`` measurements.  When a guard stops the filter
     (``ekf.max_landmarks``, ``ekf.max_runtime_s``), the trajectory covers the scans processed
     and ``summary.json`` says at which scan and why (``stopped_at_scan``, ``stop_reason``).
+    ``config`` is written as ``config.toml``; ``strict``: a log anomaly is an error.
     """
     from slam.ekf import EkfSlam
     from slam.ekf.threads import blas_threads
 
     config = check_run_config(config)
-    policy = policy_for_log(InputPolicy.of(config.slam), log, config.slam.mount_source)
-    ekf = EkfSlam(config.ekf, config.linefit, policy)
-    with blas_threads(config.ekf.blas_threads):
-        return run_estimator_on_log(
-            log,
-            out,
-            ekf,
-            policy,
-            max_scans=max_scans,
-            progress=progress,
-            plot=plot,
-            linefit_config=config.linefit,
-            min_observations=config.ekf.min_landmark_observations,
-            config=config,
-            strict=strict,
-        )
+    with _tallying(tally) as tallied:
+        source = _source(log, config, max_scans)
+        ekf = EkfSlam(config.ekf, config.linefit, source.policy)
+        with blas_threads(config.ekf.blas_threads):
+            return run_estimator_on_log(
+                source,
+                out,
+                ekf,
+                source.policy,
+                max_scans=max_scans,
+                progress=progress,
+                plot=plot,
+                linefit_config=config.linefit,
+                min_observations=config.ekf.min_landmark_observations,
+                tally=tallied,
+                config=config,
+                strict=strict,
+            )

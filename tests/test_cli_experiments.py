@@ -101,7 +101,7 @@ def test_ekf_command_on_the_demo_log_beats_odometry(tmp_path):
     assert m_ekf.abs_trans_m.mean < 0.01 < m_odo.abs_trans_m.mean
     assert m_ekf.abs_trans_m.mean < 0.1 * m_odo.abs_trans_m.mean
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["scans"] == 383 and summary["lines_fit"] > 0 and summary["frame"] == "laser"
+    assert summary["scans"] == 383 and summary["lines_fit"] > 0 and summary["frame"] == "base"
     assert 0.9 < summary["compression"] < 1.0
     assert RunConfig.from_toml(out / "config.toml") == RunConfig()
 

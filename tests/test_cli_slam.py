@@ -59,7 +59,7 @@ def test_slam_writes_the_results_folder(tmp_path, capsys, backend):
     summary = json.loads((out / "summary.json").read_text())
     for key in ("scans", "points", "lines_fit", "lines_merged", "compression", "runtime_s"):
         assert key in summary
-    assert summary["frame"] == "laser" and summary["scans"] == 60
+    assert summary["frame"] == "base" and summary["scans"] == 60
     assert summary["backend"]["backend"] == backend
     assert {"read", "estimate", "optimize", "write", "total"} <= set(summary["runtime_s"])
     line_map = read_map_json(out / "map.json")

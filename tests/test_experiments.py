@@ -122,14 +122,17 @@ def test_ekf_and_odometry_follow_the_graphs_laser_mounting_and_output_frame():
     rc = RunConfig()
     mounted = replace(
         rc,
-        slam=replace(
-            rc.slam, pose_base_laser=(0.2, 0.05, 0.1), laser_odometry="base", output_frame="base"
+        scanner=replace(
+            rc.scanner,
+            pose_base_laser=(0.2, 0.05, 0.1),
+            laser_odometry="base",
+            output_frame="base",
         ),
     )
     out = run_estimator("odometry", scans, None, mounted, None)
     np.testing.assert_allclose(out.poses_world_laser, base, atol=1e-12)
     assert out.stats["frame"] == "base"
-    laser_cfg = replace(mounted, slam=replace(mounted.slam, output_frame="laser"))
+    laser_cfg = replace(mounted, scanner=replace(mounted.scanner, output_frame="laser"))
     laser = run_estimator("odometry", scans, None, laser_cfg, None).poses_world_laser
     # the laser poses are the base poses composed with the mounting (not the logged ones)
     expected = pose_compose(base, np.broadcast_to([0.2, 0.05, 0.1], base.shape))

@@ -366,7 +366,9 @@ def test_two_runs_into_one_folder_leave_one_whole(tmp_path, capsys):
         for ref in refs.values():
             want = snapshot(ref)
             same_files = set(got) == set(want)
-            same_bytes = all(got[name] == want[name] for name in want if name != "summary.json")
+            same_bytes = same_files and all(
+                got[name] == want[name] for name in want if name != "summary.json"
+            )
             matches.append(same_files and same_bytes)
         assert sum(matches) == 1, sorted(got)
         assert leftovers(tmp_path) == []

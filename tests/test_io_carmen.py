@@ -75,15 +75,18 @@ def test_geometry_argument_and_beam_count_check(tmp_path):
         list(iter_scans(path, geometry=LaserGeometry(-0.5, 0.1, n_beams=11)))
 
 
-def test_manifest_geometry_applies_to_catalogued_file_names(tmp_path):
-    # a log called aces.clf gets the ACES manifest: 50 m clipping is "no return"
+def test_a_file_named_like_a_catalogued_log_gets_no_catalogue_geometry(tmp_path):
+    # the catalogue recognises its logs by content: a small aces.clf is not ACES (no 50 m
+    # clipping), a 181-beam fr079.clf is read by CARMEN's rule, not fr079's 360 beams
     path = write(tmp_path, [flaser(np.full(180, 50.0), [0, 0, 0], [0, 0, 0], 1.0)], name="aces.clf")
     (scan,) = iter_scans(path)
-    assert scan.max_range_m == 50.0
-    assert not scan.valid_mask().any()
-    bad = write(tmp_path, [flaser(np.full(181, 5.0), [0, 0, 0], [0, 0, 0], 1.0)], name="fr079.clf")
-    with pytest.raises(LogFormatError, match="181 readings"):
-        list(iter_scans(bad))
+    assert scan.max_range_m == 80.0
+    assert scan.valid_mask().all()
+    other = write(
+        tmp_path, [flaser(np.full(181, 5.0), [0, 0, 0], [0, 0, 0], 1.0)], name="fr079.clf"
+    )
+    (scan,) = iter_scans(other)
+    np.testing.assert_allclose(np.diff(scan.bearings), np.pi / 180)
 
 
 def test_robotlaser_and_rawlaser_use_their_own_geometry(tmp_path, rng):

@@ -49,14 +49,32 @@ def test_resolve_by_name_under_lineslam_data(tmp_path, monkeypatch):
 def test_resolve_a_path_as_is(tmp_path, monkeypatch):
     monkeypatch.setenv("LINESLAM_DATA", str(tmp_path / "elsewhere"))
     root = fake_root(tmp_path)
-    log = resolve_log(root / "aces" / "aces.clf")
-    assert log.manifest is not None and log.manifest.name == "aces"
-    assert log.relations == root / "aces" / "aces.relations"
+    log = resolve_log(root / "aces" / "aces.clf")  # ACES by name, not by content
+    assert log.manifest is None and log.relations is None and log.name == "aces"
     other = tmp_path / "mine.clf"
     other.write_text("ODOM 0 0 0 0 0 0 1.0\n")
     log = resolve_log(str(other))
     assert log.manifest is None and log.relations is None and log.name == "mine"
-    assert manifest_for_path("x/fr079.relations").name == "fr079"
+    assert manifest_for_path("x/fr079.relations") is None  # no such file: not recognised
+
+
+def test_a_log_is_recognised_by_content_not_by_name(tmp_path, monkeypatch):
+    """A renamed copy of a catalogued log keeps its entry; another file under the name does not."""
+    from dataclasses import replace
+
+    from slam.io import catalog
+
+    data = b"ODOM 0 0 0 0 0 0 1.0\n"
+    entry = replace(
+        load_catalog()["aces"], log_bytes=len(data), log_sha256=hashlib.sha256(data).hexdigest()
+    )
+    monkeypatch.setattr(catalog, "load_catalog", lambda path=None: {"aces": entry})
+    renamed = tmp_path / "my_copy.clf"
+    renamed.write_bytes(data)
+    assert manifest_for_path(renamed) is not None and resolve_log(renamed).name == "aces"
+    impostor = tmp_path / "aces.clf"
+    impostor.write_bytes(b"ODOM 1 0 0 0 0 0 1.0\n")  # same size, other content
+    assert manifest_for_path(impostor) is None and resolve_log(impostor).manifest is None
 
 
 def test_verify_detects_missing_and_altered_files(tmp_path):

@@ -25,7 +25,8 @@ CATALOGUE = """schema = 1
 [datasets.mounted]
 title = "the demo log, catalogued with a laser mounting missing from its laser poses"
 log = "mounted/mounted.clf"
-log_sha256 = "0000000000000000000000000000000000000000000000000000000000000000"
+log_bytes = {size}
+log_sha256 = "{sha}"
 
 [datasets.mounted.laser]
 beams = 180
@@ -41,10 +42,19 @@ mount_applied_in_log = false
 
 @pytest.fixture
 def mounted_log(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """The demo log under a catalogued file name whose entry records :data:`MOUNT`."""
+    """A copy of the demo log, catalogued (by its content) with :data:`MOUNT`."""
+    from slam.io.catalog import sha256_file
+
     catalogue = tmp_path / "catalog.toml"
     catalogue.write_text(
-        CATALOGUE.format(x=MOUNT[0], y=MOUNT[1], theta_deg=np.degrees(MOUNT[2])), "utf-8"
+        CATALOGUE.format(
+            x=MOUNT[0],
+            y=MOUNT[1],
+            theta_deg=np.degrees(MOUNT[2]),
+            size=DEMO_LOG.stat().st_size,
+            sha=sha256_file(DEMO_LOG),
+        ),
+        "utf-8",
     )
     monkeypatch.setenv("LINESLAM_CATALOG", str(catalogue))
     log = tmp_path / "mounted.clf"
@@ -55,7 +65,8 @@ def mounted_log(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 def test_ekf_command_applies_the_catalogued_mounting(tmp_path, mounted_log):
     """``lineslam ekf`` on a catalogued log whose laser poses lack the mounting reads the laser
     odometry as base odometry ∘ mounting and reports base poses, as ``lineslam slam`` does; with
-    ``mount_source = "config"`` it reports the logged laser poses' frame."""
+    ``mount_source = "config"`` and ``output_frame = "laser"`` it reports the logged laser
+    poses' frame."""
     n = 40
     out = tmp_path / "catalog"
     main(["ekf", str(mounted_log), "--out", str(out), "--max-scans", str(n), "--quiet"])
@@ -72,8 +83,8 @@ def test_ekf_command_applies_the_catalogued_mounting(tmp_path, mounted_log):
     cfg = RunConfig()
     explicit = replace(
         cfg,
-        slam=replace(
-            cfg.slam,
+        scanner=replace(
+            cfg.scanner,
             mount_source="config",
             pose_base_laser=MOUNT,
             laser_odometry="base",
@@ -89,7 +100,7 @@ def test_ekf_command_applies_the_catalogued_mounting(tmp_path, mounted_log):
     assert (out_explicit / "trajectory.tum").read_bytes() == (out / "trajectory.tum").read_bytes()
 
     # without the catalogue's mounting: the logged laser poses, reported for the laser
-    plain = replace(cfg, slam=replace(cfg.slam, mount_source="config"))
+    plain = replace(cfg, scanner=replace(cfg.scanner, mount_source="config", output_frame="laser"))
     plain.to_toml(tmp_path / "plain.toml")
     out_plain = tmp_path / "plain"
     main(
@@ -150,8 +161,8 @@ def test_the_ekf_runner_gives_the_filter_fed_scan_by_scan(tmp_path):
 
     cfg = RunConfig()
     run_ekf(DEMO_LOG, tmp_path, cfg, max_scans=50)
-    ekf = EkfSlam(cfg.ekf, cfg.linefit, InputPolicy.of(cfg.slam))
-    scans = list(read_log_scans(DEMO_LOG, InputPolicy.of(cfg.slam)))[:50]
+    ekf = EkfSlam(cfg.ekf, cfg.linefit, InputPolicy.of(cfg.scanner))
+    scans = list(read_log_scans(DEMO_LOG, InputPolicy.of(cfg.scanner)))[:50]
     for scan, lines in iter_scan_lines(scans, cfg.linefit):
         ekf.add_scan(scan, lines)
     res = ekf.result()

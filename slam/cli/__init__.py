@@ -25,6 +25,7 @@ from slam.cli import (  # noqa: F401  (commands register on import)
     cmd_datasets,
     cmd_ekf,
     cmd_evaluate,
+    cmd_export,
     cmd_extract,
     cmd_map,
     cmd_simulate,

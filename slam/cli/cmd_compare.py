@@ -1,7 +1,11 @@
 """``lineslam compare LOG --out DIR``: estimator variants on the same data, one report.
 
-``LOG`` is a log (path or registered dataset name) or ``sim:WORLD[:LOOPS[:SEED]]`` for the
-line-level simulator with ground truth.  Each variant runs as a task (serially, on
+``LOG`` is a log (a CARMEN file, a ROS bag, or a registered dataset name) or
+``sim:WORLD[:LOOPS[:SEED]]`` for the line-level simulator with ground truth (the world names
+of ``lineslam simulate``).  A log is evaluated against ``--relations FILE`` and/or
+``--ground-truth FILE.tum``, else the catalogue's relations, else ``relations.txt`` and
+``ground_truth.tum`` beside the log; with none of these the report has no accuracy columns and
+a warning says so.  Each variant runs as a task (serially, on
 ``--workers`` local processes, or on a Dask cluster with ``--dask ADDRESS``) and gets its own
 folder (``trajectory.tum``, ``map.json``, ``summary.json``); the comparison writes
 ``report.json``, ``report.md`` and figures (trajectories over the map, error over time, run
@@ -10,6 +14,7 @@ time per scan, NEES over time with χ² bounds for simulated data).
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -27,6 +32,21 @@ from slam.cli.common import (
     check_out_dir,
     results_dir,
     task_progress,
+)
+from slam.cli.scanner_opts import (
+    BaseFrameOpt,
+    BeamsOpt,
+    FirstAngleOpt,
+    FovOpt,
+    FrameOpt,
+    MaxRangeOpt,
+    MinRangeOpt,
+    MountOpt,
+    OdometryOpt,
+    OdomTopicOpt,
+    ScanTopicOpt,
+    StepOpt,
+    with_scanner_options,
 )
 
 __all__ = ["compare"]
@@ -68,10 +88,34 @@ def compare(
     sigma_phi: SigmaPhiOpt = None,
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
+    relations: Annotated[
+        str | None,
+        typer.Option(
+            "--relations",
+            help="Relations file (t1 t2 x y z roll pitch yaw) to evaluate against, or a dataset "
+            "name.",
+        ),
+    ] = None,
+    ground_truth: Annotated[
+        Path | None, typer.Option("--ground-truth", help="Ground-truth TUM trajectory.")
+    ] = None,
+    first_angle: FirstAngleOpt = None,
+    step: StepOpt = None,
+    fov: FovOpt = None,
+    beams: BeamsOpt = None,
+    min_range: MinRangeOpt = None,
+    max_range: MaxRangeOpt = None,
+    mount: MountOpt = None,
+    frame: FrameOpt = None,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+    odometry: OdometryOpt = None,
+    base_frame: BaseFrameOpt = None,
 ) -> None:
     """Compare graph SLAM, EKF-SLAM, odometry and front-end variants on one log."""
     from dataclasses import replace
 
+    from slam.cli.cmd_evaluate import relations_path
     from slam.errors import ConfigError
     from slam.experiments.compare import run_compare
     from slam.experiments.report import write_report
@@ -79,7 +123,26 @@ def compare(
     from slam.io.catalog import resolve_log
 
     run_config = build_config(config, sigma_d, sigma_phi, seed)
-    data = parse_source(log, seed=run_config.seed)
+    run_config = with_scanner_options(
+        run_config,
+        first_angle=first_angle,
+        step=step,
+        fov=fov,
+        beams=beams,
+        min_range=min_range,
+        max_range=max_range,
+        mount=mount,
+        frame=frame,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        odometry=odometry,
+        base_frame=base_frame,
+    )
+    check_out_dir(out)
+    rel_file = relations_path(relations) if relations is not None else None
+    data = parse_source(log, seed=run_config.seed, relations=rel_file, ground_truth=ground_truth)
+    if data.kind == "log" and rel_file is None and ground_truth is None:
+        _warn_if_no_reference(log)
     if workers <= 0:
         import os
 
@@ -92,8 +155,11 @@ def compare(
         if not time_budget > 0.0:
             raise ConfigError(f"--time-budget must be > 0, got {time_budget}")
         selected = tuple(replace(v, time_budget_s=time_budget) for v in selected)
-    check_out_dir(out)
-    inputs = [resolve_log(data.name).log] if data.kind == "log" else []
+    inputs: list[Path] = []
+    if data.kind == "log":
+        from slam.io.rosbag import is_rosbag
+
+        inputs = [Path(data.name) if is_rosbag(data.name) else resolve_log(data.name).log]
     with (
         results_dir(out, run_config, inputs, reuse=(".cache",)) as work,
         task_progress(len(selected), "variants", "variant", quiet) as progress,
@@ -111,3 +177,26 @@ def compare(
         write_report(report, work, figures=figures)
     if not quiet:
         typer.echo(report.markdown_table())
+
+
+def _warn_if_no_reference(log: str) -> None:
+    """Say so when a log has nothing to be evaluated against (no accuracy columns)."""
+    from slam.errors import LineslamError
+    from slam.io.catalog import resolve_log
+    from slam.io.rosbag import is_rosbag
+
+    folder = Path(log).parent
+    if (folder / "relations.txt").is_file() or (folder / "ground_truth.tum").is_file():
+        return
+    if not is_rosbag(log):
+        try:
+            if resolve_log(log).relations is not None:
+                return
+        except LineslamError:
+            return  # the run reports the bad LOG itself
+    typer.echo(
+        f"lineslam: warning: {log}: no relations or ground truth (not a catalogued log, no "
+        "relations.txt beside it): the report has no accuracy columns; give --relations FILE "
+        "or --ground-truth FILE.tum",
+        err=True,
+    )

@@ -32,6 +32,22 @@ from slam.cli.common import (
     check_out_dir,
     warn_log_anomalies,
 )
+from slam.cli.scanner_opts import (
+    BaseFrameOpt,
+    BeamsOpt,
+    FirstAngleOpt,
+    FovOpt,
+    FrameOpt,
+    MaxRangeOpt,
+    MinRangeOpt,
+    MountOpt,
+    OdometryOpt,
+    OdomTopicOpt,
+    ScanTopicOpt,
+    StepOpt,
+    echo_warnings,
+    with_scanner_options,
+)
 
 __all__ = ["ekf"]
 
@@ -50,14 +66,43 @@ def ekf(
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
     strict: StrictOpt = False,
+    first_angle: FirstAngleOpt = None,
+    step: StepOpt = None,
+    fov: FovOpt = None,
+    beams: BeamsOpt = None,
+    min_range: MinRangeOpt = None,
+    max_range: MaxRangeOpt = None,
+    mount: MountOpt = None,
+    frame: FrameOpt = None,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+    odometry: OdometryOpt = None,
+    base_frame: BaseFrameOpt = None,
 ) -> None:
     """EKF-SLAM baseline: trajectory.tum, map.json, summary.json."""
     from tqdm import tqdm
 
+    from slam.diagnostics import tally_warnings
     from slam.errors import ConfigError
+    from slam.inputs import open_log
     from slam.runner import run_ekf
 
     run_config = build_config(config, sigma_d, sigma_phi, seed)
+    run_config = with_scanner_options(
+        run_config,
+        first_angle=first_angle,
+        step=step,
+        fov=fov,
+        beams=beams,
+        min_range=min_range,
+        max_range=max_range,
+        mount=mount,
+        frame=frame,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        odometry=odometry,
+        base_frame=base_frame,
+    )
     if association is not None:
         if association not in ("nn", "jcbb"):
             raise ConfigError(f"--association must be nn or jcbb, got {association!r}")
@@ -67,10 +112,19 @@ def ekf(
         run_config = replace(run_config, ekf=ekf_cfg)
     check_max_scans(max_scans)
     check_out_dir(out)
-    with tqdm(desc="ekf", unit="scan", disable=quiet, total=max_scans) as bar:
-        summary = run_ekf(
-            log, out, run_config, max_scans=max_scans, progress=bar.update, strict=strict
-        )
+    with tally_warnings() as tally:
+        source = open_log(log, run_config.scanner, max_scans=max_scans)
+        with tqdm(desc="ekf", unit="scan", disable=quiet, total=source.total(max_scans)) as bar:
+            summary = run_ekf(
+                source,
+                out,
+                run_config,
+                max_scans=max_scans,
+                progress=bar.update,
+                tally=tally,
+                strict=strict,
+            )
+    echo_warnings(tally)
     warn_log_anomalies(summary["log"], summary.get("log_anomalies"))
     if not quiet:
         rt = summary.get("runtime_s", {})

@@ -15,10 +15,10 @@ from slam.io.relations import read_relations
 from slam.io.results import read_results, write_metrics
 from slam.io.tum import read_tum
 
-__all__ = ["evaluate"]
+__all__ = ["evaluate", "relations_path"]
 
 
-def _relations_path(value: str) -> Path:
+def relations_path(value: str) -> Path:
     """A relations file, or a dataset name whose catalogue entry has one."""
     path = Path(value)
     if path.is_file():
@@ -57,6 +57,14 @@ def evaluate(
         float,
         typer.Option("--max-unmatched", help="Fail if more than this fraction is unmatched."),
     ] = 0.02,
+    partial: Annotated[
+        bool | None,
+        typer.Option(
+            "--partial/--complete",
+            help="Score only the relations inside the run (default: as summary.json says; "
+            "runs with --max-scans are partial).",
+        ),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="Do not print the table.")] = False,
 ) -> None:
     """Evaluate DIR/trajectory.tum; print a table and write DIR/metrics.json."""
@@ -66,7 +74,7 @@ def evaluate(
     sources: dict[str, str] = {"trajectory": str(results_dir / "trajectory.tum")}
     rel = None
     if relations is not None:
-        rel_path = _relations_path(relations)
+        rel_path = relations_path(relations)
         rel = read_relations(rel_path)
         sources["relations_file"] = str(rel_path)
     gt = None
@@ -81,6 +89,7 @@ def evaluate(
         tolerance_s=tolerance,
         max_unmatched_fraction=max_unmatched,
         sources=sources,
+        partial=partial,
     )
     path = write_metrics(results_dir, report.to_dict())  # whole or not at all
     if not quiet:

@@ -37,11 +37,28 @@ from slam.cli.common import (
     out_path,
     warn_log_anomalies,
 )
+from slam.cli.scanner_opts import (
+    BaseFrameOpt,
+    BeamsOpt,
+    FirstAngleOpt,
+    FovOpt,
+    FrameOpt,
+    MaxRangeOpt,
+    MinRangeOpt,
+    MountOpt,
+    OdometryOpt,
+    OdomTopicOpt,
+    ScanTopicOpt,
+    StepOpt,
+    echo_warnings,
+    with_scanner_options,
+)
+from slam.config import RunConfig
 from slam.errors import InputError
 from slam.extraction import extract_lines_of_scans
+from slam.inputs import LogInput
 from slam.io.atomic import check_output_file, staged_files, staged_into
-from slam.io.carmen import CarmenStats, iter_scans
-from slam.io.catalog import resolve_log
+from slam.io.carmen import CarmenStats
 from slam.types import Scan
 
 __all__ = ["config_path_for", "extract", "scan_record"]
@@ -78,7 +95,10 @@ def _batches(scans: Iterator[Scan], size: int) -> Iterator[list[Scan]]:
 @app.command("extract")
 def extract(
     log: Annotated[
-        str, typer.Argument(help="CARMEN log file, or a dataset name (intel, aces, fr079).")
+        str,
+        typer.Argument(
+            help="CARMEN log, ROS 1 .bag, ROS 2 bag folder, or a dataset name (intel, aces, fr079)."
+        ),
     ],
     out: Annotated[
         Path,
@@ -106,6 +126,18 @@ def extract(
     seed: SeedOpt = None,
     quiet: QuietOpt = False,
     strict: StrictOpt = False,
+    first_angle: FirstAngleOpt = None,
+    step: StepOpt = None,
+    fov: FovOpt = None,
+    beams: BeamsOpt = None,
+    min_range: MinRangeOpt = None,
+    max_range: MaxRangeOpt = None,
+    mount: MountOpt = None,
+    frame: FrameOpt = None,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+    odometry: OdometryOpt = None,
+    base_frame: BaseFrameOpt = None,
 ) -> None:
     """Fit lines to every scan of LOG (Pfister et al. 2003, Secs. II-IV) and write FILE.jsonl.
 
@@ -113,28 +145,67 @@ def extract(
     into place when every scan is done: a failed or interrupted run leaves earlier files as
     they were.
     """
+    from slam.diagnostics import tally_warnings
+    from slam.inputs import open_log
+
     config = build_config(config_file, sigma_d, sigma_phi, seed)
+    config = with_scanner_options(
+        config,
+        first_angle=first_angle,
+        step=step,
+        fov=fov,
+        beams=beams,
+        min_range=min_range,
+        max_range=max_range,
+        mount=mount,
+        frame=frame,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        odometry=odometry,
+        base_frame=base_frame,
+    )
     if grouping is not None:
         config = replace(config, linefit=replace(config.linefit, grouping=grouping))
     check_output_file(out)
-    resolved = resolve_log(log)
-    total = resolved.manifest.scans if resolved.manifest is not None else None
-    if limit is not None:
-        total = min(total, limit) if total is not None else limit
+    with tally_warnings() as tally:
+        source = open_log(log, config.scanner, max_scans=limit)
+        n_scans, n_lines, stats = _extract(
+            source, out, config, plot, plot_every, limit, quiet, strict
+        )
+    echo_warnings(tally)
+    warn_log_anomalies(source.log, stats.anomalies.to_dict())
+    if not quiet:
+        per_scan = n_lines / max(n_scans, 1)
+        typer.echo(
+            f"{n_scans} scans, {n_lines} lines ({per_scan:.2f} per scan) -> {out}; "
+            f"configuration: {config_path_for(out)}"
+        )
+
+
+def _extract(
+    source: LogInput,
+    out: Path,
+    config: RunConfig,
+    plot: Path | None,
+    plot_every: int,
+    limit: int | None,
+    quiet: bool,
+    strict: bool,
+) -> tuple[int, int, CarmenStats]:
+    """Write ``out`` and its configuration (and figures under ``plot``); return the counts."""
+    total = source.total(limit)
     every = plot_every if plot_every > 0 else max(1, (total or 1200) // 12)
-    stats = CarmenStats(path=str(resolved.log))
+    stats = CarmenStats(path=str(source.log))
 
     from tqdm import tqdm
 
     n_scans = n_lines = 0
     with (
-        staged_files([out, config_path_for(out)], inputs=[resolved.log]) as (lines_tmp, cfg_tmp),
-        staged_into(plot, inputs=[resolved.log]) if plot is not None else nullcontext() as figs,
+        staged_files([out, config_path_for(out)], inputs=[source.log]) as (lines_tmp, cfg_tmp),
+        staged_into(plot, inputs=[source.log]) if plot is not None else nullcontext() as figs,
     ):
         config.to_toml(cfg_tmp)
-        scans: Iterator[Scan] = iter_scans(resolved.log, stats=stats, strict=strict)
-        if limit is not None:
-            scans = islice(scans, limit)
+        scans: Iterator[Scan] = source.scans(limit, need_odometry=False, stats=stats, strict=strict)
         with (
             lines_tmp.open("w", encoding="utf-8") as handle,
             tqdm(total=total, unit="scan", desc="extract", disable=quiet) as bar,
@@ -154,17 +225,11 @@ def extract(
                             lines,
                             config.linefit,
                             max_range_m=scan.max_range_m,
-                            title=f"{resolved.name} scan {scan.index}: {len(lines)} lines",
+                            title=f"{source.name} scan {scan.index}: {len(lines)} lines",
                         )
                 n_scans += len(chunk)
                 bar.update(len(chunk))
         if n_scans == 0:
             odometry = f" ({stats.odometry} ODOM messages)" if stats.odometry else ""
-            raise InputError(f"the log contains no laser scans{odometry}", str(resolved.log))
-    warn_log_anomalies(resolved.log, stats.anomalies.to_dict())
-    if not quiet:
-        per_scan = n_lines / max(n_scans, 1)
-        typer.echo(
-            f"{n_scans} scans, {n_lines} lines ({per_scan:.2f} per scan) -> {out}; "
-            f"configuration: {config_path_for(out)}"
-        )
+            raise InputError(f"the log contains no laser scans{odometry}", str(source.log))
+    return n_scans, n_lines, stats

@@ -23,6 +23,22 @@ from slam.cli.common import (
     check_out_dir,
     warn_log_anomalies,
 )
+from slam.cli.scanner_opts import (
+    BaseFrameOpt,
+    BeamsOpt,
+    FirstAngleOpt,
+    FovOpt,
+    FrameOpt,
+    MaxRangeOpt,
+    MinRangeOpt,
+    MountOpt,
+    OdometryOpt,
+    OdomTopicOpt,
+    ScanTopicOpt,
+    StepOpt,
+    echo_warnings,
+    with_scanner_options,
+)
 
 __all__ = ["map_command"]
 
@@ -55,6 +71,18 @@ def map_command(
     ] = None,
     max_scans: MaxScansOpt = None,
     plot: Annotated[bool, typer.Option("--plot/--no-plot", help="Draw the figures.")] = True,
+    first_angle: FirstAngleOpt = None,
+    step: StepOpt = None,
+    fov: FovOpt = None,
+    beams: BeamsOpt = None,
+    min_range: MinRangeOpt = None,
+    max_range: MaxRangeOpt = None,
+    mount: MountOpt = None,
+    frame: FrameOpt = None,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+    odometry: OdometryOpt = None,
+    base_frame: BaseFrameOpt = None,
 ) -> None:
     """Fit lines to every scan and merge them across poses (paper Sec. V).
 
@@ -62,9 +90,26 @@ def map_command(
     """
     from tqdm import tqdm
 
+    from slam.diagnostics import tally_warnings
+    from slam.inputs import open_log
     from slam.mapping import run_map
 
     config = build_config(config_path, sigma_d, sigma_phi, seed)
+    config = with_scanner_options(
+        config,
+        first_angle=first_angle,
+        step=step,
+        fov=fov,
+        beams=beams,
+        min_range=min_range,
+        max_range=max_range,
+        mount=mount,
+        frame=frame,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        odometry=odometry,
+        base_frame=base_frame,
+    )
     overrides: dict[str, Any] = {
         "pose_sigma_xy_m": pose_sigma_xy,
         "pose_sigma_theta_rad": pose_sigma_theta,
@@ -76,16 +121,20 @@ def map_command(
         config = replace(config, map=replace(config.map, **overrides))
     check_max_scans(max_scans)
     check_out_dir(out)
-    with tqdm(desc="map", unit="scan", disable=quiet, total=max_scans) as bar:
-        summary = run_map(
-            log,
-            out,
-            config,
-            plot=plot,
-            max_scans=max_scans,
-            progress=bar.update,
-            strict=strict,
-        )
+    with tally_warnings() as tally:
+        source = open_log(log, config.scanner, max_scans=max_scans)
+        with tqdm(desc="map", unit="scan", disable=quiet, total=source.total(max_scans)) as bar:
+            summary = run_map(
+                source,
+                out,
+                config,
+                plot=plot,
+                max_scans=max_scans,
+                progress=bar.update,
+                tally=tally,
+                strict=strict,
+            )
+    echo_warnings(tally)
     warn_log_anomalies(summary["log"], summary.get("log_anomalies"))
     if not quiet:
         typer.echo(

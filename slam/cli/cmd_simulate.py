@@ -88,8 +88,8 @@ def simulate_command(
     world: Annotated[
         str | None,
         typer.Argument(
-            help=f"A named world ({', '.join(WORLD_NAMES)}) or a world.json; default: the "
-            "config's world.",
+            help=f"A named world (corridor_loop, gridNxM, {', '.join(WORLD_NAMES)}) or a "
+            "world.json; default: the config's world.",
             show_default=False,
         ),
     ] = None,
@@ -163,7 +163,9 @@ def simulate_command(
         scale_bias,
     )
     check_output_dir(out)
-    the_world = load_world(config.world)
+    from slam.experiments.linesim import ray_world
+
+    the_world = ray_world(config.world) or load_world(config.world)
     bar = None
     if not quiet:
         from tqdm import tqdm

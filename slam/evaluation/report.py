@@ -16,7 +16,7 @@ from typing import Any
 from slam.errors import EvaluationError
 from slam.evaluation.ate import AteResult, ate
 from slam.evaluation.nees import NeesResult, pose_nees
-from slam.evaluation.relations_metric import RelationsMetric, relations_metric
+from slam.evaluation.relations_metric import RelationsMetric, relations_metric, relations_within
 from slam.evaluation.rpe import RpeResult, rpe
 from slam.io.relations import Relations
 from slam.io.results import Results
@@ -36,12 +36,16 @@ class EvaluationReport:
     rpe: tuple[RpeResult, ...] = ()
     nees: NeesResult | None = None
     sources: dict[str, str] = field(default_factory=dict)
+    relations_inside_run: tuple[int, int] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The content of ``metrics.json``."""
         out: dict[str, Any] = {"n_poses": self.n_poses, "frame": self.frame, **self.sources}
         if self.relations is not None:
             out["relations"] = self.relations.to_dict()
+        if self.relations_inside_run is not None:
+            inside, total = self.relations_inside_run
+            out["partial_run"] = {"relations_inside_run": inside, "relations_in_file": total}
         if self.ate is not None:
             out["ate"] = self.ate.to_dict()
         if self.rpe:
@@ -55,6 +59,11 @@ class EvaluationReport:
         rows: list[tuple[str, str]] = [("poses", f"{self.n_poses} ({self.frame} frame)")]
         if self.relations is not None:
             m = self.relations
+            if self.relations_inside_run is not None:
+                inside, total = self.relations_inside_run
+                rows.append(
+                    ("partial run", f"{inside} of the file's {total} relations lie inside it")
+                )
             rows += [
                 ("relations used", f"{m.n_used}/{m.n_relations} (unmatched {m.n_unmatched})"),
                 ("abs trans (m)", str(m.abs_trans_m)),
@@ -96,10 +105,17 @@ def evaluate_results(
     tolerance_s: float = 1e-5,
     max_unmatched_fraction: float = 0.02,
     sources: dict[str, str] | None = None,
+    partial: bool | None = None,
 ) -> EvaluationReport:
     """Relations metric (with ``relations``), ATE, RPE and NEES (with ``ground_truth``).
 
     NEES is computed when ``results`` carries pose covariances and ground truth is given.
+
+    A run over part of a log (``partial``; default: what the results' ``summary.json`` says,
+    ``"partial": true`` for ``--max-scans`` runs) is scored on the relations whose two time
+    stamps both lie inside it (:func:`slam.evaluation.relations_metric.relations_within`);
+    the report says how many of the file's that is.  A complete run keeps the strict check
+    (unmatched relations mean a time stamp mistake).
     """
     if relations is None and ground_truth is None:
         raise EvaluationError("nothing to evaluate against: give relations and/or ground truth")
@@ -108,7 +124,19 @@ def evaluate_results(
     else:
         trajectory, frame, cov = results, "laser", None
     tol, frac = tolerance_s, max_unmatched_fraction
+    if partial is None:
+        partial = isinstance(results, Results) and bool(results.summary.get("partial", False))
     rel = None
+    inside_run: tuple[int, int] | None = None
+    if relations is not None and partial:
+        total = len(relations)
+        relations = relations_within(relations, trajectory.timestamps, tolerance_s=tol)
+        inside_run = (len(relations), total)
+        if len(relations) == 0:
+            raise EvaluationError(
+                f"none of the {total} relations has both time stamps inside the partial run "
+                f"({len(trajectory)} poses): run over more of the log"
+            )
     if relations is not None:
         rel = relations_metric(trajectory, relations, tolerance_s=tol, max_unmatched_fraction=frac)
     ate_result = nees_result = None
@@ -131,4 +159,5 @@ def evaluate_results(
         rpe=rpe_results,
         nees=nees_result,
         sources=dict(sources or {}),
+        relations_inside_run=inside_run,
     )

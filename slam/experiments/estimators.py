@@ -194,7 +194,8 @@ def run_estimator(
     """Run the estimator ``name`` on scans (with their lines, or None to extract them).
 
     ``policy`` reads the scans' laser odometry and chooses the reported frame (default:
-    ``InputPolicy.of(config.slam)``).
+    ``InputPolicy.of(config.scanner)``, the stated settings; :func:`slam.inputs.open_log`
+    resolves them for a log).
 
     With ``time_budget_s`` the estimator stops taking scans once that much time is spent
     (the EKF through ``ekf.max_runtime_s``; the graph optimises what it has); its statistics
@@ -212,7 +213,7 @@ def run_estimator(
             f"unknown estimator {name!r}; known: {', '.join(sorted(ESTIMATORS))}"
         ) from exc
     t0 = time.perf_counter()
-    pol = policy if policy is not None else InputPolicy.of(config.slam)
+    pol = policy if policy is not None else InputPolicy.of(config.scanner)
     out = fn(scans, lines, config, initial_pose_world_laser, pol, time_budget_s=time_budget_s)
     if out.poses_world_laser.shape[0] == 0:
         raise EstimationError(f"estimator {name} produced no poses")

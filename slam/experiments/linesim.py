@@ -404,23 +404,91 @@ def simulate_line_run(
     return LineRun(scans, line_sets, poses_true, world)
 
 
-def world_and_trajectory(name: str, loops: float = 1.0) -> tuple[LineWorld, FloatArray]:
-    """A named simulated world and its trajectory: ``"corridor_loop"`` or ``"grid2x2"``.
+LINE_WORLD_NAMES = ("corridor_loop", "gridNxM")
+"""Worlds built here; the ray-cast simulator's (:data:`slam.sim.worlds.WORLD_NAMES`) work too."""
 
-    ``loops`` repeats the route (corridor loop: around the rectangle; grid: the whole tour).
-    """
+
+def sim_world_names() -> tuple[str, ...]:
+    """Every simulated world name, the same for ``lineslam simulate`` and ``compare sim:``."""
+    from slam.sim.worlds import WORLD_NAMES
+
+    return (*LINE_WORLD_NAMES, *WORLD_NAMES)
+
+
+def _line_world_waypoints(name: str) -> tuple[LineWorld, FloatArray] | None:
+    """The world and route waypoints of a name built here (``None`` if not one)."""
     if name == "corridor_loop":
-        return corridor_loop_world(), loop_trajectory(loops=loops)
+        corners = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 10.0], [0.0, 10.0], [0.0, 0.0]])
+        return corridor_loop_world(), corners
     if name.startswith("grid"):
         try:
             nx, ny = (int(v) for v in name[4:].split("x"))
         except ValueError as exc:
             raise ConfigError(f"world {name!r}: expected 'gridNxM'") from exc
-        route = grid_route(nx, ny)
-        reps = max(round(loops), 1)
-        wp = np.vstack([route] + [route[1:]] * (reps - 1))
-        return grid_world(nx, ny), waypoint_trajectory(wp)
-    raise ConfigError(f"unknown simulated world {name!r} (corridor_loop, gridNxM)")
+        return grid_world(nx, ny), grid_route(nx, ny)
+    return None
+
+
+def world_and_trajectory(name: str, loops: float = 1.0) -> tuple[LineWorld, FloatArray]:
+    """A named simulated world and its trajectory.
+
+    ``"corridor_loop"``, ``"gridNxM"``, or a world of the ray-cast simulator
+    (:data:`slam.sim.worlds.WORLD_NAMES`: ``hallway``, ``lab``, ``loop``), whose walls become
+    the line world and whose waypoints the route.  ``loops`` repeats the route (corridor
+    loop: around the rectangle, in quarter loops; others: the whole route, rounded).
+    """
+    if name == "corridor_loop":
+        return corridor_loop_world(), loop_trajectory(loops=loops)
+    built = _line_world_waypoints(name)
+    if built is not None:
+        world, route = built
+    else:
+        from slam.sim.worlds import WORLD_NAMES, get_world
+
+        if name not in WORLD_NAMES:
+            raise ConfigError(f"unknown simulated world {name!r} ({', '.join(sim_world_names())})")
+        ray_world = get_world(name)
+        if ray_world.waypoints is None:  # pragma: no cover - every named world has a route
+            raise ConfigError(f"world {name!r} has no route")
+        world = LineWorld(np.asarray(ray_world.segments, dtype=float), name)
+        route = np.asarray(ray_world.waypoints, dtype=float)
+    reps = max(round(loops), 1)
+    wp = np.vstack([route] + [route[1:]] * (reps - 1))
+    return world, waypoint_trajectory(wp)
+
+
+def ray_world(name: str) -> Any:
+    """A world built here as a :class:`slam.sim.world.World` for the ray-cast simulator.
+
+    ``None`` for a name that is not built here (the simulator knows those itself).
+    """
+    from slam.sim.world import World
+
+    built = _line_world_waypoints(name)
+    if built is None:
+        return None
+    world, route = built
+    if name.startswith("grid"):
+        # the ray-cast simulator's paths do not turn back on themselves: drive the horizontal
+        # corridors as a snake, then back along the last side and the first corridor
+        nx, ny = (int(v) for v in name[4:].split("x"))
+        sx, sy = 8.0 + 2.0, 4.0 + 2.0
+        nodes: list[tuple[float, float]] = [(0.0, 0.0)]
+        for j in range(ny + 1):
+            ends = [(0.0, j * sy), (nx * sx, j * sy)]
+            nodes += ends if j % 2 == 0 else ends[::-1]
+        last_x = nodes[-1][0]
+        nodes += [(last_x, 0.0), (nx * sx - last_x, 0.0)]
+        route = np.array(nodes[1:], dtype=float)
+    n = world.walls.shape[0]
+    return World(
+        segments=world.walls,
+        ids=np.arange(n),
+        labels=("wall",) * n,
+        name=name,
+        waypoints=route,
+        description=f"{name} (the line simulator's world, slam.experiments.linesim)",
+    )
 
 
 def lineset_to_lines(lines: LineSet, point_spacing_m: float = 0.05) -> list[Line]:

@@ -220,7 +220,9 @@ def prepare_log_cache(tasks: list[CompareTask], cache_dir: str | Path) -> None:
                 _linefit_for(task),
                 Path(cache_dir),
                 task.max_scans,
-                odometry_sign=task.run_config.slam.odometry_sign,
+                scanner=task.run_config.scanner,
+                relations=task.data.relations,
+                ground_truth=task.data.ground_truth,
             )
 
 
@@ -251,7 +253,6 @@ def _run_on_sim(task: CompareTask) -> VariantOutcome:
 
 def _run_on_log(task: CompareTask) -> VariantOutcome:
     from slam.experiments.logdata import cached_log_data
-    from slam.inputs import InputPolicy, policy_for_log
     from slam.io import read_relations, read_tum
 
     cache = Path(task.cache_dir) if task.cache_dir else None
@@ -260,11 +261,12 @@ def _run_on_log(task: CompareTask) -> VariantOutcome:
         _linefit_for(task),
         cache,
         task.max_scans,
-        odometry_sign=task.run_config.slam.odometry_sign,
+        scanner=task.run_config.scanner,
+        relations=task.data.relations,
+        ground_truth=task.data.ground_truth,
     )
-    # the laser mounting of a catalogued log, for every estimator alike
-    slam_cfg = task.run_config.slam
-    pol = policy_for_log(InputPolicy.of(slam_cfg), task.data.name, slam_cfg.mount_source)
+    # the log's input policy (mounting, laser odometry, frame), for every estimator alike
+    pol = data.policy
     rc = replace(task.run_config, linefit=_linefit_for(task))
     t0 = time.perf_counter()
     est = run_estimator(

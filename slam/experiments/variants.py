@@ -10,8 +10,9 @@ A :class:`DataSpec` says where the scans come from (:func:`parse_source`):
 
 * ``sim:WORLD[:LOOPS[:SEED]]`` — the line-level simulator (:mod:`slam.experiments.linesim`),
   with ground truth;
-* a CARMEN log (path or registered dataset name), with the relations and ground truth found
-  next to it.
+* a log (a CARMEN file, a ROS bag or a registered dataset name), with the relations and
+  ground truth given (``--relations``, ``--ground-truth``), else the catalogue's relations or
+  those found next to it.
 
 Both are small picklable values: every comparison task carries them to its worker, which
 loads the data itself (:mod:`slam.experiments.tasks`).
@@ -133,12 +134,17 @@ class DataSpec:
         Route repetitions (sim).
     seed : int
         Simulation seed (sim).
+    relations, ground_truth : str or None
+        Files to evaluate a log against (``--relations``, ``--ground-truth``); default the
+        catalogue's relations, or those beside the log (:class:`slam.experiments.logdata.LogData`).
     """
 
     kind: str
     name: str
     loops: float = 1.0
     seed: int = 0
+    relations: str | None = None
+    ground_truth: str | None = None
 
     @property
     def label(self) -> str:
@@ -151,10 +157,16 @@ class DataSpec:
         return path.parent.name if path.stem == "log" else path.stem
 
 
-def parse_source(source: str, seed: int = 0) -> DataSpec:
+def parse_source(
+    source: str,
+    seed: int = 0,
+    relations: str | Path | None = None,
+    ground_truth: str | Path | None = None,
+) -> DataSpec:
     """``sim:WORLD[:LOOPS[:SEED]]`` or a log path / dataset name.
 
-    ``seed`` is the simulation seed when the source names none.
+    ``seed`` is the simulation seed when the source names none.  ``relations`` and
+    ``ground_truth`` (files) are for logs; a simulated source has its own ground truth.
     """
     if source.startswith("sim:"):
         parts = source.split(":")
@@ -164,5 +176,15 @@ def parse_source(source: str, seed: int = 0) -> DataSpec:
         except ValueError as exc:
             raise ConfigError(f"bad simulated source {source!r}: sim:WORLD[:LOOPS[:SEED]]") from exc
         world_and_trajectory(parts[1], 1.0)  # validates the world name
+        if relations is not None or ground_truth is not None:
+            raise ConfigError("a simulated source has its own ground truth: no --relations")
         return DataSpec("sim", parts[1], loops, run_seed)
-    return DataSpec("log", source)
+    for what, value in (("--relations", relations), ("--ground-truth", ground_truth)):
+        if value is not None and not Path(value).is_file():
+            raise ConfigError(f"{what} {value}: no such file")
+    return DataSpec(
+        "log",
+        source,
+        relations=None if relations is None else str(relations),
+        ground_truth=None if ground_truth is None else str(ground_truth),
+    )

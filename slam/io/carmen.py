@@ -42,8 +42,9 @@ there, the first laser type met); other laser types are counted in
 
 Geometry and range limit
 ------------------------
-``geometry=None`` looks the file name up in the dataset catalogue (``datasets/catalog.toml``:
-``intel.clf``, ``aces.clf``, ``fr079.clf``) and uses its laser facts, else CARMEN's
+``geometry=None`` looks the file up in the dataset catalogue by its content
+(``datasets/catalog.toml``, :func:`slam.io.catalog.manifest_for_path`) and uses its laser
+facts, else CARMEN's
 ``carmen_laser_guess_fov`` rule with a range limit of 80 m (:mod:`slam.io.laser`).  A
 :class:`~slam.io.laser.LaserGeometry` passed in is used for ``FLASER``/``RLASER`` lines; its
 ``n_beams``, when set, must match every line.  ``ROBOTLASER1``/``RAWLASER`` lines always use
@@ -590,7 +591,7 @@ def iter_scans(
         Skip and count malformed lines (in ``stats``) instead of raising.
     geometry
         Beam layout of ``FLASER``/``RLASER`` lines; ``None``: the dataset catalogue's entry for
-        this file name, else CARMEN's ``carmen_laser_guess_fov`` rule.
+        this file's content, else CARMEN's ``carmen_laser_guess_fov`` rule.
     stats
         A :class:`CarmenStats` to fill while iterating (counts of scans, ODOM lines, comments,
         unknown and malformed lines).

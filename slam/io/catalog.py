@@ -9,8 +9,12 @@ Main entry points (stable, used across the project)::
 
 A ``LOG`` argument is either a path to a file, used as it is, or the name of a registered
 dataset (``intel``, ``aces``, ``fr079``) resolved under the data root: ``$LINESLAM_DATA`` if
-set, else ``<repository>/../shared/datasets``.  A path whose file name is that of a catalogue
-entry (``.../intel.clf``) gets that entry's manifest (laser geometry, range limit, relations).
+set, else ``<repository>/../shared/datasets``.  A file is recognised as a catalogued log by its
+**content** (size, then SHA-256; the hash of a file is computed once while it is unchanged),
+never by its name: a renamed copy of ``intel.clf`` is still Intel, and another file named
+``intel.clf`` is not.  A recognised log gets its entry's manifest (laser geometry, range
+limit, mounting) and relations (beside the file under the catalogue's name, else under the
+data root).
 
 The catalogue is ``datasets/catalog.toml`` in the repository (``$LINESLAM_CATALOG`` overrides
 it; an installed wheel carries a copy inside the package).
@@ -213,22 +217,48 @@ def load_catalog(path: str | Path | None = None) -> dict[str, DatasetManifest]:
     return _load_catalog_cached(str(path), mtime)
 
 
+@lru_cache(maxsize=64)
+def _sha256_cached(path: str, size: int, mtime_ns: int) -> str:
+    return sha256_file(path)
+
+
 def manifest_for_path(path: str | Path) -> DatasetManifest | None:
-    """The catalogue entry whose log or relations file has the file name of ``path``, if any."""
-    name = Path(path).name
+    """The catalogue entry whose log or relations file has the content of ``path``, if any.
+
+    Compared by size first and then by SHA-256 (cached per file while its size and
+    modification time stay the same); the file's name plays no part.
+    """
+    p = Path(path)
+    try:
+        stat = p.stat()
+    except OSError:
+        return None
+    if not p.is_file():
+        return None
+    digest: str | None = None
     for manifest in load_catalog().values():
-        if Path(manifest.log).name == name or (
-            manifest.relations and Path(manifest.relations).name == name
+        for size, expected in (
+            (manifest.log_bytes, manifest.log_sha256),
+            (manifest.relations_bytes, manifest.relations_sha256),
         ):
-            return manifest
+            if not expected or (size and size != stat.st_size):
+                continue
+            if digest is None:
+                digest = _sha256_cached(str(p.resolve()), stat.st_size, stat.st_mtime_ns)
+            if digest == expected:
+                return manifest
     return None
 
 
-def _sibling(log: Path, relative: str) -> Path | None:
-    if not relative:
+def _relations_for(log: Path, manifest: DatasetManifest, root: Path | None = None) -> Path | None:
+    """The entry's relations file: beside ``log`` under its catalogue name, else the data root's."""
+    if not manifest.relations:
         return None
-    candidate = log.parent / Path(relative).name
-    return candidate if candidate.is_file() else None
+    candidate = log.parent / Path(manifest.relations).name
+    if candidate.is_file():
+        return candidate
+    under_root = (root if root is not None else data_root()) / manifest.relations
+    return under_root if under_root.is_file() else None
 
 
 def resolve_log(name_or_path: str | Path, *, root: str | Path | None = None) -> ResolvedLog:
@@ -250,7 +280,7 @@ def resolve_log(name_or_path: str | Path, *, root: str | Path | None = None) -> 
     candidate = Path(name_or_path)
     if candidate.is_file():
         manifest = manifest_for_path(candidate)
-        relations = _sibling(candidate, manifest.relations) if manifest is not None else None
+        relations = _relations_for(candidate, manifest) if manifest is not None else None
         name = manifest.name if manifest is not None else candidate.stem
         return ResolvedLog(candidate, relations, manifest, name)
     catalog = load_catalog()

@@ -5,6 +5,8 @@ Main entry points::
     graph = odometry_pose_graph(poses, information)   # consecutive odometry edges
     write_g2o(path, graph, fix_first=True)            # readable by g2o and gtsam.readG2o
     read_g2o(path) -> PoseGraph2D
+    write_line_graph_g2o(path, line_graph, result)    # lineslam's whole factor graph
+    read_line_graph_g2o(path) -> LineGraphFile        # poses, odometry, lines and line factors
 
 Format (g2o's ``types_slam2d``)::
 
@@ -15,12 +17,37 @@ Format (g2o's ``types_slam2d``)::
 An edge measures ``pose_i⁻¹ · pose_j`` (pose ``j`` in the frame of pose ``i``); its information
 matrix (upper triangle, row by row) is in the tangent space ``(x, y, θ)`` of the measurement,
 which is also GTSAM's ``Pose2`` tangent order.
+
+The whole line-SLAM graph (``graph.g2o`` of ``lineslam slam``)
+----------------------------------------------------------------
+:func:`write_line_graph_g2o` writes the final factor graph of :class:`slam.line_slam.LineSlam`:
+
+* ``VERTEX_SE2 i x y θ`` — keyframe ``i`` (0-based, in keyframe order), the **laser** pose in
+  the world frame as optimised;
+* ``EDGE_SE2 i j dx dy dθ I…`` — every odometry factor (``x_i⁻¹ x_j``), information = the
+  inverse of the motion model's covariance;
+* ``FIX 0`` — the first pose (the prior that fixes the world frame);
+
+all of which ``gtsam.readG2o`` and g2o read as a pose graph, and the extension (lines that
+g2o and GTSAM skip as unknown tags)::
+
+    LINESLAM_SCAN i timestamp                   keyframe i is the scan of this log time stamp
+    LINESLAM_VERTEX_LINE2D k r alpha            landmark k (ids after the poses), world line
+    LINESLAM_EDGE_SE2_LINE2D i k r alpha I_rr I_ralpha I_alphaalpha
+
+A ``LINESLAM_EDGE_SE2_LINE2D`` is a line measurement: the line ``(r, α)`` measured in the
+laser frame of pose ``i`` (``{p : p·(cos α, sin α) = r}``), predicted from landmark ``k`` by
+:func:`slam.geometry` Eq. 30 (:mod:`slam.graph.factors`), with the inverse of its 2×2
+covariance (upper triangle).  Only landmarks still in the graph (not fused into another) and
+their factors are written; a landmark's id is ``n_poses +`` its index among them.  The file
+has no ``#`` comment lines: ``gtsam.readG2o`` (4.2/4.3) stops reading edges at one.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,7 +56,15 @@ from slam.errors import InputError, LogFormatError
 from slam.geometry import pose_between
 from slam.io._text import iter_text_lines
 
-__all__ = ["PoseGraph2D", "odometry_pose_graph", "read_g2o", "write_g2o"]
+__all__ = [
+    "LineGraphFile",
+    "PoseGraph2D",
+    "odometry_pose_graph",
+    "read_g2o",
+    "read_line_graph_g2o",
+    "write_g2o",
+    "write_line_graph_g2o",
+]
 
 FloatArray = NDArray[np.float64]
 _UPPER = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
@@ -177,3 +212,150 @@ def read_g2o(path: str | Path) -> PoseGraph2D:
         )
     except InputError as exc:
         raise LogFormatError(exc.reason, where) from None
+
+
+_LINE_VERTEX = "LINESLAM_VERTEX_LINE2D"
+_LINE_EDGE = "LINESLAM_EDGE_SE2_LINE2D"
+_SCAN = "LINESLAM_SCAN"
+
+
+def write_line_graph_g2o(path: str | Path, graph: Any, result: Any = None) -> Path:
+    """Write a :class:`slam.graph.problem.LineGraph` as g2o with the line extension (module doc).
+
+    Parameters
+    ----------
+    path
+        The ``.g2o`` file.
+    graph
+        The estimator's graph (``LineSlam.graph``): poses, odometry and line factors.
+    result
+        The run's :class:`slam.result.SlamResult`, for the keyframes' time stamps
+        (``LINESLAM_SCAN`` comments); optional.
+    """
+    poses = np.asarray(graph.poses, dtype=float)
+    n = poses.shape[0]
+    stamps: FloatArray | None = None
+    if result is not None:
+        kf = np.asarray(result.is_keyframe, dtype=bool)
+        if int(kf.sum()) == n:
+            stamps = np.asarray(result.timestamps, dtype=float)[kf]
+    alive = np.flatnonzero(np.asarray(graph.landmark_alive, dtype=bool))
+    line_id = np.full(np.asarray(graph.landmark_alive).shape[0], -1, dtype=np.int64)
+    line_id[alive] = n + np.arange(alive.shape[0])
+    r_alpha = np.asarray(graph.landmarks_r_alpha, dtype=float)[alive]
+    first = np.asarray(graph.odometry_first, dtype=np.int64)
+    second = np.asarray(graph.odometry_second, dtype=np.int64)
+    info = np.linalg.inv(np.asarray(graph.odometry_cov, dtype=float)).reshape(-1, 3, 3)
+    info = 0.5 * (info + np.swapaxes(info, 1, 2))
+    f_lm = np.asarray(graph.factor_landmark, dtype=np.int64)
+    keep = line_id[f_lm] >= 0 if f_lm.size else np.zeros(0, bool)
+    f_pose = np.asarray(graph.factor_pose, dtype=np.int64)[keep]
+    f_id = line_id[f_lm[keep]]
+    z = np.asarray(graph.factor_z, dtype=float)[keep]
+    f_info = np.linalg.inv(np.asarray(graph.factor_cov, dtype=float)[keep]).reshape(-1, 2, 2)
+    path = Path(path)
+    with path.open("w", encoding="utf-8") as handle:
+        if stamps is not None:
+            for i, t in enumerate(stamps):
+                handle.write(f"{_SCAN} {i} {t:.6f}\n")
+        np.savetxt(
+            handle,
+            np.column_stack([np.arange(n), poses]),
+            fmt=["VERTEX_SE2 %d", "%.9f", "%.9f", "%.9f"],
+        )
+        if r_alpha.shape[0]:
+            np.savetxt(
+                handle,
+                np.column_stack([line_id[alive], r_alpha]),
+                fmt=[f"{_LINE_VERTEX} %d", "%.9f", "%.9f"],
+            )
+        if first.shape[0]:
+            measured = np.asarray(graph.odometry_measured, dtype=float)
+            table = np.column_stack([first, second, measured, info[:, _UPPER[0], _UPPER[1]]])
+            np.savetxt(handle, table, fmt=["EDGE_SE2 %d", "%d"] + ["%.9f"] * 3 + ["%.9g"] * 6)
+        if f_pose.shape[0]:
+            upper = np.column_stack([f_info[:, 0, 0], f_info[:, 0, 1], f_info[:, 1, 1]])
+            table = np.column_stack([f_pose, f_id, z, upper])
+            np.savetxt(handle, table, fmt=[f"{_LINE_EDGE} %d", "%d"] + ["%.9f"] * 2 + ["%.9g"] * 3)
+        if n:
+            handle.write("FIX 0\n")
+    return path
+
+
+@dataclass(frozen=True, eq=False)
+class LineGraphFile:
+    """A ``graph.g2o`` read back (:func:`read_line_graph_g2o`).
+
+    Attributes
+    ----------
+    pose_graph : PoseGraph2D
+        Poses and odometry edges.
+    line_ids : ndarray of int, shape (M,)
+    lines_r_alpha : ndarray, shape (M, 2)
+        World lines.
+    factor_pose, factor_line : ndarray of int, shape (F,)
+    factor_z : ndarray, shape (F, 2)
+        Measured ``(r, α)`` in the laser frame of the pose.
+    factor_information : ndarray, shape (F, 2, 2)
+    timestamps : ndarray, shape (N,) or None
+        The keyframes' scan time stamps, if written.
+    """
+
+    pose_graph: PoseGraph2D
+    line_ids: NDArray[np.int64]
+    lines_r_alpha: FloatArray
+    factor_pose: NDArray[np.int64]
+    factor_line: NDArray[np.int64]
+    factor_z: FloatArray
+    factor_information: FloatArray
+    timestamps: FloatArray | None
+
+
+def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
+    """Read a file of :func:`write_line_graph_g2o` (the pose graph and the line extension)."""
+    where = str(path)
+    plain: list[str] = []
+    lines_v: list[list[float]] = []
+    lines_e: list[list[float]] = []
+    stamps: dict[int, float] = {}
+    for line_number, line in iter_text_lines(path):
+        tokens = line.split()
+        if not tokens:
+            continue
+        try:
+            if tokens[0] == _LINE_VERTEX and len(tokens) == 4:
+                lines_v.append([float(t) for t in tokens[1:]])
+            elif tokens[0] == _LINE_EDGE and len(tokens) == 8:
+                lines_e.append([float(t) for t in tokens[1:]])
+            elif tokens[0] == _SCAN and len(tokens) == 3:
+                stamps[int(tokens[1])] = float(tokens[2])
+            elif tokens[0] in (_LINE_VERTEX, _LINE_EDGE, _SCAN):
+                raise ValueError
+            else:
+                plain.append(line)
+        except ValueError:
+            raise LogFormatError(f"{tokens[0]}: wrong fields", where, line_number) from None
+    import tempfile
+
+    with tempfile.NamedTemporaryFile("w", suffix=".g2o", delete=False) as tmp:
+        tmp.writelines(plain)
+    try:
+        pose_graph = read_g2o(tmp.name)
+    finally:
+        Path(tmp.name).unlink()
+    v = np.asarray(lines_v, dtype=float).reshape(-1, 3)
+    e = np.asarray(lines_e, dtype=float).reshape(-1, 7)
+    info = np.zeros((e.shape[0], 2, 2))
+    info[:, 0, 0], info[:, 0, 1], info[:, 1, 0], info[:, 1, 1] = e[:, 4], e[:, 5], e[:, 5], e[:, 6]
+    n = pose_graph.vertex_ids.shape[0]
+    timestamps = np.array([stamps[i] for i in range(n)]) if stamps and len(stamps) == n else None
+    return LineGraphFile(
+        pose_graph=pose_graph,
+        line_ids=v[:, 0].astype(np.int64),
+        lines_r_alpha=v[:, 1:],
+        factor_pose=e[:, 0].astype(np.int64),
+        factor_line=e[:, 1].astype(np.int64),
+        factor_z=e[:, 2:4],
+        factor_information=info,
+        timestamps=timestamps,
+    )

@@ -7,7 +7,6 @@ defined beside their code (:mod:`slam.frontend.config`, :mod:`slam.graph.config`
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import ClassVar, Literal
 
@@ -123,6 +122,10 @@ class FusionConfig:
 class SlamConfig:
     """Everything :class:`slam.line_slam.LineSlam` needs.
 
+    The log's scanner, laser mounting, odometry and output frame are the ``[scanner]`` table
+    (:class:`slam.inputs.ScannerConfig`); an older ``config.toml`` with those keys in
+    ``[slam]`` is migrated on loading (:func:`slam.inputs.migrate_slam_keys`).
+
     Attributes
     ----------
     backend : {"batch", "isam2"}
@@ -134,28 +137,6 @@ class SlamConfig:
         frame: the first laser pose).
     frontend, tentative, loop_closure
         Registration front end, tentative landmarks, loop closing.
-    pose_base_laser : tuple of 3 floats
-        Laser pose on the robot base, ``(x m, y m, θ rad)`` (the mounting): used with the base
-        odometry (``laser_odometry = "base"``, or when a scan has no logged laser pose) and to
-        report base poses (``output_frame = "base"``).
-    mount_source : {"catalog", "config"}
-        ``"catalog"``: for a catalogued log whose laser poses lack the recorded mounting, the
-        runner (:func:`slam.inputs.policy_for_log`) sets ``pose_base_laser`` from the
-        catalogue, ``laser_odometry = "base"`` and ``output_frame = "base"``; ``"config"``:
-        these three are taken as configured.
-    laser_odometry : {"logged", "base"}
-        ``"logged"``: the laser's odometry is ``Scan.pose_odom_laser`` as logged (else the base
-        odometry composed with the mounting); ``"base"``: always
-        ``Scan.pose_odom_base ∘ pose_base_laser`` (logs whose laser pose lacks the mounting).
-    output_frame : {"laser", "base"}
-        Frame of the trajectory in the result (``summary.json`` says which).
-    odometry_sign : {"velocity", "logged"}
-        ``"velocity"``: when a CARMEN log is read for an estimator (the graph, and the EKF
-        and the comparisons, which read this setting too), pose increments that moved forwards
-        while the ``ODOM`` speed ``tv`` was negative are negated
-        (:func:`slam.io.carmen.velocity_signed_scans`; fr079 logs reversing as forward
-        motion); logs whose ``tv`` is never negative are unchanged.  ``"logged"``: the
-        odometry poses as logged.
     line_model_sigma_r_m, line_model_sigma_alpha_rad : float
         Model error (m, rad) added to every measured line's covariance, at the segment's
         mid-point (:func:`slam.models.anchored.model_error_covariance`): real walls are not
@@ -187,11 +168,6 @@ class SlamConfig:
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     prior_sigma_xy_m: float = 1e-4
     prior_sigma_theta_rad: float = 1e-5
-    pose_base_laser: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    mount_source: Literal["catalog", "config"] = "catalog"
-    laser_odometry: Literal["logged", "base"] = "logged"
-    output_frame: Literal["laser", "base"] = "laser"
-    odometry_sign: Literal["velocity", "logged"] = "velocity"
     line_model_sigma_r_m: float = 0.02
     line_model_sigma_alpha_rad: float = 0.01
     min_line_points: int = 5
@@ -206,19 +182,6 @@ class SlamConfig:
         )
         positive("prior_sigma_xy_m", self.prior_sigma_xy_m)
         positive("prior_sigma_theta_rad", self.prior_sigma_theta_rad)
-        require(
-            len(self.pose_base_laser) == 3 and all(math.isfinite(v) for v in self.pose_base_laser),
-            "pose_base_laser must be three finite numbers (x, y, theta)",
-        )
-        require(self.laser_odometry in ("logged", "base"), "laser_odometry must be logged or base")
-        require(
-            self.mount_source in ("catalog", "config"), "mount_source must be catalog or config"
-        )
-        require(self.output_frame in ("laser", "base"), "output_frame must be laser or base")
-        require(
-            self.odometry_sign in ("velocity", "logged"),
-            "odometry_sign must be velocity or logged",
-        )
         nonneg("line_model_sigma_r_m", self.line_model_sigma_r_m)
         nonneg("line_model_sigma_alpha_rad", self.line_model_sigma_alpha_rad)
         require(self.min_line_points >= 2, "min_line_points must be >= 2")
