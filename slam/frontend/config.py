@@ -88,6 +88,7 @@ class RelocalisationConfig:
             positive(name, getattr(self, name))
         nonneg("overlap_margin_m", self.overlap_margin_m)
         nonneg("min_matched_length_m", self.min_matched_length_m)
+        nonneg("min_cross_length_m", self.min_cross_length_m)
         require(self.min_matches >= 2, "min_matches must be >= 2")
         require(0.0 < self.max_ambiguity <= 1.0, "max_ambiguity must be in (0, 1]")
 
@@ -353,16 +354,17 @@ class LoopClosureConfig:
         require(self.max_updates >= 1, "max_updates must be >= 1")
         require(self.min_matches >= 2, "min_matches must be >= 2")
         for name in (
-            "window_sigmas",
             "min_window_xy_m",
             "min_window_theta_rad",
             "overlap_margin_m",
             "min_matched_length_m",
+            "min_cross_length_m",
             "large_correction_m",
             "large_correction_rad",
         ):
             nonneg(name, getattr(self, name))
         for name in (
+            "window_sigmas",
             "cell_m",
             "angle_tolerance_rad",
             "offset_tolerance_m",
