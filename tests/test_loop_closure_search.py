@@ -168,9 +168,12 @@ def test_top_cells_are_the_largest_in_order_with_ties_by_index():
         {"local_keyframes": 0},
         {"judge_max_pair_chi2": 0.0},
         {"judge_max_pair_chi2": float("nan")},
-        {"max_correction_chi2": 0.0},
-        {"max_correction_chi2": float("nan")},
-        {"gate_override_after": -1},
+        {"consistency_probability": 1.0},
+        {"consistency_probability": float("nan")},
+        {"confirmations": -1},
+        {"judge_max_f": 0.0},
+        {"window_sigmas": -1.0},
+        {"min_cross_length_m": -0.5},
     ],
 )
 def test_invalid_loop_closure_settings_are_rejected(kwargs):
@@ -226,3 +229,33 @@ def test_correction_chi2_known_answers():
     # a singular covariance: no correction is possible, none needed is
     assert correction_chi2(np.zeros(3), x_now, np.zeros((6, 6)), np.array([0.1, 0, 0])) == np.inf
     assert correction_chi2(np.zeros(3), x_now, np.zeros((6, 6)), np.zeros(3)) == 0.0
+
+
+@pytest.mark.parametrize(("cross_m", "verified"), [(0.3, False), (2.0, True)])
+def test_two_direction_closure_needs_metres_of_wall_across_the_corridor(cross_m, verified):
+    """A corridor's two long walls and one short cross wall: the position along the corridor
+    rests on the cross wall alone, so a hypothesis counts in two directions only if that wall
+    matches at least ``min_cross_length_m`` (metres of wall, not a number of lines)."""
+    walls = [
+        ((0.0, 0.0), (3.0, 0.0)),
+        ((0.0, 2.0), (3.0, 2.0)),
+        ((3.0, 1.0 - cross_m / 2), (3.0, 1.0 + cross_m / 2)),
+    ]
+    ends = np.array(walls)
+    inside = np.array([1.5, 1.0])
+    d = ends[:, 1] - ends[:, 0]
+    n = np.stack([d[:, 1], -d[:, 0]], -1) / np.linalg.norm(d, axis=1)[:, None]
+    r = np.einsum("kd,kd->k", n, ends[:, 0])
+    flip = (n @ inside) > r
+    n[flip] *= -1.0
+    r[flip] *= -1.0
+    old = LoopLines(np.arctan2(n[:, 1], n[:, 0]), r, ends)
+    local = old.transformed(np.array([0.3, 0.0, 0.0]), inside)
+    config = LoopClosureConfig(
+        corridor_closures=False, min_cross_length_m=1.0, min_matched_length_m=4.0
+    )
+    found = search_loop_closure(local, old, inside, 1.0, 0.1, config).closure
+    assert (found is not None) == verified
+    if verified:
+        assert found is not None and len(found.pairs) == 3
+        np.testing.assert_allclose(found.correction, [-0.3, 0.0, 0.0], atol=0.02)

@@ -19,10 +19,11 @@ __all__ = ["FrontendConfig", "LoopClosureConfig", "RelocalisationConfig", "Tenta
 class RelocalisationConfig:
     """Relocalisation: the front end's fallback when the registration pairs too few lines.
 
-    After wheel slip or a fast turn the odometry prediction is too far off for the χ² gates:
-    the scan's lines are then searched for in the local map over a window with
-    :func:`slam.frontend.loop_closure.search_loop_closure` (same meaning of the fields as in
-    :class:`LoopClosureConfig`), and the registration is run again from the correction found.
+    When the registration pairs too few lines, or its correction is not consistent with the
+    odometry, the scan's lines are searched for in the local map over a window around the
+    prediction with :func:`slam.frontend.loop_closure.search_loop_closure` (same meaning of the
+    fields as in :class:`LoopClosureConfig`), and the registration is run again from the
+    correction found, with the same prior (so the same consistency test applies).
 
     Attributes
     ----------
@@ -31,26 +32,37 @@ class RelocalisationConfig:
     min_matched_fraction : float
         Relocalise when the registration paired fewer than this fraction of the lines (and
         fewer than all of them).
-    window_xy_m, window_theta_rad : float
-        Half-widths of the search window around the odometry prediction (m, rad).  The
-        refinement of a hypothesis also takes them as the σ of a weak zero-mean prior on the
-        correction, so that a scan pairing only parallel lines cannot slide it along them.
+    window_sigmas : float
+        Half-widths of the search window around the odometry prediction, in standard
+        deviations of the prediction's covariance (translation: its larger eigenvalue).  The
+        refinement of a hypothesis also takes the window as the σ of a weak zero-mean prior on
+        the correction, so that a scan pairing only parallel lines cannot slide it along them.
+    min_window_xy_m, min_window_theta_rad : float
+        Least half-widths (m, rad): the search's own resolution.
     cell_m, angle_tolerance_rad, offset_tolerance_m, overlap_margin_m : float
         The search's vote grid (m), match tolerances (rad, m) and largest gap between matched
         segments (m); the same meaning as in :class:`LoopClosureConfig`.
-    min_matched_length_m, min_matches, min_direction_angle_rad, max_ambiguity : float
+    min_matched_length_m, min_matches, min_direction_angle_rad, min_cross_length_m, max_ambiguity
         Least matched length (m), least number of pairs, least angle between two matched
-        directions (rad), largest runner-up score as a fraction of the winner's; as in
-        :class:`LoopClosureConfig`, with looser defaults for the short, local search.
+        directions (rad), least matched length across the dominant direction (m), largest
+        runner-up score as a fraction of the winner's; as in :class:`LoopClosureConfig`, with
+        looser defaults for the short, local search.
     corridor_closures : bool
         Accept a correction whose paired lines are all parallel (as in
         :class:`LoopClosureConfig`).
     """
 
+    RENAMED_KEYS: ClassVar[dict[str, str]] = {
+        "window_xy_m": "replaced by window_sigmas (and min_window_xy_m): the window follows "
+        "the prediction's covariance",
+        "window_theta_rad": "replaced by window_sigmas (and min_window_theta_rad)",
+    }
+
     enabled: bool = True
     min_matched_fraction: float = 0.5
-    window_xy_m: float = 0.5
-    window_theta_rad: float = 0.4
+    window_sigmas: float = 3.0
+    min_window_xy_m: float = 0.2
+    min_window_theta_rad: float = 0.1
     cell_m: float = 0.05
     angle_tolerance_rad: float = 0.04
     offset_tolerance_m: float = 0.1
@@ -58,14 +70,16 @@ class RelocalisationConfig:
     min_matched_length_m: float = 1.0
     min_matches: int = 2
     min_direction_angle_rad: float = 0.5
+    min_cross_length_m: float = 0.5
     max_ambiguity: float = 0.8
     corridor_closures: bool = True
 
     def __post_init__(self) -> None:
         require(0.0 <= self.min_matched_fraction <= 1.0, "min_matched_fraction in [0, 1]")
         for name in (
-            "window_xy_m",
-            "window_theta_rad",
+            "window_sigmas",
+            "min_window_xy_m",
+            "min_window_theta_rad",
             "cell_m",
             "angle_tolerance_rad",
             "offset_tolerance_m",
@@ -74,6 +88,7 @@ class RelocalisationConfig:
             positive(name, getattr(self, name))
         nonneg("overlap_margin_m", self.overlap_margin_m)
         nonneg("min_matched_length_m", self.min_matched_length_m)
+        nonneg("min_cross_length_m", self.min_cross_length_m)
         require(self.min_matches >= 2, "min_matches must be >= 2")
         require(0.0 < self.max_ambiguity <= 1.0, "max_ambiguity must be in (0, 1]")
 
@@ -84,10 +99,12 @@ class FrontendConfig:
 
     The local map is every landmark (graph or tentative) whose extent is within
     ``association.max_range_m`` of the predicted pose and whose drift relative to the robot is
-    small: a landmark last seen ``d`` metres of path ago has drifted by about
-    ``σ_xy = drift_xy_per_m·d`` and ``σ_θ = drift_theta_per_m·d``
-    (:func:`slam.models.anchored.drift_covariance` adds this to its covariance); beyond
-    ``max_drift_xy_m`` it is left to loop closing.
+    small: the drift since the landmark was last seen is the sum of the front end's step
+    covariances since then (:mod:`slam.line_slam.drift`;
+    :func:`slam.models.anchored.drift_covariance` adds it to the landmark's covariance); beyond
+    ``max_drift_xy_m`` it is left to loop closing.  Every registration's correction of the
+    odometry prediction must be consistent with the prediction's covariance
+    (``consistency_probability``; :mod:`slam.line_slam.front_end`).
 
     Attributes
     ----------
@@ -99,7 +116,11 @@ class FrontendConfig:
         Added (in quadrature) to the odometry covariance of the prediction used as the
         registration's prior, so that a bad odometry step (wheel slip) can be corrected.
     drift_xy_per_m, drift_theta_per_m : float
-        Drift model of the front end (m per m of path, rad per m of path).
+        The systematic part of the front end's drift, per metre of path (m/m, rad/m; added in
+        quadrature to the accumulated step covariances, :mod:`slam.line_slam.drift`).
+    consistency_probability : float
+        A registration (or relocalisation) whose correction of the prediction lies beyond this
+        quantile of χ² (degrees of freedom: the directions its lines constrain) is not used.
     max_drift_xy_m : float
         Landmarks whose drift ``σ_xy`` exceeds this are not offered to the registration.
     landmark_sigma_r_m, landmark_sigma_alpha_rad : float
@@ -120,6 +141,7 @@ class FrontendConfig:
     prior_sigma_theta_rad: float = 0.01
     drift_xy_per_m: float = 0.01
     drift_theta_per_m: float = 0.002
+    consistency_probability: float = 0.999
     max_drift_xy_m: float = 0.2
     landmark_sigma_r_m: float = 0.005
     landmark_sigma_alpha_rad: float = 0.002
@@ -127,6 +149,9 @@ class FrontendConfig:
     pose_factor_inflation: float = 4.0
 
     def __post_init__(self) -> None:
+        require(
+            0.0 < self.consistency_probability < 1.0, "consistency_probability must be in (0, 1)"
+        )
         for name in (
             "prior_sigma_xy_m",
             "prior_sigma_theta_rad",
@@ -167,9 +192,10 @@ class LoopClosureConfig:
 
     Every ``interval_keyframes`` keyframes the local submap (landmarks seen during the last
     ``local_keyframes`` keyframes) is searched for in the old map (landmarks beyond the front
-    end's drift limit, within reach) over a window that grows with the path since they were
-    seen: rotation candidates from the histogram of line angle differences, translation by a
-    vote of line-pair constraints on a grid, then verification (segment overlap, matched length,
+    end's drift limit, within reach) over a window from the drift since they were seen
+    (:mod:`slam.line_slam.drift`): rotation candidates from the histogram of line angle
+    differences, translation by a vote of line-pair constraints on a grid, then verification
+    (segment overlap, matched length,
     two directions, a clear winner) and a refinement.  Verified pairs of landmarks are merged;
     the closure is kept only if the graph explains it afterwards (a batch solve of the loop,
     after which at least ``min_consistent_fraction`` of the merged pairs have both sides'
@@ -186,14 +212,12 @@ class LoopClosureConfig:
         The local submap is the landmarks seen during the last this many keyframes; also the
         memory (in keyframes) of rejected and gated hypotheses, and how far before the old
         landmarks' last sighting the judged loop starts.
-    window_xy_per_m, window_theta_per_m : float
-        Search half-widths per metre of path since the old landmarks were seen (m/m, rad/m).
-    min_window_xy_m, min_window_theta_rad, max_window_xy_m, max_window_theta_rad : float
-        Bounds on those half-widths (m, rad).  ``max_window_xy_m`` (5 m) covers the front
-        end's drift between closures: with loop closing off, against the default run, the
-        translation error over any 10-200 m of path stays below 3.3 m on Intel, ACES and fr079
-        (``scripts/front_end_drift.py``).  Wider windows mostly admit aliases in
-        buildings whose rooms repeat (fr079).
+    window_sigmas : float
+        The search window around the current pose, in standard deviations of the drift since
+        the old landmarks were last seen (:mod:`slam.line_slam.drift`; translation and heading
+        separately).
+    min_window_xy_m, min_window_theta_rad : float
+        Least half-widths (m, rad): the search's own resolution.
     window_of_pairs : bool
         A hypothesis must lie within the window of the old lines it pairs (the median of
         their windows), not only within the search window (that of the oldest line in
@@ -208,9 +232,13 @@ class LoopClosureConfig:
     min_matched_length_m : float
         Matched local lines must add up to this length (m).
     min_matches : int
-        Least number of matched line pairs of a hypothesis.
+        Least number of matched line pairs of a hypothesis (two fix a correction).
     min_direction_angle_rad : float
         Matched lines must include two directions at least this far apart.
+    min_cross_length_m : float
+        A hypothesis in two directions must match at least this length (m) of lines across
+        the dominant direction (the lines that fix the position along it); evidence is counted
+        in metres of matched wall, not in lines.
     max_ambiguity : float
         A distinct runner-up hypothesis with more than this fraction of the winner's score
         makes the closure ambiguous (rejected).
@@ -240,19 +268,21 @@ class LoopClosureConfig:
         larger of its two sides' median whitened χ²) is rejected whole, however many pairs
         are explained: at ~30σ the local map sits on other walls than the hypothesis says,
         which a few mismatched lines in a right closure do not do.  inf: off.
-    max_correction_chi2 : float
-        Gate before the judgement: the correction, as a change of the relative pose between
-        the keyframe where the paired old lines were last seen and the current one, must lie
-        within this squared Mahalanobis distance under the back-end's joint marginal
-        covariance of the two poses (``Backend.joint_pose_covariance``); a hypothesis beyond it
-        is rejected without being judged.  The covariances are over-confident on real logs
-        (right closures reach ~600, ``docs/real-logs.md``), so this is a wide gate, not a χ²
-        quantile.  inf: off.
-    gate_override_after : int
-        A hypothesis whose correction the gate has already turned away this many times within
-        the last ``local_keyframes`` keyframes (the same correction within twice the angle and
-        offset tolerances) is judged anyway: persistent evidence against the marginals, which
-        a wrong closure accepted earlier makes over-confident.  0: never.
+    consistency_probability : float
+        A hypothesis is judged only if its correction is consistent with the front end's own
+        trajectory (the relative pose the front end estimated between the two keyframes, free of
+        loop closures) under the drift between them (:mod:`slam.line_slam.drift`), and with
+        ``confirmations`` other recent hypotheses (pairwise consistency through the front end's
+        chains, Mangelson et al. 2018): within this quantile of χ².
+    judge_max_f : float
+        A judged closure is rejected when it raises the loop's cost per merged degree of
+        freedom more than this many times the loop's cost per residual degree of freedom before
+        (an F statistic of the merge against the graph's own residual level: a right closure
+        spreads the drift along the loop, a wrong one strains it where it binds).
+    confirmations : int
+        How many hypotheses found at other keyframes within the last ``local_keyframes`` must
+        agree with one before it is judged (0: none; a hypothesis is never accepted on its own
+        once this is 1 or more, so a revisit must be recognised twice).
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -273,26 +303,33 @@ class LoopClosureConfig:
 
     RENAMED_KEYS: ClassVar[dict[str, str]] = {
         "max_chi2_per_factor": "removed (it had no effect; the verdict is judge_* and "
-        "min_consistent_fraction): delete the line"
+        "min_consistent_fraction): delete the line",
+        "window_xy_per_m": "replaced by window_sigmas: the window follows the drift "
+        "accumulated from the front end's covariances",
+        "window_theta_per_m": "replaced by window_sigmas",
+        "max_window_xy_m": "removed: the window is not capped",
+        "max_window_theta_rad": "removed: the window is not capped",
+        "max_correction_chi2": "replaced by consistency_probability (the correction against the "
+        "front end's own trajectory and drift)",
+        "gate_override_after": "removed: hypotheses are checked against the front end's own "
+        "trajectory, which loop closures do not change; delete the line",
     }
 
     enabled: bool = True
     interval_keyframes: int = 5
     local_keyframes: int = 20
-    window_xy_per_m: float = 0.05
-    window_theta_per_m: float = 0.005
+    window_sigmas: float = 3.0
     min_window_xy_m: float = 0.5
     min_window_theta_rad: float = 0.05
-    max_window_xy_m: float = 5.0
-    max_window_theta_rad: float = 0.5
     window_of_pairs: bool = True
     cell_m: float = 0.1
     angle_tolerance_rad: float = 0.04
     offset_tolerance_m: float = 0.15
     overlap_margin_m: float = 0.3
     min_matched_length_m: float = 4.0
-    min_matches: int = 4
+    min_matches: int = 2
     min_direction_angle_rad: float = 0.5
+    min_cross_length_m: float = 1.0
     max_ambiguity: float = 0.7
     corridor_closures: bool = True
     max_updates: int = 20
@@ -300,8 +337,9 @@ class LoopClosureConfig:
     judge_relative_tolerance: float = 1e-4
     judge_loop_only: bool = True
     judge_max_pair_chi2: float = float("inf")
-    max_correction_chi2: float = float("inf")
-    gate_override_after: int = 0
+    consistency_probability: float = 0.999
+    confirmations: int = 0
+    judge_max_f: float = 100.0
     min_consistent_fraction: float = 0.6
     skip_repeated_rejections: bool = True
     judge_hopeless_after: int = 5
@@ -316,19 +354,17 @@ class LoopClosureConfig:
         require(self.max_updates >= 1, "max_updates must be >= 1")
         require(self.min_matches >= 2, "min_matches must be >= 2")
         for name in (
-            "window_xy_per_m",
-            "window_theta_per_m",
             "min_window_xy_m",
             "min_window_theta_rad",
             "overlap_margin_m",
             "min_matched_length_m",
+            "min_cross_length_m",
             "large_correction_m",
             "large_correction_rad",
         ):
             nonneg(name, getattr(self, name))
         for name in (
-            "max_window_xy_m",
-            "max_window_theta_rad",
+            "window_sigmas",
             "cell_m",
             "angle_tolerance_rad",
             "offset_tolerance_m",
@@ -341,5 +377,8 @@ class LoopClosureConfig:
             0.0 < self.min_consistent_fraction <= 1.0, "min_consistent_fraction must be in (0, 1]"
         )
         require(self.judge_max_pair_chi2 > 0.0, "judge_max_pair_chi2 must be > 0 (inf: off)")
-        require(self.max_correction_chi2 > 0.0, "max_correction_chi2 must be > 0 (inf: off)")
-        require(self.gate_override_after >= 0, "gate_override_after must be >= 0")
+        require(
+            0.0 < self.consistency_probability < 1.0, "consistency_probability must be in (0, 1)"
+        )
+        require(self.confirmations >= 0, "confirmations must be >= 0")
+        require(self.judge_max_f > 0.0, "judge_max_f must be > 0")

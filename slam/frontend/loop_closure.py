@@ -78,6 +78,9 @@ class LoopConfig(Protocol):
     def min_direction_angle_rad(self) -> float: ...
 
     @property
+    def min_cross_length_m(self) -> float: ...
+
+    @property
     def max_ambiguity(self) -> float: ...
 
     @property
@@ -290,11 +293,15 @@ class _Hypothesis:
         self.corr, self.i, self.j, self.score = corr, i, j, score
         # translation information of the pairs: Σ w n nᵀ; one direction when the lines' normals
         # all lie within min_direction_angle of each other
+        cross = 0.0
         if alpha.size:
             d = np.abs(np.sin(alpha[:, None] - alpha[None, :]))
             self.single = bool(d.max() < np.sin(config.min_direction_angle_rad))
             k = int(np.argmax(w))
             self.normal = np.array([np.cos(alpha[k]), np.sin(alpha[k])])
+            # matched length across the dominant direction: what fixes the position along it
+            across = np.abs(np.sin(alpha - alpha[k])) >= np.sin(config.min_direction_angle_rad)
+            cross = float(w[across].sum())
         else:
             self.single = True
             self.normal = np.array([1.0, 0.0])
@@ -302,7 +309,9 @@ class _Hypothesis:
         self.valid = (
             i.size >= config.min_matches
             and score >= need
-            and (config.corridor_closures or not self.single)
+            and (
+                cross >= config.min_cross_length_m if not self.single else config.corridor_closures
+            )
         )
 
     def distinct(self, other: _Hypothesis, config: LoopConfig) -> bool:

@@ -214,6 +214,7 @@ def register_lines(
     pose_prior: FloatArray,
     pose_prior_cov: FloatArray,
     config: RegistrationConfig | None = None,
+    initial_pose: FloatArray | None = None,
 ) -> RegistrationResult:
     """Estimate the laser pose that best aligns ``scan`` (sensor frame) with ``map_lines`` (world).
 
@@ -230,6 +231,9 @@ def register_lines(
         definite.
     config : RegistrationConfig, optional
         Gates, iterations and kernel.
+    initial_pose : ndarray, shape (3,), optional
+        Where the iterations start (default ``pose_prior``), e.g. a relocalisation's guess far
+        from the prediction; the prior term stays ``(pose_prior, pose_prior_cov)``.
 
     Returns
     -------
@@ -249,7 +253,7 @@ def register_lines(
         raise InputError("register_lines: pose_prior_cov is not positive definite") from exc
     info_prior = np.linalg.inv(L_prior @ L_prior.T)
 
-    pose = pose_prior.copy()
+    pose = pose_prior.copy() if initial_pose is None else np.asarray(initial_pose, float).reshape(3)
     cov_assoc = P_prior
     matches = np.full(len(scan), -1, dtype=np.int64)
     n_compat = np.zeros(len(scan), dtype=np.int64)

@@ -39,6 +39,7 @@ from slam.line_slam.config import SlamConfig
 from slam.line_slam.keyframes import ANGLE_WEIGHT_M_PER_RAD, KeyframeTrack
 from slam.lines import unite_segments
 from slam.models.anchored import anchored_jacobian, landmarks_normal_form
+from slam.models.motion import MotionNoiseConfig
 from slam.result import SlamResult
 
 __all__ = ["assemble_result", "landmark_segments", "scan_poses"]
@@ -124,10 +125,12 @@ def assemble_result(
     config: SlamConfig,
     policy: InputPolicy,
     stats: dict[str, Any],
+    motion: MotionNoiseConfig | None = None,
 ) -> SlamResult:
     """The run's :class:`~slam.result.SlamResult` (module docstring).
 
-    ``stats`` becomes the result's statistics (the same dict: the caller may complete it).
+    ``stats`` becomes the result's statistics (the same dict: the caller may complete it);
+    ``motion`` is the odometry noise for non-keyframe scans (default ``config.motion``).
     """
     g = graph
     n = track.n_scans
@@ -140,7 +143,7 @@ def assemble_result(
         cov = F @ kf_cov[kf] @ np.swapaxes(F, 1, 2) + np.where(
             np.asarray(track.scan_is_keyframe)[:, None, None],
             0.0,
-            config.motion.covariance(offsets),
+            (motion or config.motion).covariance(offsets),
         )
     interrupts.check()  # between the covariance blocks (slam.interrupts)
     poses, cov_out = policy.report(poses, cov)

@@ -10,13 +10,52 @@ merges it again.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from slam.graph.factors import line_factor_residuals
-from slam.graph.problem import MergeRecord
+from slam.graph.odometry import between_costs
+from slam.graph.problem import LineGraph, MergeRecord
 from slam.line_slam.config import FusionConfig
 from slam.line_slam.landmarks import LandmarkBook
 
-__all__ = ["MergeAudit"]
+__all__ = ["MergeAudit", "residual_chi2"]
+
+FloatArray = NDArray[np.float64]
+
+
+def residual_chi2(graph: LineGraph, from_pose: int = 0) -> tuple[float, FloatArray]:
+    """Squared whitened residuals of the graph at its estimate (Gaussian, no kernel).
+
+    Returns the total over the line factors of poses from ``from_pose`` on and the odometry
+    factors ending there, and each of those line factors' own (2 dof).
+    """
+    g = graph
+    line = np.zeros(0)
+    f = np.flatnonzero(g.factor_pose >= from_pose)
+    if f.size:
+        lm = g.factor_landmark[f]
+        ew = line_factor_residuals(
+            g.poses[g.factor_pose[f]],
+            g.landmarks[lm],
+            g.anchors[lm],
+            g.factor_z[f],
+            g.factor_sqrt_info[f],
+        )
+        line = np.sum(ew**2, axis=1)
+    odo = 0.0
+    e = np.flatnonzero(g.odometry_second >= from_pose)
+    if e.size:
+        odo = 2.0 * float(
+            np.sum(
+                between_costs(
+                    g.poses[g.odometry_first[e]],
+                    g.poses[g.odometry_second[e]],
+                    g.odometry_measured[e],
+                    g.odometry_sqrt_info[e],
+                )
+            )
+        )
+    return float(line.sum()) + odo, line
 
 
 class MergeAudit:

@@ -8,7 +8,7 @@ defined beside their code (:mod:`slam.frontend.config`, :mod:`slam.graph.config`
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -85,14 +85,19 @@ class FusionConfig:
         A merge (fusion or loop closure) is undone when, some keyframes later, the median
         whitened squared residual of either side's line factors exceeds this (χ²₂ 99 %: 9.21);
         fusion never merges an undone pair again.
-    max_path_gap_m : float
-        During the run, two landmarks last seen more than this much driven path apart are
-        not fused but left to loop closing, which verifies a whole submap and rejects
-        ambiguous matches: after metres of drift a wall can land on its neighbour (rooms along
-        a corridor repeat), and a wrong fusion binds the drifted estimate to the wrong place.
-        Default: the front end's drift limit (``max_drift_xy_m / drift_xy_per_m`` = 20 m).
-        The final round over the whole map (:meth:`LineSlam.optimize`) has no such limit.
+
+    During the run, two landmarks whose last sightings are further apart in drift than the
+    front end's reach (``frontend.max_drift_xy_m``) are not fused but left to loop closing,
+    which verifies a whole submap and rejects ambiguous matches: after metres of drift a wall
+    can land on its neighbour (rooms along a corridor repeat), and a wrong fusion binds the
+    drifted estimate to the wrong place.  The final round over the whole map
+    (:meth:`LineSlam.optimize`) has no such limit.
     """
+
+    RENAMED_KEYS: ClassVar[dict[str, str]] = {
+        "max_path_gap_m": "removed: fusion compares the drift between the two landmarks' last "
+        "sightings with frontend.max_drift_xy_m; delete the line"
+    }
 
     enabled: bool = True
     interval_keyframes: int = 10
@@ -102,7 +107,6 @@ class FusionConfig:
     max_distance_m: float = 0.5
     retest_growth: float = 2.0
     audit_max_median_chi2: float = 9.21
-    max_path_gap_m: float = 20.0
 
     def __post_init__(self) -> None:
         require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
@@ -112,7 +116,6 @@ class FusionConfig:
         positive("max_angle_rad", self.max_angle_rad)
         positive("max_distance_m", self.max_distance_m)
         positive("audit_max_median_chi2", self.audit_max_median_chi2)
-        positive("max_path_gap_m", self.max_path_gap_m)
 
 
 @dataclass(frozen=True)

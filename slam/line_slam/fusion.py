@@ -7,8 +7,8 @@ landmarks near the robot.
 1. **Candidates** (:func:`fusion_candidates`, a vectorised pre-filter over pairs): normals that
    differ by less than ``max_angle_rad`` modulo π, the mid-point of one's extent within
    ``max_distance_m`` of the other line, extents along the line that overlap or leave a gap of
-   at most ``max_gap_m``.  During the run, pairs last seen more than ``max_path_gap_m`` of path
-   apart are left to loop closing.
+   at most ``max_gap_m``.  During the run, pairs whose last sightings are further apart in drift
+   (:mod:`slam.line_slam.drift`) than ``frontend.max_drift_xy_m`` are left to loop closing.
 2. **Test**: the paper's merge test (Eqs. 34-35, :func:`slam.association.landmarks_compatible`)
    on the two landmarks' covariances relative to the poses that saw them, the second one
    widened by the drift between their last sightings (no joint marginal is needed: both are
@@ -31,7 +31,8 @@ from slam.graph.problem import LineGraph, MergeRecord
 from slam.line_slam.audit import MergeAudit
 from slam.line_slam.clock import StageClock
 from slam.line_slam.config import FusionConfig, SlamConfig
-from slam.line_slam.keyframes import EveryKeyframes, KeyframeTrack
+from slam.line_slam.drift import DriftAccumulator
+from slam.line_slam.keyframes import EveryKeyframes
 from slam.line_slam.landmarks import LandmarkBook
 from slam.models.anchored import anchored_jacobian, drift_covariance
 
@@ -95,8 +96,8 @@ class LandmarkFusion:
 
     Parameters
     ----------
-    book, track, audit
-        The run's landmark book, keyframe track and merge audit.
+    book, drift, audit
+        The run's landmark book, drift accumulator and merge audit.
     config : SlamConfig
         ``fusion``, ``association.max_range_m`` and the front end's drift model.
     counters : dict
@@ -108,14 +109,14 @@ class LandmarkFusion:
     def __init__(
         self,
         book: LandmarkBook,
-        track: KeyframeTrack,
+        drift: DriftAccumulator,
         audit: MergeAudit,
         config: SlamConfig,
         counters: dict[str, int],
         clock: StageClock,
     ) -> None:
         self.book = book
-        self.track = track
+        self.drift = drift
         self.audit = audit
         self.config = config
         self.counters = counters
@@ -178,23 +179,21 @@ class LandmarkFusion:
         la = g.landmarks_r_alpha
         # drift between their last sightings
         last = book.last_keyframe
-        kf_path = self.track.keyframe_path_m
-        gap = np.abs(kf_path[last[a]] - kf_path[last[b]])
+        sxy, sth = self.drift.between(last[a], last[b])
         if not everywhere:
-            # far apart in path: loop closing's job (submap verification), not fusion's
-            near = gap <= cfg.fusion.max_path_gap_m
-            a, b, gap = a[near], b[near], gap[near]
+            # far apart in drift: loop closing's job (submap verification), not fusion's
+            near = sxy <= cfg.frontend.max_drift_xy_m
+            a, b, sxy, sth = a[near], b[near], sxy[near], sth[near]
         Pa = book.covariance(a)
         Pb = book.covariance(b)
-        fc = cfg.frontend
         # the drift rotates b about the robot where it last saw b
         seen_from = g.poses[last[b], :2]
         Pb = Pb + drift_covariance(
             g.landmarks[b],
             g.anchors[b],
             seen_from,
-            fc.drift_xy_per_m * gap,
-            fc.drift_theta_per_m * gap,
+            sxy,
+            sth,
         )
         Ja = anchored_jacobian(g.landmarks[a], g.anchors[a])
         Jb = anchored_jacobian(g.landmarks[b], g.anchors[b])

@@ -1,9 +1,9 @@
 """The local map: the landmarks offered to a keyframe's registration.
 
 Graph and tentative landmarks within ``association.max_range_m`` of the predicted pose whose
-drift relative to the robot is small: the drift of a landmark grows with the path driven since
-it was last seen (``frontend.drift_xy_per_m``, ``frontend.drift_theta_per_m``), and landmarks
-whose translation drift exceeds ``frontend.max_drift_xy_m`` are left to loop closing.  Each
+drift relative to the robot is small: the drift since a landmark was last seen is the sum of the
+front end's step covariances since (:mod:`slam.line_slam.drift`), and landmarks whose
+translation drift exceeds ``frontend.max_drift_xy_m`` are left to loop closing.  Each
 landmark's covariance relative to the robot is its covariance relative to the poses that saw
 it, plus the drift since (:func:`slam.models.anchored.drift_covariance`), plus a floor.
 """
@@ -16,14 +16,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.association import candidate_landmarks
-from slam.frontend.config import FrontendConfig
 from slam.line_slam.config import SlamConfig
-from slam.line_slam.keyframes import KeyframeTrack
+from slam.line_slam.drift import DriftAccumulator
 from slam.line_slam.landmarks import LandmarkBook, anchored_endpoints
 from slam.lines.lineset import LineSet
 from slam.models.anchored import anchored_jacobian, drift_covariance, r_alpha_from_anchored
 
-__all__ = ["GRAPH", "TENTATIVE", "LocalMap", "build_local_map", "drift_sigmas"]
+__all__ = ["GRAPH", "TENTATIVE", "LocalMap", "build_local_map"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -32,13 +31,6 @@ GRAPH = 0
 """``LocalMap.kind`` of a graph landmark."""
 TENTATIVE = 1
 """``LocalMap.kind`` of a tentative landmark."""
-
-
-def drift_sigmas(
-    path_since_m: FloatArray, frontend: FrontendConfig
-) -> tuple[FloatArray, FloatArray]:
-    """Drift ``(σ_xy, σ_θ)`` (m, rad) of the robot relative to what it saw that far back (m)."""
-    return frontend.drift_xy_per_m * path_since_m, frontend.drift_theta_per_m * path_since_m
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,7 +72,7 @@ class LocalMap:
 
 
 def build_local_map(
-    book: LandmarkBook, track: KeyframeTrack, x_pred: FloatArray, config: SlamConfig
+    book: LandmarkBook, drift: DriftAccumulator, x_pred: FloatArray, config: SlamConfig
 ) -> LocalMap:
     """Graph and tentative landmarks near ``x_pred`` with small drift (module docstring)."""
     g = book.graph
@@ -105,7 +97,7 @@ def build_local_map(
             anchors=g.anchors,
         )
         if cand.size:
-            sxy, sth = drift_sigmas(track.path_since(book.last_keyframe[cand]), fc)
+            sxy, sth = drift.since(book.last_keyframe[cand])
             near = sxy <= fc.max_drift_xy_m
             cand, sxy, sth = cand[near], sxy[near], sth[near]
         if cand.size:
@@ -131,7 +123,7 @@ def build_local_map(
         if near_t.size:
             v = tp.rho_phi[near_t]
             c = tp.anchors[near_t]
-            sxy, sth = drift_sigmas(track.path_since(tp.last_kf[near_t]), fc)
+            sxy, sth = drift.since(tp.last_kf[near_t])
             P = tp.cov[near_t] + drift_covariance(v, c, p, sxy, sth)
             P[:, 0, 0] += fc.landmark_sigma_r_m**2
             P[:, 1, 1] += fc.landmark_sigma_alpha_rad**2

@@ -4,15 +4,18 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
 
 1. **Search.**  The local submap (landmarks seen in the last ``local_keyframes`` keyframes) is
    searched for among the old landmarks (drifted beyond the front end's reach, near the robot)
-   within a window that grows with the path driven since the old landmarks were seen
-   (``window_*_per_m``, clipped to ``[min_window_*, max_window_*]``;
-   :func:`slam.frontend.loop_closure.search_loop_closure`).
+   within a window of ``window_sigmas`` standard deviations of the drift since the old
+   landmarks were last seen (:mod:`slam.line_slam.drift`; at least ``min_window_*``;
+   :func:`slam.frontend.loop_closure.search_loop_closure`).  Every accepted closure tells the
+   drift accumulator how far off the prediction was (its scale).
 2. **Repeats.**  A hypothesis that repeats one rejected recently (same correction, no more pairs)
    is not judged again (``skip_repeated_rejections``).
-3. **Gate.**  The correction's squared Mahalanobis distance under the back-end's joint marginal
-   covariance of the two keyframes it links (:func:`slam.frontend.loop_closure.correction_chi2`)
-   must not exceed ``max_correction_chi2``; ``gate_override_after`` lets a correction through
-   that the gate turned away that many times recently.
+3. **Consistency.**  The hypothesis, as a relative pose between the old keyframe and the
+   current one, must agree with the front end's own trajectory between them (free of loop
+   closures, so an earlier wrong closure cannot bias the test) under the drift between them,
+   and with ``confirmations`` other recent hypotheses (pairwise consistency through the front
+   end's chains, as in PCM, Mangelson et al. 2018); within the ``consistency_probability``
+   quantile of χ².  A revisit is thus recognised twice before it is judged.
 4. **Judge.**  A large correction is first spread over the loop (:func:`spread_correction`); the
    paired landmarks are merged and a batch solve of the loop
    (:class:`slam.graph.batch.BatchSolver`, at most ``judge_iterations``) outside the back-end
@@ -32,28 +35,26 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import chi2 as _chi2_dist
 
 from linefit.line import wrap_angle
 from slam.association import candidate_landmarks
-from slam.frontend.loop_closure import (
-    LoopClosure,
-    correction_chi2,
-    same_correction,
-    search_loop_closure,
-)
+from slam.frontend.loop_closure import LoopClosure, same_correction, search_loop_closure
+from slam.geometry import pose_between, pose_compose, pose_inverse, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend
 from slam.graph.batch import BatchSolver
-from slam.line_slam.audit import MergeAudit
+from slam.line_slam.audit import MergeAudit, residual_chi2
 from slam.line_slam.clock import StageClock
 from slam.line_slam.config import SlamConfig
+from slam.line_slam.drift import DriftAccumulator
 from slam.line_slam.keyframes import EveryKeyframes, KeyframeTrack
 from slam.line_slam.landmarks import LandmarkBook
-from slam.line_slam.local_map import drift_sigmas
 
-__all__ = ["ClosureAttempt", "LoopCloser", "spread_correction"]
+__all__ = ["ClosureAttempt", "Hypothesis", "LoopCloser", "spread_correction"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
+
 
 _WHERE = ("scan", "old_keyframe", "old_scan", "pose_before", "old_pose_before")
 _ORDER = {
@@ -72,12 +73,39 @@ _ORDER = {
         "judge_iterations",
         "judge_stop",
         "judge_free_from",
+        "f_statistic",
         "correction_chi2",
         *_WHERE,
         "accepted",
         "backend_restarted",
     ),
 }
+
+
+@dataclass(frozen=True, eq=False)
+class Hypothesis:
+    """A loop-closure hypothesis as a relative-pose measurement.
+
+    Attributes
+    ----------
+    keyframe, k_old : int
+        The current keyframe and the old one (where the paired old lines were last seen).
+    z : ndarray, shape (3,)
+        Pose of ``keyframe`` in the frame of ``k_old`` that the hypothesis implies.
+    normal : ndarray, shape (2,) or None
+        Along a corridor, the walls' normal in ``keyframe``'s frame (the component of ``z``
+        along the walls is not measured); None otherwise.
+    """
+
+    keyframe: int
+    k_old: int
+    z: FloatArray
+    normal: FloatArray | None = None
+
+    @property
+    def single(self) -> bool:
+        """Corridor hypothesis (one direction)."""
+        return self.normal is not None
 
 
 @dataclass
@@ -113,6 +141,7 @@ class ClosureAttempt:
     judge_stop: str | None = None
     judge_free_from: int | None = None
     backend_restarted: bool | None = None
+    f_statistic: float | None = None
     where: dict[str, Any] = field(default_factory=dict)
 
     def as_log(self) -> dict[str, Any]:
@@ -169,8 +198,8 @@ class LoopCloser:
 
     Parameters
     ----------
-    book, track, audit
-        The run's landmark book, keyframe track and merge audit.
+    book, track, drift, audit
+        The run's landmark book, keyframe track, drift accumulator and merge audit.
     backend : BatchBackend or Isam2Backend
         The online back-end (joint marginals for the gate; converged after a closure).
     config : SlamConfig
@@ -186,6 +215,7 @@ class LoopCloser:
         self,
         book: LandmarkBook,
         track: KeyframeTrack,
+        drift: DriftAccumulator,
         audit: MergeAudit,
         backend: BatchBackend | Isam2Backend,
         config: SlamConfig,
@@ -194,6 +224,7 @@ class LoopCloser:
     ) -> None:
         self.book = book
         self.track = track
+        self.drift = drift
         self.audit = audit
         self.backend = backend
         self.config = config
@@ -202,8 +233,8 @@ class LoopCloser:
         self.attempts: list[ClosureAttempt] = []
         # judged and rejected hypotheses: (keyframe, correction, paired lines)
         self._rejected: list[tuple[int, FloatArray, int]] = []
-        # hypotheses the marginals' gate turned away: (keyframe, correction)
-        self._gated: list[tuple[int, FloatArray]] = []
+        # recent hypotheses that passed the drift test (for confirmation)
+        self._recent: list[Hypothesis] = []
         self._every = EveryKeyframes()
         self._judge = BatchSolver(
             replace(config.solver, relative_tolerance=config.loop_closure.judge_relative_tolerance)
@@ -231,15 +262,12 @@ class LoopCloser:
         if local.size < lcc.min_matches:
             return 0
         x = g.poses[pose]
-        since = self.track.path_since(last)
-        sxy, _ = drift_sigmas(since, cfg.frontend)
+        sxy, sth = self.drift.since(last)
         old_mask = (
             alive & (sxy > cfg.frontend.max_drift_xy_m) & (last <= pose - lcc.local_keyframes)
         )
-        win_xy = np.clip(lcc.window_xy_per_m * since, lcc.min_window_xy_m, lcc.max_window_xy_m)
-        win_th = np.clip(
-            lcc.window_theta_per_m * since, lcc.min_window_theta_rad, lcc.max_window_theta_rad
-        )
+        win_xy = np.maximum(lcc.window_sigmas * sxy, lcc.min_window_xy_m)
+        win_th = np.maximum(lcc.window_sigmas * sth, lcc.min_window_theta_rad)
         reach = cfg.association.max_range_m + win_xy
         near = candidate_landmarks(
             x,
@@ -291,17 +319,19 @@ class LoopCloser:
             )
             self.counters["loop_closures_repeated"] += 1
             return 0
-        # the marginals' gate: a correction the back-end's uncertainty cannot explain is
-        # not worth a judgement (max_correction_chi2)
+        # consistency: with the front end's own trajectory, then with an earlier hypothesis
         k_old = int(np.median(last[near[[j for _, j in found.pairs]]]))
-        corr_eff = self.effective_correction(found, near)
-        chi2_t = self.correction_chi2(k_old, pose, corr_eff)
-        if chi2_t > lcc.max_correction_chi2 and not self.gate_overridden(corr_eff, pose):
+        hyp = self.hypothesis(found, near, pose, k_old)
+        chi2_t = self.chain_chi2(hyp)
+        reason = None
+        if not self.confirmed(hyp):
+            reason = "awaiting a consistent second hypothesis"
+        if reason is not None:
             self.attempts.append(
                 ClosureAttempt(
                     "gated",
                     int(pose),
-                    reason="correction beyond the marginals' gate",
+                    reason=reason,
                     pairs=len(found.pairs),
                     correction=[float(v) for v in found.correction],
                     correction_chi2=chi2_t,
@@ -314,22 +344,6 @@ class LoopCloser:
         return self.apply(local, near, found, pose, chi2_t)
 
     # -- the rules ---------------------------------------------------------------------------
-    def gate_overridden(self, correction: FloatArray, pose: int) -> bool:
-        """Whether the gate lets a correction through after turning it away repeatedly.
-
-        ``LoopClosureConfig.gate_override_after``; a correction not let through is recorded as
-        gated.
-        """
-        lcc = self.config.loop_closure
-        self._gated = [g for g in self._gated if g[0] > pose - lcc.local_keyframes]
-        if lcc.gate_override_after > 0:
-            seen = sum(same_correction(correction, c, lcc) for _, c in self._gated)
-            if seen >= lcc.gate_override_after:
-                self.counters["loop_closure_gate_overrides"] += 1
-                return True
-        self._gated.append((int(pose), np.asarray(correction, dtype=float)))
-        return False
-
     def repeated_rejection(self, found: LoopClosure, pose: int) -> int | None:
         """The keyframe of a recent rejected hypothesis that ``found`` repeats, if any.
 
@@ -354,15 +368,94 @@ class LoopCloser:
             corr[:2] = (corr[:2] @ n) * n
         return corr
 
-    def correction_chi2(self, k_old: int, pose: int, correction: FloatArray) -> float:
-        """The correction's squared Mahalanobis distance under the back-end's marginals.
+    def hypothesis(self, found: LoopClosure, old: IntArray, pose: int, k_old: int) -> Hypothesis:
+        """A found closure as a relative-pose measurement from keyframe ``k_old`` to ``pose``.
 
-        :func:`slam.frontend.loop_closure.correction_chi2` with the joint covariance of the
-        keyframe where the paired old lines were last seen and the current one.
+        The correction moves the current keyframe by ``(t, dθ)`` (it rotates about its
+        position), so it measures ``z = x_old⁻¹ ∘ (x_k + (t, dθ))`` with the estimates at the
+        time.  Along a corridor the correction's component along the walls is arbitrary: the
+        hypothesis then carries the walls' normal (in the current keyframe's frame).
         """
         g = self.book.graph
-        P = self.backend.joint_pose_covariance(g, np.array([k_old, pose], dtype=np.intp))
-        return correction_chi2(g.poses[k_old], g.poses[pose], P, correction)
+        x = g.poses[pose]
+        corr = self.effective_correction(found, old)
+        moved = np.array([x[0] + corr[0], x[1] + corr[1], float(wrap_angle(x[2] + corr[2]))])
+        z = pose_between(g.poses[k_old], moved)
+        normal = None
+        if found.single_direction:
+            a = float(self.book.loop_lines(old[[found.pairs[0][1]]]).alpha[0]) - float(moved[2])
+            normal = np.array([np.cos(a), np.sin(a)])
+        return Hypothesis(int(pose), int(k_old), z, normal)
+
+    def _z_cov(self) -> FloatArray:
+        lcc = self.config.loop_closure
+        return np.diag(
+            [lcc.offset_tolerance_m**2, lcc.offset_tolerance_m**2, lcc.angle_tolerance_rad**2]
+        )
+
+    def _chi2_limit(self, dof: int) -> float:
+        return float(_chi2_dist.ppf(self.config.loop_closure.consistency_probability, dof))
+
+    def _mahalanobis(self, e: FloatArray, cov: FloatArray, normals: list[FloatArray]) -> float:
+        """``eᵀ S⁻¹ e`` with the components along any corridor (``normals``' tangents) left out."""
+        P = np.eye(3)
+        for n in normals:
+            t = np.array([-n[1], n[0], 0.0])
+            P = P - np.outer(P @ t, P @ t) / max(float(t @ P @ t), 1e-12)
+        w, V = np.linalg.eigh(P)
+        B = V[:, w > 0.5]
+        eb = B.T @ e
+        Sb = B.T @ cov @ B
+        return float(eb @ np.linalg.solve(Sb, eb))
+
+    def chain_chi2(self, h: Hypothesis) -> float:
+        """How far the hypothesis is from the front end's own trajectory, in its drift.
+
+        ``e = Log(F⁻¹ z)`` with ``F`` the front end's relative pose from ``k_old`` to the
+        current keyframe (free of loop closures) and covariance the drift between them
+        (:mod:`slam.line_slam.drift`) plus the match tolerances; squared Mahalanobis distance
+        (two degrees of freedom along a corridor, three otherwise).
+        """
+        F = self.drift.relative(h.k_old, h.keyframe)
+        e = pose_log(pose_between(F, h.z))
+        sxy, sth = self.drift.between(h.k_old, h.keyframe)
+        S = np.diag([float(sxy) ** 2, float(sxy) ** 2, float(sth) ** 2]) + self._z_cov()
+        return self._mahalanobis(e, S, [] if h.normal is None else [h.normal])
+
+    def pair_chi2(self, a: Hypothesis, b: Hypothesis) -> float:
+        """Pairwise consistency of two hypotheses (PCM, Mangelson et al. 2018).
+
+        The cycle ``old_a → old_b → k_b → k_a → old_a`` through the front end's chains and the
+        two measurements: ``e = Log(z_a⁻¹ ∘ F(old_a→old_b) ∘ z_b ∘ F(k_b→k_a))``, covariance the
+        drift along both chains plus both measurements' tolerances.
+        """
+        d = self.drift
+        cycle = pose_compose(
+            pose_compose(pose_inverse(a.z), d.relative(a.k_old, b.k_old)),
+            pose_compose(b.z, d.relative(b.keyframe, a.keyframe)),
+        )
+        e = pose_log(cycle)
+        s1xy, s1th = d.between(a.k_old, b.k_old)
+        s2xy, s2th = d.between(b.keyframe, a.keyframe)
+        var_xy = float(s1xy) ** 2 + float(s2xy) ** 2
+        S = np.diag([var_xy, var_xy, float(s1th) ** 2 + float(s2th) ** 2]) + 2.0 * self._z_cov()
+        normals = [n for n in (a.normal, b.normal) if n is not None]
+        return self._mahalanobis(e, S, normals)
+
+    def confirmed(self, h: Hypothesis) -> bool:
+        """Whether ``h`` agrees with ``confirmations`` recent hypotheses (else it waits).
+
+        Recent: found within the last ``local_keyframes`` keyframes at another keyframe.  ``h``
+        joins the recent ones either way.
+        """
+        lcc = self.config.loop_closure
+        self._recent = [r for r in self._recent if r.keyframe > h.keyframe - lcc.local_keyframes]
+        agree = sum(
+            r.keyframe != h.keyframe and self.pair_chi2(r, h) <= self._chi2_limit(3)
+            for r in self._recent
+        )
+        self._recent.append(h)
+        return agree >= lcc.confirmations
 
     def where(self, pose: int, k_old: int) -> dict[str, Any]:
         """Where a candidate was: the two keyframes, their scans and poses."""
@@ -400,6 +493,8 @@ class LoopCloser:
         lcc = self.config.loop_closure
         before = book.snapshot()
         old_last = book.last_keyframe[old[[j for _, j in found.pairs]]]
+        loop_from = max(int(old_last.min()) - lcc.local_keyframes, 0)
+        loop_before, _ = residual_chi2(g, loop_from)
         k_old = int(np.median(old_last))
         where = self.where(pose, k_old)
         corr = self.effective_correction(found, old)
@@ -439,6 +534,18 @@ class LoopCloser:
         chi2 = [c for c in (self.audit.chi2(r) for r in records) if c is not None]
         good = sum(c <= self.config.fusion.audit_max_median_chi2 for c in chi2)
         worst = max(chi2, default=0.0)
+        # likelihood ratio of the merged loop against the graph without it, in units of the
+        # graph's own residual level (its variance factor, from the line factors' median χ²)
+        # F statistic: the loop region's cost increase per merged degree of freedom against its
+        # own cost per residual degree of freedom before
+        loop_after, _ = residual_chi2(g, loop_from)
+        m_loop = max(
+            2 * int(np.count_nonzero(g.factor_pose >= loop_from))
+            + 3 * int(np.count_nonzero(g.odometry_second >= loop_from))
+            - 3 * (g.n_poses - loop_from),
+            1,
+        )
+        f_stat = ((loop_after - loop_before) / (2 * len(done))) / max(loop_before / m_loop, 1e-12)
         attempt = ClosureAttempt(
             "judged",
             int(pose),
@@ -455,15 +562,24 @@ class LoopCloser:
             correction_chi2=chi2_t,
             where=where,
         )
+        attempt.f_statistic = float(f_stat)
         self.attempts.append(attempt)
-        if (
+        explained = (
             good >= max(lcc.min_matches - 1, 2)
             and good >= lcc.min_consistent_fraction * len(records)
             and worst <= lcc.judge_max_pair_chi2
-        ):
+        )
+        if explained and f_stat <= lcc.judge_max_f:
             # explained (up to a few wrong pairs, which are undone)
             self.audit.audit(records)
             self.converge(reset=big)
+            sxy, sth = self.drift.since(np.array([k_old]))
+            self.drift.observe_closure(
+                corr,
+                float(sxy[0]) / self.drift.scale_xy,
+                float(sth[0]) / self.drift.scale_theta,
+                bool(found.single_direction),
+            )
             attempt.accepted = True
             attempt.backend_restarted = big
             self.counters["loop_closures"] += 1

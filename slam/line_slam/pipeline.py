@@ -47,7 +47,7 @@ from linefit.config import LineFitConfig
 from linefit.line import Line
 from slam import interrupts
 from slam.extraction import extract_lines_of_scans, extract_scan_lines
-from slam.geometry import pose_compose
+from slam.geometry import pose_between, pose_compose
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
 from slam.graph.problem import LineGraph
 from slam.inputs import InputPolicy
@@ -56,6 +56,7 @@ from slam.line_slam.associate import associate_lines
 from slam.line_slam.audit import MergeAudit
 from slam.line_slam.clock import StageClock
 from slam.line_slam.config import SlamConfig
+from slam.line_slam.drift import DriftAccumulator
 from slam.line_slam.front_end import add_registration_factor, register_keyframe
 from slam.line_slam.fusion import LandmarkFusion
 from slam.line_slam.keyframes import KeyframeTrack, OdometryStep
@@ -63,6 +64,7 @@ from slam.line_slam.landmarks import LandmarkBook
 from slam.line_slam.local_map import LocalMap, build_local_map
 from slam.line_slam.loop_closer import LoopCloser
 from slam.line_slam.observations import usable_lines
+from slam.line_slam.odometry_noise import MotionNoiseEstimator
 from slam.line_slam.report import ScanReport, SlamWarning, degradation
 from slam.result import SlamResult
 from slam.types import Scan, check_lines, check_scan
@@ -86,6 +88,7 @@ COUNTERS = (
     "tentative_promoted",
     "tentative_expired",
     "registrations_failed",
+    "registrations_rejected",
     "relocalisations",
     "relocalisations_used",
     "loop_closure_attempts",
@@ -94,7 +97,6 @@ COUNTERS = (
     "loop_closures_undone",
     "loop_closures_repeated",
     "loop_closures_gated",
-    "loop_closure_gate_overrides",
     "keyframes_without_lines",
     "keyframes_parallel_lines",
     "keyframes_lost_association",
@@ -153,13 +155,22 @@ class LineSlam:
         self.graph = LineGraph()
         self.backend: BatchBackend | Isam2Backend = make_backend(cfg.backend, cfg.solver, cfg.isam2)
         self.track = KeyframeTrack(cfg.keyframes)
+        self.drift = DriftAccumulator(cfg.frontend.drift_xy_per_m, cfg.frontend.drift_theta_per_m)
+        self.odometry_noise = MotionNoiseEstimator(cfg.motion)
         self.book = LandmarkBook(self.graph, cfg.frontend)
         self.audit = MergeAudit(self.book, cfg.fusion, self.counters)
         self.fusion = LandmarkFusion(
-            self.book, self.track, self.audit, cfg, self.counters, self.clock
+            self.book, self.drift, self.audit, cfg, self.counters, self.clock
         )
         self.loop_closer = LoopCloser(
-            self.book, self.track, self.audit, self.backend, cfg, self.counters, self.clock
+            self.book,
+            self.track,
+            self.drift,
+            self.audit,
+            self.backend,
+            cfg,
+            self.counters,
+            self.clock,
         )
 
     @property
@@ -255,16 +266,26 @@ class LineSlam:
         x_pred = (
             step.pose_odom_laser.copy() if step.first else pose_compose(g.poses[prev], step.delta)
         )
-        Q = cfg.motion.covariance(step.delta)
+        Q = self.odometry_noise.model.covariance(step.delta)
         # 4. front end: registration against the local map = initial guess + association
         with self.clock("frontend"):
             local = LocalMap.empty()
             if K and not step.first:
-                local = build_local_map(self.book, self.track, x_pred, cfg)
+                local = build_local_map(self.book, self.drift, x_pred, cfg)
             reg = register_keyframe(obs, local, x_pred, Q, cfg.frontend)
         self.counters["relocalisations"] += int(reg.relocalised)
         self.counters["relocalisations_used"] += int(reg.relocalisation_used)
         self.counters["registrations_failed"] += int(reg.failed)
+        self.counters["registrations_rejected"] += int(reg.rejected)
+        # the step's uncertainty (drift) and what it says about the odometry's noise
+        self.drift.add_step(
+            np.zeros((3, 3)) if step.first else (Q if reg.cov is None else reg.cov),
+            self.track.path_m,
+            None if step.first else pose_between(g.poses[prev], reg.pose_world_laser),
+        )
+        if reg.cov is not None:
+            self.odometry_noise.add(step.delta, reg.correction, reg.prior_cov, reg.cov)
+        self.odometry_noise.keyframe()
         with self.clock("associate"):
             # 5. the pose and its odometry
             i = g.add_pose(reg.pose_world_laser)
@@ -346,12 +367,20 @@ class LineSlam:
         stats: dict[str, Any] = {}
         with self.clock("covariances"):
             result = assemble_result(
-                self.graph, self.backend, self.track, self.config, self.policy, stats
+                self.graph,
+                self.backend,
+                self.track,
+                self.config,
+                self.policy,
+                stats,
+                self.odometry_noise.model,
             )
         time_s = self.clock.time_s
         stats.update(self.counters)
         stats["backend"] = self.backend.stats()
         stats["loop_closures_log"] = [a.as_log() for a in self.loop_closer.attempts]
+        stats["odometry_noise"] = self.odometry_noise.summary()
+        stats["drift_scale"] = {"xy": self.drift.scale_xy, "theta": self.drift.scale_theta}
         stats["runtime_s"] = {
             "total": float(np.sum(self.track.scan_runtime_s)) + time_s["optimize"],
             **{k: float(v) for k, v in time_s.items()},

@@ -1,0 +1,182 @@
+"""The odometry's noise, estimated during the run from the front end's registrations.
+
+The motion model (:class:`slam.models.motion.MotionNoiseConfig`) says how uncertain a relative
+motion ``δ`` is: ``σ_xy² = a₀ + a₁·d + a₂·|dθ|`` and ``σ_θ² = b₀ + b₁·d + b₂·|dθ|`` with ``d``
+the distance and ``|dθ|`` the turn.  The configured values are a prior; each log's odometry is
+its own.  Wherever a keyframe's lines pin its pose down in every direction (the registration's
+posterior covariance below a quarter of the prediction's in every direction), the registration
+measured the odometry's error on that step:
+
+``ν = (I + P_L I_P) c``,   ``E[ν νᵀ] ≈ Q_true(δ) + P_L``,
+
+with ``c = x_reg ⊖ x̂`` the registration's correction of the prediction, ``I_P`` the
+prediction's information and ``P_L`` the lines' own covariance.  The squared residuals (minus
+the lines' part) are regressed on ``(1, d, |dθ|)`` by weighted, non-negative least squares with
+the weights of a χ² variable (``Var(σ² z²) = 2σ⁴``), gross outliers (beyond 4σ under the
+current fit: wheel slip, a wrong pairing) left out, and the prior counted as ``prior_weight``
+samples.  The estimate is refreshed every ``update_every`` keyframes once
+``min_samples`` are in; later predictions and odometry factors use it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import lsq_linear
+
+from slam.models.motion import MotionNoiseConfig
+
+__all__ = ["MotionNoiseEstimator"]
+
+FloatArray = NDArray[np.float64]
+
+_FLOOR_XY = 1e-3**2
+_FLOOR_TH = 1e-4**2
+
+
+@dataclass(frozen=True)
+class _Fit:
+    xy: FloatArray
+    theta: FloatArray
+
+
+def _params(model: MotionNoiseConfig) -> _Fit:
+    return _Fit(
+        np.array([model.sigma_xy_min_m**2, model.sigma_xy_per_m**2, model.sigma_xy_per_rad**2]),
+        np.array(
+            [model.sigma_theta_min_rad**2, model.sigma_theta_per_m**2, model.sigma_theta_per_rad**2]
+        ),
+    )
+
+
+def _fit_one(
+    A: FloatArray, y: FloatArray, p0: FloatArray, prior_weight: float, floor: float
+) -> FloatArray:
+    """Weighted non-negative least squares of ``y ≈ A p`` with a prior ``p0`` (module doc)."""
+    p = p0.copy()
+    keep = np.ones(y.size, dtype=bool)
+    for _ in range(3):
+        m = np.maximum(A @ p, floor)
+        keep = y <= 16.0 * m
+        w = 1.0 / (np.sqrt(2.0) * m)
+        # the prior as pseudo-samples at the same motions, prior_weight of them in all
+        w0 = np.sqrt(prior_weight / max(int(keep.sum()), 1)) * w
+        rows = np.vstack([A[keep] * w[keep, None], A[keep] * w0[keep, None]])
+        rhs = np.concatenate([y[keep] * w[keep], (A[keep] @ p0) * w0[keep]])
+        if rows.shape[0] < 3:
+            return p0
+        sol = lsq_linear(rows, rhs, bounds=(np.array([floor, 0.0, 0.0]), np.inf))
+        p = np.asarray(sol.x, dtype=float)
+    return p
+
+
+class MotionNoiseEstimator:
+    """Collects registration residuals and fits the motion model (module docstring).
+
+    Parameters
+    ----------
+    prior : MotionNoiseConfig
+        The configured model: the starting point and the prior of the fit.
+    prior_weight : float
+        How many samples the prior counts as.
+    min_samples, update_every : int
+        The first fit needs ``min_samples`` samples; the model is refitted every
+        ``update_every`` keyframes.
+    """
+
+    def __init__(
+        self,
+        prior: MotionNoiseConfig,
+        prior_weight: float = 30.0,
+        min_samples: int = 30,
+        update_every: int = 25,
+    ) -> None:
+        self.prior = prior
+        self.model = prior
+        self.prior_weight = prior_weight
+        self.min_samples = min_samples
+        self.update_every = update_every
+        self._features: list[tuple[float, float, float]] = []
+        self._y_xy: list[float] = []
+        self._y_th: list[float] = []
+        self._since = 0
+        self.fits = 0
+
+    @property
+    def n_samples(self) -> int:
+        """Samples collected."""
+        return len(self._y_th)
+
+    def add(
+        self,
+        delta: FloatArray,
+        correction: FloatArray,
+        prior_cov: FloatArray,
+        posterior_cov: FloatArray,
+    ) -> bool:
+        """Offer one registration; returns whether it was used as a sample.
+
+        Parameters
+        ----------
+        delta : ndarray, shape (3,)
+            The odometry's motion from the previous keyframe.
+        correction : ndarray, shape (3,)
+            ``x_reg ⊖ x̂`` (right tangent space).
+        prior_cov, posterior_cov : ndarray, shape (3, 3)
+            The registration's prior (prediction) and posterior covariances.
+        """
+        P0 = np.asarray(prior_cov, dtype=float)
+        Pp = np.asarray(posterior_cov, dtype=float)
+        L = np.linalg.cholesky(P0)
+        Li = np.linalg.inv(L)
+        ratio = np.linalg.eigvalsh(Li @ Pp @ Li.T)
+        if ratio.max() > 0.25:
+            return False
+        I_P = np.linalg.inv(P0)
+        I_post = np.linalg.inv(Pp)
+        P_L = np.linalg.inv(I_post - I_P)
+        nu = (np.eye(3) + P_L @ I_P) @ np.asarray(correction, dtype=float)
+        d = float(np.hypot(delta[0], delta[1]))
+        turn = abs(float(delta[2]))
+        self._features.append((1.0, d, turn))
+        self._y_xy.append(0.5 * (nu[0] ** 2 + nu[1] ** 2) - 0.5 * (P_L[0, 0] + P_L[1, 1]))
+        self._y_th.append(float(nu[2] ** 2 - P_L[2, 2]))
+        return True
+
+    def keyframe(self) -> bool:
+        """Count a keyframe; refit when due.  Returns whether the model changed."""
+        self._since += 1
+        if self.n_samples < self.min_samples or self._since < self.update_every:
+            return False
+        self._since = 0
+        A = np.asarray(self._features, dtype=float)
+        p0 = _params(self.prior)
+        xy = _fit_one(A, np.asarray(self._y_xy), p0.xy, self.prior_weight, _FLOOR_XY)
+        th = _fit_one(A, np.asarray(self._y_th), p0.theta, self.prior_weight, _FLOOR_TH)
+        self.model = replace(
+            self.prior,
+            sigma_xy_min_m=float(np.sqrt(xy[0])),
+            sigma_xy_per_m=float(np.sqrt(xy[1])),
+            sigma_xy_per_rad=float(np.sqrt(xy[2])),
+            sigma_theta_min_rad=float(np.sqrt(th[0])),
+            sigma_theta_per_m=float(np.sqrt(th[1])),
+            sigma_theta_per_rad=float(np.sqrt(th[2])),
+        )
+        self.fits += 1
+        return True
+
+    def summary(self) -> dict[str, float | int]:
+        """The current model and how it was obtained (for ``summary.json``)."""
+        m = self.model
+        return {
+            "samples": self.n_samples,
+            "fits": self.fits,
+            "sigma_xy_min_m": m.sigma_xy_min_m,
+            "sigma_xy_per_m": m.sigma_xy_per_m,
+            "sigma_xy_per_rad": m.sigma_xy_per_rad,
+            "sigma_theta_min_rad": m.sigma_theta_min_rad,
+            "sigma_theta_per_m": m.sigma_theta_per_m,
+            "sigma_theta_per_rad": m.sigma_theta_per_rad,
+        }

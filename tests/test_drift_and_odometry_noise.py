@@ -1,0 +1,137 @@
+"""The front end's drift accumulator and the odometry-noise estimator (slam.line_slam)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from slam.frontend.config import FrontendConfig
+from slam.geometry import pose_between, pose_compose
+from slam.line_slam.drift import DriftAccumulator
+from slam.line_slam.front_end import correction_consistency
+from slam.line_slam.odometry_noise import MotionNoiseEstimator
+from slam.models.motion import MotionNoiseConfig
+
+
+def test_drift_sums_step_variances_and_a_systematic_part():
+    d = DriftAccumulator(xy_per_m=0.01, theta_per_m=0.002)
+    steps = [np.diag([0.0, 0.0, 0.0]), np.diag([4e-4, 1e-4, 1e-6]), np.diag([1e-4, 9e-4, 4e-6])]
+    for k, C in enumerate(steps):
+        d.add_step(C, path_m=2.0 * k, step_pose=np.array([2.0, 0.0, 0.0]))
+    sxy, sth = d.between(0, 2)
+    # larger eigenvalue of each xy block: 4e-4 + 9e-4; heading 1e-6 + 4e-6; path 4 m
+    assert float(sxy) == pytest.approx(np.sqrt(13e-4 + (0.01 * 4.0) ** 2))
+    assert float(sth) == pytest.approx(np.sqrt(5e-6 + (0.002 * 4.0) ** 2))
+    assert np.allclose(d.between(2, 0), d.between(0, 2))
+    sxy1, _ = d.since(np.array([1]))
+    assert float(sxy1[0]) == pytest.approx(np.sqrt(9e-4 + 0.02**2))
+    # the chain of the front end's steps
+    np.testing.assert_allclose(d.relative(0, 2), [4.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_drift_scale_learns_from_closures_larger_than_predicted(rng):
+    d = DriftAccumulator()
+    for _ in range(3):
+        d.add_step(np.diag([1e-3, 1e-3, 1e-4]), 0.0, np.zeros(3))
+    sigma_xy, sigma_th = 0.1, 0.01
+    for _ in range(400):
+        t = rng.normal(0.0, 2.0 * np.array([sigma_xy, sigma_xy, sigma_th]))
+        d.observe_closure(t, sigma_xy, sigma_th, single_direction=False)
+    # closures twice as large as predicted: the scale becomes about 2 (never below 1)
+    assert d.scale_xy == pytest.approx(2.0, rel=0.15)
+    assert d.scale_theta == pytest.approx(2.0, rel=0.15)
+    e = DriftAccumulator()
+    for _ in range(100):
+        e.observe_closure(np.zeros(3) + 1e-4, sigma_xy, sigma_th, single_direction=False)
+    assert e.scale_xy == 1.0 and e.scale_theta == 1.0
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(7)
+
+
+def _map_step(rng, P0, P_L):
+    """A prediction error from P0 and a lines-only measurement error from P_L: the MAP correction
+    and its posterior covariance."""
+    x_err = rng.multivariate_normal(np.zeros(3), P0)  # prediction minus truth
+    l_err = rng.multivariate_normal(np.zeros(3), P_L)  # lines-only estimate minus truth
+    I0, IL = np.linalg.inv(P0), np.linalg.inv(P_L)
+    post = np.linalg.inv(I0 + IL)
+    # MAP relative to the prediction: post (IL (l − x))
+    c = post @ (IL @ (l_err - x_err))
+    return c, post
+
+
+def test_registration_correction_is_chi2_distributed(rng):
+    """Monte Carlo: under the models the correction's squared distance is χ² with as many
+    degrees of freedom as the lines constrain (NEES mean ≈ dof, 99.9 % point respected)."""
+    P0 = np.diag([0.03**2, 0.02**2, 0.02**2])
+    for P_L, dof in ((np.diag([0.01**2, 0.015**2, 0.004**2]), 3), (None, 2)):
+        d2 = []
+        for _ in range(3000):
+            if P_L is None:
+                # parallel walls: nothing along x (the lines' information has rank 2)
+                IL = np.diag([0.0, 1.0 / 0.01**2, 1.0 / 0.004**2])
+                I0 = np.linalg.inv(P0)
+                post = np.linalg.inv(I0 + IL)
+                x_err = rng.multivariate_normal(np.zeros(3), P0)
+                noise = np.array([0.0, rng.normal(0, 0.01), rng.normal(0, 0.004)])
+                c = post @ (IL @ (noise - x_err))
+            else:
+                c, post = _map_step(rng, P0, P_L)
+            value, k = correction_consistency(c, P0, post)
+            assert k == dof
+            d2.append(value)
+        d2 = np.asarray(d2)
+        assert abs(d2.mean() - dof) < 0.15 * dof
+        assert np.mean(d2 > chi2.ppf(0.999, dof)) < 0.004
+
+
+def test_odometry_noise_estimator_recovers_the_model(rng):
+    """Registrations of a simulated run whose odometry is noisier than configured: the fitted
+    model finds the true noise from the residuals (the prior far off)."""
+    true = MotionNoiseConfig(
+        sigma_xy_per_m=0.12, sigma_xy_per_rad=0.02, sigma_theta_per_m=0.06, sigma_theta_per_rad=0.1
+    )
+    prior = MotionNoiseConfig()
+    est = MotionNoiseEstimator(prior, prior_weight=30.0, min_samples=30, update_every=25)
+    floor = FrontendConfig().prior_sigma_xy_m
+    P_L = np.diag([0.004**2, 0.004**2, 0.0015**2])
+    for _ in range(1500):
+        delta = np.array([rng.uniform(0.1, 0.6), rng.normal(0, 0.02), rng.normal(0, 0.3)])
+        Q = prior.covariance(delta)
+        P0 = Q + np.diag([floor**2, floor**2, 0.01**2])
+        x_err = rng.multivariate_normal(np.zeros(3), true.covariance(delta))
+        l_err = rng.multivariate_normal(np.zeros(3), P_L)
+        I0, IL = np.linalg.inv(P0), np.linalg.inv(P_L)
+        post = np.linalg.inv(I0 + IL)
+        c = post @ (IL @ (l_err - x_err))
+        est.add(delta, c, P0, post)
+        est.keyframe()
+    m = est.model
+    assert est.fits > 10
+    assert m.sigma_xy_per_m == pytest.approx(true.sigma_xy_per_m, rel=0.2)
+    assert m.sigma_theta_per_m == pytest.approx(true.sigma_theta_per_m, rel=0.25)
+    assert m.sigma_theta_per_rad == pytest.approx(true.sigma_theta_per_rad, rel=0.2)
+
+
+def test_odometry_noise_estimator_ignores_weakly_constrained_registrations():
+    est = MotionNoiseEstimator(MotionNoiseConfig())
+    P0 = np.diag([0.03**2, 0.03**2, 0.02**2])
+    # posterior barely tighter than the prior in x (parallel walls): not a sample
+    post = np.diag([0.029**2, 0.005**2, 0.002**2])
+    assert not est.add(np.array([0.3, 0.0, 0.1]), np.array([0.01, 0.0, 0.0]), P0, post)
+    assert est.n_samples == 0
+
+
+def test_front_end_chain_is_the_composition_of_its_steps(rng):
+    d = DriftAccumulator()
+    poses = [np.zeros(3)]
+    d.add_step(np.zeros((3, 3)), 0.0, None)  # the first keyframe
+    for _ in range(20):
+        step = np.array([rng.uniform(0, 0.5), rng.normal(0, 0.05), rng.normal(0, 0.3)])
+        poses.append(pose_compose(poses[-1], step))
+        d.add_step(np.eye(3) * 1e-4, 0.0, step)
+    np.testing.assert_allclose(d.relative(3, 17), pose_between(poses[3], poses[17]), atol=1e-12)
