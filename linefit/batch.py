@@ -31,7 +31,7 @@ from linefit.readings import check_batch, check_reach, scan_points, valid_readin
 from linefit.refine import refine
 from linefit.split_merge import split_merge_groups
 
-__all__ = ["extract_lines_batch", "extract_lines_batch_numpy"]
+__all__ = ["extract_lines_batch", "extract_lines_batch_numpy", "kernel_ready", "warm_up"]
 
 IntArray = NDArray[np.intp]
 
@@ -130,6 +130,26 @@ def extract_lines_batch(
             )
         )
     return out
+
+
+def kernel_ready() -> bool:
+    """The compiled kernel is in memory (:func:`warm_up` or an extraction has run)."""
+    return bool(extract_kernel.signatures)
+
+
+def warm_up() -> None:
+    """Load the compiled kernel now (from numba's cache, or compile it: about 30 s, once).
+
+    The first :func:`extract_lines_batch` of a process does this anyway; a caller that wants
+    it at a chosen moment (e.g. off the main thread, ``slam.extraction``) calls this.  Extracts
+    the lines of a small made-up scan, through the same call as every extraction (same
+    argument types, so the same compiled code).
+    """
+    if kernel_ready():
+        return
+    phi = np.linspace(-np.pi / 2, np.pi / 2, 61)
+    d = np.minimum(2.0 / np.maximum(np.cos(phi), 1e-3), 8.0)  # a wall 2 m ahead
+    extract_lines_batch(d[None, :], phi, max_range_m=10.0)
 
 
 def extract_lines_batch_numpy(

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from slam import interrupts
 from slam.errors import InputError
 from slam.geometry import pose_compose
 
@@ -94,6 +95,7 @@ def export_occupancy(
     scans = []
     n = 0
     for k, scan in enumerate(source.scans(len(stamps))):
+        interrupts.check()  # between scans (slam.interrupts)
         n = k + 1
         if abs(scan.timestamp - stamps[k]) > 1e-5:
             raise InputError(
@@ -106,6 +108,7 @@ def export_occupancy(
     if n < len(stamps):
         raise InputError(f"{source.log} has {n} scans, the trajectory {len(stamps)}")
     grid = occupancy_grid(poses[keep], scans, resolution_m)
+    interrupts.check()
     return list(write_map_server(grid, out, into=into))
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from linefit.line import Line
+from slam import interrupts
 from slam.config import RunConfig
 from slam.errors import InputError
 from slam.geometry import pose_compose
@@ -190,6 +191,7 @@ def build_map(
     t_fit = t_merge = 0.0
     t0 = time.perf_counter()
     for scan in scans:
+        interrupts.check()  # between scans (slam.interrupts)
         if max_scans is not None and n_scans + skipped >= max_scans:
             break
         pose = scan_pose(scan, policy)
@@ -213,6 +215,7 @@ def build_map(
         if progress is not None:
             progress(1)
     total = time.perf_counter() - t0
+    interrupts.check()
     line_map = builder.line_map()
     st = builder.stats
     summary: dict[str, Any] = {
@@ -239,6 +242,7 @@ def build_map(
 def _write_map_files(out: Path, run: MapRun, title: str, plot: bool) -> dict[str, Path]:
     """Write ``map.json`` and the figures (their time goes to ``runtime_s["plot"]``)."""
     paths = {"map": write_map_json(out / "map.json", run.line_map)}
+    interrupts.check()
     if plot and run.figures is not None:
         t0 = time.perf_counter()
         paths.update(_draw(out / "figures", run, title))

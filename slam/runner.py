@@ -30,6 +30,7 @@ from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
+from slam import interrupts
 from slam.config import RunConfig, check_run_config
 from slam.diagnostics import WarningTally, tally_warnings
 from slam.errors import InputError
@@ -91,7 +92,8 @@ def feed_scans(
     ``linefit_config`` the runner extracts every scan's lines on the way
     (:func:`slam.extraction.iter_scan_lines`, batches of consecutive scans) and calls
     ``add_scan(scan, lines)`` scan by scan; ``progress`` is then called with 1 per scan.
-    Feeding stops early once ``estimator.stopped`` is true.
+    Feeding stops early once ``estimator.stopped`` is true.  A signal (:mod:`slam.interrupts`)
+    stops it between scans (between chunks for an estimator whose ``add_scans`` checks itself).
     """
     clock = {"read": 0.0, "estimate": 0.0}
     source: Iterable[Scan] = _timed(itertools.islice(scans, max_scans), clock, "read")
@@ -114,6 +116,7 @@ def feed_scans(
         buffer.clear()
 
     for scan in source:
+        interrupts.check()
         buffer.append(scan)
         n += 1
         if len(buffer) >= (chunk if batch_fn is not None else 1):
@@ -122,6 +125,7 @@ def feed_scans(
                 break
     if buffer:
         flush()
+    interrupts.check()
     if n == 0:
         raise _NoScansError("the log contains no laser scans")
     return clock
@@ -149,6 +153,7 @@ def _feed_with_lines(
     clock["extract"] = 0.0
     n = 0
     for scan, lines in _timed(iter_scan_lines(scans, linefit_config), clock, "extract"):
+        interrupts.check()
         t0 = time.perf_counter()
         estimator.add_scan(scan, lines)
         clock["estimate"] += time.perf_counter() - t0
@@ -230,7 +235,9 @@ def run_estimator_on_log(
         t0 = time.perf_counter()
         estimator.optimize()
         clock["optimize"] = time.perf_counter() - t0
+        interrupts.check()
         result = estimator.result()
+        interrupts.check()
         t0 = time.perf_counter()
         result.write_files(work, min_observations)
         graph = getattr(estimator, "graph", None)

@@ -8,7 +8,11 @@ one run's complete results; no temporary ``.NAME.partial-*`` is left behind (exc
 The signal tests run ``python -m slam`` as real processes, wait until the run has started (its
 temporary folder or file appears beside the target), wait a random (seeded) moment more, send
 the signal, and check the exit status (130 for SIGINT, 143 for SIGTERM), the one line saying
-so, and the target.  The only time bound is the generous "stops within a few seconds".
+so, and the target.  The only time bound is the generous "stops within a few seconds" (the
+stop times themselves are measured by ``scripts/bench_interrupt.py``).  Signals are recorded
+and acted on at the run's next check (``slam.interrupts``), never inside compiled code: a
+signal during the first compiled extraction (numba loading or compiling its code) is tested
+by sending it from inside numba's object-cache callback.
 """
 
 from __future__ import annotations
@@ -169,6 +173,7 @@ def test_signal_stops_the_run_cleanly(tmp_path, long_log, earlier, kind, signum,
     )
     wait_for_partial(tmp_path, target.name, proc)
     time.sleep(float(rng.uniform(0.0, 1.0)))  # a random point of the run
+    assert proc.poll() is None, "the run ended before the signal (the log is too short)"
     proc.send_signal(signum)
     t_signal = time.monotonic()
     try:
@@ -187,6 +192,77 @@ def test_signal_stops_the_run_cleanly(tmp_path, long_log, earlier, kind, signum,
     else:
         assert not target.exists() and not config.exists()
     assert leftovers(tmp_path) == []
+
+
+# Runs lineslam with numba's object-cache hook (called by LLVM, through a ctypes callback,
+# while numba loads or compiles the kernel's machine code) patched to send the process SIGINT,
+# COUNT times, the first time it is called: the signal arrives inside compiled code's loading.
+SIGNAL_IN_FIRST_KERNEL_CALL = """
+import os, signal, sys
+from numba.core.codegen import JITCodeLibrary
+
+original = JITCodeLibrary._object_getbuffer_hook.__func__
+sent = []
+
+def getbuffer(cls, ll_module):
+    if not sent:
+        sent.append(1)
+        for _ in range({count}):
+            os.kill(os.getpid(), signal.SIGINT)
+    return original(cls, ll_module)
+
+JITCodeLibrary._object_getbuffer_hook = classmethod(getbuffer)
+from slam.cli import main
+main(sys.argv[1:])
+"""
+
+
+WARM_UP = (
+    "import numpy as np; from linefit import extract_lines; "
+    "extract_lines(np.full(61, 3.0), np.linspace(-1.5, 1.5, 61))"
+)
+
+
+@pytest.mark.parametrize(
+    ("kind", "cache", "count"),
+    [("extract", "warm", 1), ("slam-batch", "warm", 2), ("extract", "cold", 1)],
+)
+def test_signal_in_the_first_compiled_extraction(tmp_path, kind, cache, count):
+    """A signal while numba loads (warm cache) or compiles (cold) the kernel: 130, nothing left.
+
+    The kernel is loaded off the main thread (``slam.extraction.ensure_kernel``): the run stops
+    at once, not after the loading or the compilation (about 30 s), and no exception is raised
+    inside numba (no "Exception ignored" line, no crash).  Two signals: the second raises at
+    once, still outside numba.
+    """
+    target = tmp_path / ("lines.jsonl" if kind == "extract" else "run")
+    run_env = env()
+    if cache == "cold":
+        run_env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba-cache")  # empty: numba compiles
+    else:  # the kernel is in numba's cache (compiled here if not yet)
+        subprocess.run(
+            [sys.executable, "-c", WARM_UP],
+            env=run_env,
+            check=True,
+            timeout=600,
+        )
+    script = SIGNAL_IN_FIRST_KERNEL_CALL.format(count=count)
+    t0 = time.monotonic()
+    proc = subprocess.run(
+        [sys.executable, "-c", script, *command(kind, DEMO_LOG, target)[3:], "--quiet"],
+        env=run_env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    took = time.monotonic() - t0
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.splitlines() == [
+        "lineslam: interrupted (SIGINT); nothing written, earlier results unchanged"
+    ]
+    assert took < STOP_WITHIN_S + 10.0  # the start-up included; a compilation takes ~30 s more
+    assert not target.exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name != "numba-cache"] == []
 
 
 def test_sigint_stops_a_parallel_compare(tmp_path):

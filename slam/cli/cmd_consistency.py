@@ -14,6 +14,7 @@ from typing import Annotated
 
 import typer
 
+from slam import interrupts
 from slam.cli._app import app
 from slam.cli.common import (
     ConfigOpt,
@@ -69,7 +70,10 @@ def consistency(
         with task_progress(runs, "runs", "run", quiet) as progress:
             result = run_consistency(study, run_config, workers, dask, progress)
         (work / "consistency.json").write_text(json.dumps(result.to_dict(), indent=1))
+        interrupts.check()  # between the steps of the end (slam.interrupts)
         from slam.plotting.compare import plot_errors_over_time, plot_nees_over_time
+
+        interrupts.check()
 
         plot_nees_over_time(
             {k: v.anees for k, v in result.estimators.items()},
@@ -78,6 +82,7 @@ def consistency(
             n_runs=runs,
             title=f"Pose NEES over time, {world} x{loops:g}, {runs} runs",
         )
+        interrupts.check()
         plot_errors_over_time(
             {k: v.pos_rmse_over_time for k, v in result.estimators.items()},
             work / "error.png",

@@ -25,6 +25,7 @@ from typing import Annotated, Literal
 import typer
 
 from linefit import Line
+from slam import interrupts
 from slam.cli._app import app
 from slam.cli.common import (
     ConfigOpt,
@@ -211,6 +212,7 @@ def _extract(
             tqdm(total=total, unit="scan", desc="extract", disable=quiet) as bar,
         ):
             for chunk in _batches(scans, BATCH_SCANS):
+                interrupts.check()  # between chunks (slam.interrupts)
                 results = extract_lines_of_scans(chunk, config.linefit)
                 for scan, lines in zip(chunk, results, strict=True):
                     handle.write(json.dumps(scan_record(scan, lines)) + "\n")

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from linefit.line import Line
+from slam import interrupts
 from slam.config import RunConfig
 from slam.ekf import EkfSlam
 from slam.ekf.threads import blas_threads
@@ -97,6 +98,7 @@ def _ekf(
     ekf = EkfSlam(ekf_cfg, config.linefit, policy, initial_pose_world_laser=initial_pose)
     with blas_threads(ekf_cfg.blas_threads):
         for k, scan in enumerate(scans):
+            interrupts.check()
             if ekf.stopped:
                 break
             if use_lines:
@@ -150,6 +152,7 @@ def _graph(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # SlamWarnings are counted in the result's stats
         for k, scan in enumerate(scans):
+            interrupts.check()
             if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
                 stop = {
                     "stopped_at_scan": k,

@@ -9,10 +9,12 @@ Determinism: tasks carry everything they need, their seeds included (derive them
 :func:`task_seed`), and results come back in task order, so a run gives the same numbers
 serially, on a process pool, or on a cluster.
 
-Interruption: when the waiting is interrupted (``KeyboardInterrupt``, or the command line's
-SIGINT/SIGTERM exception), the tasks not finished are cancelled and the local cluster's worker
-processes are killed at once (their tasks are lost anyway), so that the run stops within a
-second or two, without Dask's shutdown warnings; the exception then propagates.
+Interruption: the waiting checks for a signal (:func:`slam.interrupts.check`) between tasks
+(serially) or every :data:`POLL_S` seconds (on a cluster).  When it is interrupted
+(:class:`~slam.interrupts.Interrupted`, or a ``KeyboardInterrupt``), the tasks not finished are
+cancelled and the local cluster's worker processes are killed at once (their tasks are lost
+anyway), so that the run stops within a second or two, without Dask's shutdown warnings; the
+exception then propagates.
 """
 
 from __future__ import annotations
@@ -20,15 +22,23 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, suppress
 from typing import Any, TypeVar
 
 import numpy as np
 
+from slam import interrupts
 from slam.errors import ConfigError
 
 __all__ = ["map_tasks", "task_seed"]
+
+POLL_S = 0.05
+"""How often (s) the wait for a cluster's results checks for a signal."""
+
+_GIVE_UP_S = 5.0
+"""How long (s) an interrupted start or close of a cluster may take once its workers are killed."""
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -45,15 +55,25 @@ def task_seed(base_seed: int, *keys: int) -> int:
 
 @contextmanager
 def _client(workers: int, dask_address: str | None, timeout_s: float) -> Iterator[Any]:
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise ConfigError(
-            "parallel runs need dask.distributed: pip install 'lineslam[dask]'"
-        ) from exc
+    """A Dask client (and the local cluster it runs on); closed, or killed when interrupted.
+
+    Starting and closing a cluster take a second or two: they run in a helper thread
+    (:func:`slam.interrupts.call_in_thread`), so that a signal meanwhile stops the run at once;
+    the worker processes are then killed (and end anyway with this process: Dask's workers
+    watch their parent).
+    """
+    with interrupts.at_once():  # importing: nothing to clean up
+        try:
+            from dask.distributed import Client, LocalCluster
+        except ImportError as exc:  # pragma: no cover - depends on the installation
+            raise ConfigError(
+                "parallel runs need dask.distributed: pip install 'lineslam[dask]'"
+            ) from exc
     if dask_address is not None:
         try:
-            client = Client(dask_address, timeout=f"{timeout_s}s")
+            client = interrupts.call_in_thread(
+                lambda: Client(dask_address, timeout=f"{timeout_s}s"), name="dask-connect"
+            )
         except OSError as exc:
             raise ConfigError(f"cannot reach the Dask scheduler at {dask_address}: {exc}") from exc
         try:
@@ -66,12 +86,20 @@ def _client(workers: int, dask_address: str | None, timeout_s: float) -> Iterato
     for v in saved:
         os.environ[v] = "1"
     try:
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=":0",  # the scheduler always serves HTTP; any free port
+        cluster = interrupts.call_in_thread(
+            lambda: LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=":0",  # the scheduler always serves HTTP; any free port
+            ),
+            name="dask-start",
         )
+    except BaseException as exc:
+        if not isinstance(exc, Exception):  # interrupted while the workers start
+            _mute_dask()
+            _kill_children_until_stopped()  # the start then fails at once
+        raise
     finally:
         for v, old in saved.items():
             if old is None:
@@ -79,17 +107,51 @@ def _client(workers: int, dask_address: str | None, timeout_s: float) -> Iterato
             else:
                 os.environ[v] = old
     client = Client(cluster)
+    interrupted = False
     try:
         yield client
     except BaseException as exc:
         if not isinstance(exc, Exception):  # interrupted: no graceful shutdown
+            interrupted = True
             _mute_dask()
             _kill_workers(cluster)
         raise
     finally:
-        client.close()
-        cluster.close()
-        _unmute_dask()
+        if interrupted:
+            _close(client, cluster)  # quick: the workers are gone
+        else:
+            try:
+                interrupts.call_in_thread(lambda: _close(client, cluster), name="dask-close")
+            except BaseException as exc:
+                if not isinstance(exc, Exception):  # interrupted while closing
+                    interrupted = True
+                    _mute_dask()
+                    _kill_children_until_stopped()
+                raise
+            _unmute_dask()
+
+
+def _close(client: Any, cluster: Any) -> None:
+    client.close()
+    cluster.close()
+
+
+def _kill_children_until_stopped() -> None:
+    """Kill this process's worker processes until the interrupted start or close has ended.
+
+    The call left running (:func:`slam.interrupts.call_in_thread`) then fails or ends at once;
+    waiting for it lets the process end normally (multiprocessing's resources released).
+    Workers started meanwhile are killed too; after :data:`_GIVE_UP_S` the call is left.
+    """
+    import multiprocessing
+
+    deadline = time.monotonic() + _GIVE_UP_S
+    while True:
+        for child in multiprocessing.active_children():
+            with suppress(OSError):
+                child.kill()
+        if interrupts.wait_abandoned(POLL_S) or time.monotonic() > deadline:
+            return
 
 
 _MUTED: dict[str, int] = {}
@@ -153,6 +215,7 @@ def map_tasks(
     if dask_address is None and workers <= 1:
         out = []
         for i, task in enumerate(tasks):
+            interrupts.check()
             out.append(fn(task))
             if progress is not None:
                 progress(i + 1, total)
@@ -164,10 +227,18 @@ def map_tasks(
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * total
         try:
-            for done, future in enumerate(as_completed(futures), start=1):
-                results[index[future.key]] = future.result()
-                if progress is not None:
-                    progress(done, total)
+            waiting = as_completed(futures)
+            done = 0
+            while not waiting.is_empty():
+                interrupts.check()
+                if not waiting.has_ready():
+                    time.sleep(POLL_S)
+                    continue
+                for future in waiting.next_batch(block=False):
+                    results[index[future.key]] = future.result()
+                    done += 1
+                    if progress is not None:
+                        progress(done, total)
         except BaseException as exc:
             if not isinstance(exc, Exception):  # interrupted: drop the tasks not finished
                 _mute_dask()

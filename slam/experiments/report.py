@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from slam import interrupts
 from slam.evaluation import nees_bounds
 from slam.experiments.linesim import world_and_trajectory
 from slam.experiments.tasks import VariantOutcome
@@ -123,6 +124,7 @@ def write_report(report: CompareReport, out_dir: str | Path, figures: bool = Tru
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for o in report.outcomes:
+        interrupts.check()  # between files and figures (slam.interrupts)
         if o.estimate.result is not None and hasattr(o.estimate.result, "write"):
             o.estimate.result.write(out / o.variant.name)
     doc = report.to_dict()
@@ -205,8 +207,10 @@ def _figures(report: CompareReport, out: Path) -> list[str]:
     if report.data.kind == "sim":
         _, truth = world_and_trajectory(report.data.name, report.data.loops)
     title = "Trajectories over the map" + (f" ({mapped[0].variant.name})" if mapped else "")
+    interrupts.check()
     plot_trajectories(trajs, out / "trajectories.png", segments, truth, title=title)
     names.append("trajectories.png")
+    interrupts.check()
     errs = {o.variant.name: o.pos_err_m for o in report.outcomes if o.pos_err_m is not None}
     rel = {
         o.variant.name: (o.rel_scan, o.rel_err_m)
@@ -225,6 +229,7 @@ def _figures(report: CompareReport, out: Path) -> list[str]:
     elif errs:
         plot_errors_over_time(errs, out / "error.png", ylabel="position error after alignment (m)")
         names.append("error.png")
+    interrupts.check()
     runtimes = {o.variant.name: o.estimate.scan_runtime_s for o in report.outcomes}
     sizes = {
         o.variant.name: np.asarray(o.estimate.result.n_landmarks, dtype=float)
@@ -233,6 +238,7 @@ def _figures(report: CompareReport, out: Path) -> list[str]:
     }
     plot_runtime_per_scan(runtimes, out / "runtime.png", sizes or None)
     names.append("runtime.png")
+    interrupts.check()
     nees = {o.variant.name: o.nees for o in report.outcomes if o.nees is not None}
     if nees:
         plot_nees_over_time(

@@ -19,12 +19,14 @@ queries (pose blocks in the right tangent space, landmark blocks in the anchored
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from typing import Any, Protocol
 
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from slam import interrupts
 from slam.errors import EstimationError
 from slam.geometry import adjoint_pose2, line_to_parent, pose_inverse
 from slam.graph.batch import BatchSolver
@@ -71,6 +73,14 @@ class Backend(Protocol):
 
     def stats(self) -> dict[str, Any]:
         """Counters and timings."""
+
+
+def _checked(indices: IntArray, every: int = 64) -> Iterator[int]:
+    """``indices`` as ints, checking for a signal every ``every`` (:mod:`slam.interrupts`)."""
+    for k, i in enumerate(np.asarray(indices).tolist()):
+        if k % every == 0:
+            interrupts.check()
+        yield int(i)
 
 
 class Isam2Backend:
@@ -127,12 +137,12 @@ class Isam2Backend:
 
     def pose_covariances(self, graph: LineGraph, poses: IntArray) -> FloatArray:
         """``ISAM2.marginalCovariance`` per pose."""
-        out = [self.solver.pose_covariance(int(i)) for i in np.asarray(poses)]
+        out = [self.solver.pose_covariance(i) for i in _checked(poses)]
         return np.array(out).reshape(-1, 3, 3)
 
     def landmark_covariances(self, graph: LineGraph, landmarks: IntArray) -> FloatArray:
         """``ISAM2.marginalCovariance`` per landmark."""
-        out = [self.solver.landmark_covariance(int(j)) for j in np.asarray(landmarks)]
+        out = [self.solver.landmark_covariance(j) for j in _checked(landmarks)]
         return np.array(out).reshape(-1, 2, 2)
 
     def stats(self) -> dict[str, Any]:
@@ -324,15 +334,15 @@ class BatchBackend:
 
     def pose_covariances(self, graph: LineGraph, poses: IntArray) -> FloatArray:
         """Marginals of each pose."""
-        out = [self.joint_covariance(graph, int(i), np.zeros(0, np.intp)) for i in poses]
+        out = [self.joint_covariance(graph, i, np.zeros(0, np.intp)) for i in _checked(poses)]
         return np.array(out).reshape(-1, 3, 3)
 
     def landmark_covariances(self, graph: LineGraph, landmarks: IntArray) -> FloatArray:
         """Marginals of each landmark (anchored chart)."""
         self._ensure_marginals(graph)
         out = []
-        for j in np.asarray(landmarks):
-            if int(j) in self._marg_landmarks:
+        for j in _checked(landmarks):
+            if j in self._marg_landmarks:
                 assert self._marginals is not None
                 out.append(self._marginals.marginalCovariance(keys_of("l", np.array([j]))[0]))
             else:

@@ -34,6 +34,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from slam import interrupts
 from slam.errors import EstimationError
 from slam.geometry import pose_retract
 from slam.graph.config import SolverConfig
@@ -375,6 +376,7 @@ class BatchSolver:
         gfg = gtsam.GaussianFactorGraph()
         relinearize = True
         while True:
+            interrupts.check()  # between iterations (slam.interrupts)
             if relinearize:
                 if stats.iterations >= iters:
                     stats.reason = "iteration limit"

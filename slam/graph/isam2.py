@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
+from slam import interrupts
 from slam.errors import EstimationError
 from slam.geometry import pose_retract
 from slam.graph.config import Isam2Config, SolverConfig
@@ -301,6 +302,8 @@ class Isam2Solver:
             fs = np.concatenate([self._factors_of_pose[p] for p in rebuild]).astype(np.intp)
             touched_lms.update(np.unique(graph.factor_landmark[fs]).tolist())
         self.stats.time_s["build"] += time.perf_counter() - t0
+        if rebuild and len(rebuild) > 64:
+            interrupts.check()  # a restart: building and updating each take a while
         t0 = time.perf_counter()
         try:
             result = self.isam.update(nfg, values, remove, force_relinearize=force_relinearize)
@@ -382,6 +385,7 @@ class Isam2Solver:
         n = self.config.final_updates if max_updates is None else max_updates
         runs = 0
         for _ in range(n):
+            interrupts.check()  # between updates (slam.interrupts)
             result = self.update(graph, force_relinearize=True)
             runs += 1
             # settled: iSAM2 relinearised nothing, so no block is stale and nothing is queued
@@ -391,6 +395,7 @@ class Isam2Solver:
         if not exact:
             return runs
         for _ in range(self.config.final_relinearizations):
+            interrupts.check()
             poses, landmarks = graph.poses.copy(), graph.landmarks.copy()
             self.restart(graph)
             d_poses, d_lms = graph.poses - poses, graph.landmarks - landmarks

@@ -45,6 +45,7 @@ import threading
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
+from slam import interrupts
 from slam.errors import OutputError
 
 __all__ = [
@@ -403,6 +404,7 @@ def staged_dir(
             if _is_inside(exc.filename, work) or exc.errno in (errno.ENOSPC, errno.EDQUOT):
                 raise _output_error(exc, shown) from None
             raise
+        interrupts.check()  # a run interrupted while writing is not put in place
         with _quiet_signals(), _folder_lock(path.parent):
             try:
                 os.chmod(work, 0o777 & ~_UMASK)
@@ -479,6 +481,7 @@ def staged_files(
                 if _is_inside(exc.filename, w) or exc.errno in (errno.ENOSPC, errno.EDQUOT):
                     raise _output_error(exc, s) from None
             raise
+        interrupts.check()
         parents = sorted({str(p.parent) for p in paths})
         with _quiet_signals(), contextlib.ExitStack() as locks:
             for parent in parents:
@@ -533,6 +536,7 @@ def staged_into(
             if _is_inside(exc.filename, work) or exc.errno in (errno.ENOSPC, errno.EDQUOT):
                 raise _output_error(exc, shown) from None
             raise
+        interrupts.check()
         with _quiet_signals():
             try:
                 path.mkdir(exist_ok=True)

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
+from slam import interrupts
 from slam.geometry import (
     adjoint_pose2,
     pose_between,
@@ -144,6 +145,7 @@ def assemble_result(
             0.0,
             (motion or config.motion).covariance(offsets),
         )
+    interrupts.check()  # between the covariance blocks (slam.interrupts)
     poses, cov_out = policy.report(poses, cov)
     assert cov_out is not None
     counts = g.observation_counts()
@@ -152,6 +154,7 @@ def assemble_result(
     lcov = backend.landmark_covariances(g, ids) if ids.size else np.zeros((0, 2, 2))
     J = anchored_jacobian(g.landmarks[ids], g.anchors[ids])
     lcov = J @ lcov @ np.swapaxes(J, 1, 2)
+    interrupts.check()
     la_nf, lcov_nf = landmarks_normal_form(la, lcov)
     assert lcov_nf is not None
     segs, seg_var = landmark_segments(g, ids, la_nf, kf_cov, config.map_segment_gap_m)

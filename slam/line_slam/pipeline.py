@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 
 from linefit.config import LineFitConfig
 from linefit.line import Line
+from slam import interrupts
 from slam.extraction import extract_lines_of_scans, extract_scan_lines
 from slam.geometry import pose_between, pose_compose
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
@@ -182,7 +183,8 @@ class LineSlam:
         """Process several scans.
 
         The lines of those that become keyframes are extracted together
-        (:func:`slam.extraction.extract_lines_of_scans`, the vectorised fast path).
+        (:func:`slam.extraction.extract_lines_of_scans`, the vectorised fast path).  A signal
+        (:mod:`slam.interrupts`) stops it between two scans (:class:`~slam.interrupts.Interrupted`).
         """
         scans = [check_scan(s, f"scans[{k}]") for k, s in enumerate(scans)]
         odometry = [self.policy.pose_odom_laser(s) for s in scans]
@@ -190,7 +192,11 @@ class LineSlam:
         with self.clock("extract"):
             extracted = extract_lines_of_scans([scans[n] for n in keyframes], self.linefit_config)
         lines = dict(zip(keyframes, extracted, strict=True))
-        return [self.add_scan(s, lines.get(n, [])) for n, s in enumerate(scans)]
+        reports = []
+        for n, s in enumerate(scans):
+            interrupts.check()
+            reports.append(self.add_scan(s, lines.get(n, [])))
+        return reports
 
     def add_scan(self, scan: Scan, lines: Sequence[Line] | None = None) -> ScanReport:
         """Process one scan.
@@ -323,7 +329,9 @@ class LineSlam:
     def optimize(self) -> dict[str, Any]:
         """Final fusion over the whole map and convergence of the back-end.
 
-        Returns the back-end's statistics of the last solve.
+        Returns the back-end's statistics of the last solve.  A signal
+        (:mod:`slam.interrupts`) stops it between two solves (and within a batch solve, between
+        its iterations).
         """
         t0 = time.perf_counter()
         stats: dict[str, Any] = {}
@@ -331,7 +339,9 @@ class LineSlam:
         if g.n_poses == 0:
             return stats
         for _ in range(3):
+            interrupts.check()
             stats = self.backend.optimize(g)
+            interrupts.check()
             self.book.refresh_extents()
             if not self.config.fusion.enabled:
                 break
@@ -340,9 +350,12 @@ class LineSlam:
             self.backend.update(g)
         if self.fusion.pending_audit:
             # the last round's merges, checked at the converged estimate
+            interrupts.check()
             stats = self.backend.optimize(g)
+            interrupts.check()
             if self.audit.audit(self.fusion.pending_audit):
                 self.backend.update(g)
+                interrupts.check()
                 stats = self.backend.optimize(g)
             self.fusion.pending_audit = []
             self.book.refresh_extents()

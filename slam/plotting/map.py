@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from slam import interrupts
 from slam.plotting.figure import plt, save_figure
 from slam.plotting.shapes import add_polygons, add_segments, band_polygons, ellipse_polygons
 
@@ -117,6 +118,7 @@ def figure_panels(
     sc = auto(np.sqrt(np.linalg.eigvalsh(covs)[:, -1]) if covs.size else np.zeros(0))
     plot_points(axes[0], pts, ellipse_centers, ellipse_covs, scale=sc)
     axes[0].set_title(f"A: raw points ({len(pts)}), 3σ ×{sc:g}")
+    interrupts.check()
     sc = auto(np.sqrt(np.asarray(fit[1]).reshape(-1, 2, 2)[:, 0, 0]))
     plot_lines(axes[1], *fit, scale=sc)
     axes[1].set_title(f"B: fitted lines ({len(fit[0])}), 3σ ×{sc:g}")
@@ -132,4 +134,5 @@ def figure_panels(
         ax.set_ylabel("y (m)")
     if title:
         fig.suptitle(title)
+    interrupts.check()
     return save_figure(fig, path, dpi=130)

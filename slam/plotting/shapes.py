@@ -25,6 +25,8 @@ import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 from numpy.typing import ArrayLike, NDArray
 
+from slam import interrupts
+
 __all__ = [
     "add_polygons",
     "add_segments",
@@ -131,7 +133,9 @@ def band_polygons(
     polys: list[FloatArray] = []
     ra = np.asarray(r_alpha, dtype=np.float64).reshape(-1, 2)
     covs = np.asarray(cov_r_alpha, dtype=np.float64).reshape(-1, 2, 2)
-    for (r, a), P, segs in zip(ra, covs, segments, strict=True):
+    for q, ((r, a), P, segs) in enumerate(zip(ra, covs, segments, strict=True)):
+        if q % 1024 == 0:
+            interrupts.check()  # a map of many lines takes seconds (slam.interrupts)
         tangent = np.array([-np.sin(a), np.cos(a)])
         for seg in np.asarray(segs, dtype=np.float64).reshape(-1, 2, 2):
             s0, s1 = seg @ tangent
