@@ -58,13 +58,15 @@ from slam.line_slam.config import SlamConfig
 from slam.line_slam.drift import DriftAccumulator
 from slam.line_slam.front_end import add_registration_factor, register_keyframe
 from slam.line_slam.fusion import LandmarkFusion
-from slam.line_slam.keyframes import KeyframeTrack, OdometryStep
+from slam.line_slam.keyframes import EveryKeyframes, KeyframeTrack, OdometryStep
 from slam.line_slam.landmarks import LandmarkBook
+from slam.line_slam.line_noise import LineModelErrorEstimator
 from slam.line_slam.local_map import LocalMap, build_local_map
 from slam.line_slam.loop_closer import LoopCloser
 from slam.line_slam.observations import usable_lines
 from slam.line_slam.odometry_noise import MotionNoiseEstimator
 from slam.line_slam.report import ScanReport, SlamWarning, degradation
+from slam.models.anchored import model_error_covariance
 from slam.result import SlamResult
 from slam.types import Scan, check_lines, check_scan
 from slam.validate import check_config
@@ -101,6 +103,9 @@ COUNTERS = (
     "keyframes_lost_association",
 )
 """The counters of a run, in ``summary.json`` (``docs/real-logs.md`` says what each counts)."""
+
+LINE_NOISE_INTERVAL = 50
+"""Keyframes between two estimates of the lines' model error."""
 
 
 class LineSlam:
@@ -156,6 +161,10 @@ class LineSlam:
         self.track = KeyframeTrack(cfg.keyframes)
         self.drift = DriftAccumulator(cfg.frontend.drift_xy_per_m, cfg.frontend.drift_theta_per_m)
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
+        self.line_noise = LineModelErrorEstimator(
+            cfg.line_model_sigma_r_m, cfg.line_model_sigma_alpha_rad
+        )
+        self._line_noise_due = EveryKeyframes()
         self.book = LandmarkBook(self.graph, cfg.frontend)
         self.audit = MergeAudit(self.book, cfg.fusion, self.counters)
         self.fusion = LandmarkFusion(
@@ -251,7 +260,7 @@ class LineSlam:
         cfg = self.config
         g = self.graph
         # 2. usable lines
-        obs, rejected = usable_lines(lines, cfg)
+        obs, rejected = usable_lines(lines, cfg, self.line_noise.sigmas)
         K = len(obs)
         self.counters["lines_rejected"] += rejected
         self.counters["lines_used"] += K
@@ -302,6 +311,8 @@ class LineSlam:
         with self.clock("backend"):
             self.backend.update(g)
         self.book.update_extents(assoc.factors, self.backend.estimate_moved)
+        if self._line_noise_due.tick(cfg.line_model_error == "estimated", LINE_NOISE_INTERVAL):
+            self.line_noise.update(g, self.book.fit_cov)
         # 9. fusion and 10. loop closing
         merged = self.fusion.round(reg.pose_world_laser) if self.fusion.due() else 0
         closures = self.loop_closer.attempt(i) if self.loop_closer.due() else 0
@@ -330,6 +341,10 @@ class LineSlam:
         g = self.graph
         if g.n_poses == 0:
             return stats
+        if self.config.line_model_error == "estimated" and self.line_noise.update(
+            g, self.book.fit_cov
+        ):
+            self._reweight_lines()
         for _ in range(3):
             stats = self.backend.optimize(g)
             self.book.refresh_extents()
@@ -349,6 +364,17 @@ class LineSlam:
         self.clock.time_s["optimize"] += time.perf_counter() - t0
         return stats
 
+    def _reweight_lines(self) -> None:
+        """Every line factor's covariance: its fit's plus the current model error; restart."""
+        g = self.graph
+        f = np.arange(g.n_line_factors)
+        sigma_o, sigma_a = self.line_noise.sigmas
+        cov = self.book.fit_cov + model_error_covariance(
+            g.factor_z, g.factor_endpoints, sigma_o, sigma_a
+        )
+        g.set_line_factor_covariances(f, cov)
+        self.backend.reset(g)
+
     def result(self) -> SlamResult:
         """The current estimate of every scan's pose and the map, with covariances."""
         stats: dict[str, Any] = {}
@@ -367,6 +393,7 @@ class LineSlam:
         stats["backend"] = self.backend.stats()
         stats["loop_closures_log"] = [a.as_log() for a in self.loop_closer.attempts]
         stats["odometry_noise"] = self.odometry_noise.summary()
+        stats["line_model_error"] = self.line_noise.summary()
         stats["drift_scale"] = {"xy": self.drift.scale_xy, "theta": self.drift.scale_theta}
         stats["runtime_s"] = {
             "total": float(np.sum(self.track.scan_runtime_s)) + time_s["optimize"],
