@@ -104,8 +104,14 @@ COUNTERS = (
 )
 """The counters of a run, in ``summary.json`` (``docs/real-logs.md`` says what each counts)."""
 
+LINE_NOISE_FIRST = 20
+"""Keyframes before the first estimate of the lines' model error."""
+
 LINE_NOISE_INTERVAL = 50
-"""Keyframes between two estimates of the lines' model error."""
+"""Keyframes between two later estimates of the lines' model error."""
+
+LINE_NOISE_CHANGE = 0.2
+"""Relative change of the estimated model error that re-weights the line factors."""
 
 
 class LineSlam:
@@ -165,6 +171,7 @@ class LineSlam:
             cfg.line_model_sigma_r_m, cfg.line_model_sigma_alpha_rad
         )
         self._line_noise_due = EveryKeyframes()
+        self._lines_weighted_with = self.line_noise.sigmas
         self.book = LandmarkBook(self.graph, cfg.frontend)
         self.audit = MergeAudit(self.book, cfg.fusion, self.counters)
         self.fusion = LandmarkFusion(
@@ -311,8 +318,9 @@ class LineSlam:
         with self.clock("backend"):
             self.backend.update(g)
         self.book.update_extents(assoc.factors, self.backend.estimate_moved)
-        if self._line_noise_due.tick(cfg.line_model_error == "estimated", LINE_NOISE_INTERVAL):
-            self.line_noise.update(g, self.book.fit_cov)
+        interval = LINE_NOISE_INTERVAL if self.line_noise.updates else LINE_NOISE_FIRST
+        if self._line_noise_due.tick(cfg.line_model_error == "estimated", interval):
+            self._estimate_line_noise()
         # 9. fusion and 10. loop closing
         merged = self.fusion.round(reg.pose_world_laser) if self.fusion.due() else 0
         closures = self.loop_closer.attempt(i) if self.loop_closer.due() else 0
@@ -341,10 +349,8 @@ class LineSlam:
         g = self.graph
         if g.n_poses == 0:
             return stats
-        if self.config.line_model_error == "estimated" and self.line_noise.update(
-            g, self.book.fit_cov
-        ):
-            self._reweight_lines()
+        if self.config.line_model_error == "estimated":
+            self._estimate_line_noise()
         for _ in range(3):
             stats = self.backend.optimize(g)
             self.book.refresh_extents()
@@ -363,6 +369,23 @@ class LineSlam:
             self.book.refresh_extents()
         self.clock.time_s["optimize"] += time.perf_counter() - t0
         return stats
+
+    def _estimate_line_noise(self) -> None:
+        """Estimate the lines' model error; re-weight the line factors when it has moved.
+
+        The factors are re-weighted (and the back-end restarted) when either component differs
+        by more than :data:`LINE_NOISE_CHANGE` (relative) from what they were weighted with: the
+        estimate settles within the first few hundred keyframes, while the graph is small.
+        """
+        if not self.line_noise.update(self.graph, self.book.fit_cov):
+            return
+        new = self.line_noise.sigmas
+        old = self._lines_weighted_with
+        if any(
+            abs(n - o) > LINE_NOISE_CHANGE * max(o, 1e-6) for n, o in zip(new, old, strict=True)
+        ):
+            self._reweight_lines()
+            self._lines_weighted_with = new
 
     def _reweight_lines(self) -> None:
         """Every line factor's covariance: its fit's plus the current model error; restart."""
