@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.config import RunConfig
-from slam.errors import LineslamError
+from slam.errors import EvaluationError, LineslamError
 from slam.evaluation import ate, pose_nees_values, relations_metric
 from slam.experiments.estimators import EstimateOutput, run_estimator
 from slam.experiments.linesim import (
@@ -179,7 +179,12 @@ def evaluate_variant(
             )
     if ground_truth is None:
         return out
-    aligned = ate(traj, ground_truth, max_unmatched_fraction=1.0)
+    try:
+        aligned = ate(traj, ground_truth, max_unmatched_fraction=1.0)
+    except EvaluationError:
+        # too little motion to determine an alignment (a run stopped after a few scans)
+        aligned = ate(traj, ground_truth, align=False, max_unmatched_fraction=1.0)
+        metrics["ate_aligned"] = False
     metrics["ate_rmse_m"] = aligned.translation_m.rmse
     matched, truth_index = aligned.index_estimate, aligned.index_reference
     pos_err = np.full(n, np.nan)

@@ -41,6 +41,8 @@ class Observation:
     endpoint_var: FloatArray
     pieces: FloatArray
     pieces_var: FloatArray
+    R_fit: FloatArray | None = None
+    """The fit's covariance without model error (default: ``R``)."""
 
 
 class TentativePool:

@@ -377,6 +377,16 @@ class LineGraph:
                 self._p_var.append(pv)
         return idx
 
+    def set_line_factor_covariances(self, factors: IntArray, cov: FloatArray) -> None:
+        """Replace the measurement covariances ``(k, 2, 2)`` of line factors ``factors``.
+
+        A back-end that has them must be restarted (``reset``) to see the change.
+        """
+        f = np.asarray(factors, dtype=np.intp).reshape(-1)
+        c = np.asarray(cov, dtype=float).reshape(f.size, 2, 2)
+        self._f_cov.data[f] = c
+        self._f_sqrt_info.data[f] = sqrt_information_2x2(c)
+
     def merge_landmarks(self, keep: int, drop: int, value: FloatArray | None = None) -> IntArray:
         """Fuse landmark ``drop`` into ``keep``: rewire ``drop``'s factors, retire ``drop``.
 

@@ -137,10 +137,18 @@ class SlamConfig:
         frame: the first laser pose).
     frontend, tentative, loop_closure
         Registration front end, tentative landmarks, loop closing.
+    line_model_error : {"fixed", "estimated"}
+        ``"fixed"`` (default): the configured values below.  ``"estimated"``: the model error
+        added to every measured line's covariance is estimated during the run from the
+        residuals of the landmarks seen many times (:mod:`slam.line_slam.line_noise`; first
+        after 20 keyframes, then every 50 and at the end; the line factors are re-weighted,
+        and the back-end restarted, when an estimate moves by more than 20 %).  The estimate
+        is in ``summary.json`` (``line_model_error``).
     line_model_sigma_r_m, line_model_sigma_alpha_rad : float
         Model error (m, rad) added to every measured line's covariance, at the segment's
         mid-point (:func:`slam.models.anchored.model_error_covariance`): real walls are not
-        the fit's straight lines.  0 for simulated data whose fit covariances are exact.
+        the fit's straight lines.  With ``line_model_error = "estimated"`` the values used until
+        the first estimate.
     min_line_points : int
         Lines with fewer supporting points are ignored (neither matched nor new landmarks).
     min_line_length_m : float
@@ -168,6 +176,7 @@ class SlamConfig:
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     prior_sigma_xy_m: float = 1e-4
     prior_sigma_theta_rad: float = 1e-5
+    line_model_error: Literal["estimated", "fixed"] = "fixed"
     line_model_sigma_r_m: float = 0.02
     line_model_sigma_alpha_rad: float = 0.01
     min_line_points: int = 5
@@ -189,6 +198,10 @@ class SlamConfig:
         require(
             self.pose_covariances in ("keyframes", "none"),
             "pose_covariances must be keyframes or none",
+        )
+        require(
+            self.line_model_error in ("estimated", "fixed"),
+            "line_model_error must be estimated or fixed",
         )
         nonneg("map_segment_gap_m", self.map_segment_gap_m)
         require(self.map_min_observations >= 1, "map_min_observations must be >= 1")

@@ -78,6 +78,7 @@ class LandmarkBook:
         self._info = GrowableArray((2, 2))
         self._last_kf = GrowableArray((), dtype=np.intp)
         self._side = GrowableArray(())
+        self._fit_cov = GrowableArray((2, 2))
 
     # -- views -------------------------------------------------------------------------------
     @property
@@ -89,6 +90,11 @@ class LandmarkBook:
     def side(self) -> FloatArray:
         """Side of the wall each graph landmark was seen from (sign along its normal)."""
         return self._side.data
+
+    @property
+    def fit_cov(self) -> FloatArray:
+        """Fit covariance (without model error) of each line factor, ``(F, 2, 2)``."""
+        return self._fit_cov.data
 
     @property
     def info(self) -> FloatArray:
@@ -137,6 +143,7 @@ class LandmarkBook:
             pieces=[lines.pieces[k] for k in rows],
             pieces_var=[lines.pieces_var[k] for k in rows],
         )
+        self._fit_cov.append(lines.R_fit[rows])
         self._note_observations(lms, lines.z[rows], lines.R[rows], x0, pose)
         return factors
 
@@ -179,6 +186,7 @@ class LandmarkBook:
                         pieces_var=[o.pieces_var],
                     )
                 )
+                self._fit_cov.append((o.R if o.R_fit is None else o.R_fit)[None])
         tp.remove(tids)
         return np.concatenate(out) if out else np.zeros(0, dtype=np.intp)
 

@@ -35,6 +35,8 @@ class ScanLines:
         Variance (m²) of each end point along the line.
     pieces, pieces_var : list of ndarray
         The segment's visible pieces (end points) and their variances.
+    R_fit : ndarray, shape (K, 2, 2)
+        The fit's covariance of ``(r, α)`` alone (``R`` without the model error).
     """
 
     z: FloatArray
@@ -43,6 +45,7 @@ class ScanLines:
     endpoint_var: FloatArray
     pieces: list[FloatArray]
     pieces_var: list[FloatArray]
+    R_fit: FloatArray
 
     def __len__(self) -> int:
         return int(self.z.shape[0])
@@ -51,7 +54,7 @@ class ScanLines:
     def empty(cls) -> ScanLines:
         """No lines."""
         empty = np.zeros((0, 2, 2))
-        return cls(np.zeros((0, 2)), empty, empty, np.zeros((0, 2)), [], [])
+        return cls(np.zeros((0, 2)), empty, empty, np.zeros((0, 2)), [], [], empty)
 
     def observation(self, pose: int, k: int) -> Observation:
         """Line ``k`` as a measurement from pose variable ``pose``."""
@@ -63,17 +66,26 @@ class ScanLines:
             self.endpoint_var[k],
             self.pieces[k],
             self.pieces_var[k],
+            self.R_fit[k],
         )
 
 
-def usable_lines(lines: Sequence[Line], config: SlamConfig) -> tuple[ScanLines, int]:
+def usable_lines(
+    lines: Sequence[Line], config: SlamConfig, model_error: tuple[float, float] | None = None
+) -> tuple[ScanLines, int]:
     """The usable lines of a scan and how many were rejected.
 
     A line is usable with at least ``min_line_points`` points, a length of at least
     ``min_line_length_m``, finite values and a positive-definite ``(r, α)`` covariance; the
-    model-error floor (``line_model_sigma_r_m``, ``line_model_sigma_alpha_rad``, at the
-    segment's mid-point: :func:`slam.models.anchored.model_error_covariance`) is added to it.
+    model error ``(σ_o, σ_a)`` (m, rad, at the segment's mid-point:
+    :func:`slam.models.anchored.model_error_covariance`; default ``line_model_sigma_r_m``,
+    ``line_model_sigma_alpha_rad``) is added to it.
     """
+    sigma_o, sigma_a = (
+        (config.line_model_sigma_r_m, config.line_model_sigma_alpha_rad)
+        if model_error is None
+        else model_error
+    )
     z, R, ep, ev = [], [], [], []
     pieces: list[FloatArray] = []
     pieces_var: list[FloatArray] = []
@@ -99,9 +111,8 @@ def usable_lines(lines: Sequence[Line], config: SlamConfig) -> tuple[ScanLines, 
         pieces_var.append(np.asarray(ln.segments_var, dtype=float))
     if not z:
         return ScanLines.empty(), rejected
-    z_arr, R_arr, ep_arr = np.array(z), np.array(R), np.array(ep)
-    if config.line_model_sigma_r_m > 0.0 or config.line_model_sigma_alpha_rad > 0.0:
-        R_arr = R_arr + model_error_covariance(
-            z_arr, ep_arr, config.line_model_sigma_r_m, config.line_model_sigma_alpha_rad
-        )
-    return ScanLines(z_arr, R_arr, ep_arr, np.array(ev), pieces, pieces_var), rejected
+    z_arr, R_fit, ep_arr = np.array(z), np.array(R), np.array(ep)
+    R_arr = R_fit
+    if sigma_o > 0.0 or sigma_a > 0.0:
+        R_arr = R_fit + model_error_covariance(z_arr, ep_arr, sigma_o, sigma_a)
+    return ScanLines(z_arr, R_arr, ep_arr, np.array(ev), pieces, pieces_var, R_fit), rejected

@@ -59,13 +59,15 @@ from slam.line_slam.config import SlamConfig
 from slam.line_slam.drift import DriftAccumulator
 from slam.line_slam.front_end import add_registration_factor, register_keyframe
 from slam.line_slam.fusion import LandmarkFusion
-from slam.line_slam.keyframes import KeyframeTrack, OdometryStep
+from slam.line_slam.keyframes import EveryKeyframes, KeyframeTrack, OdometryStep
 from slam.line_slam.landmarks import LandmarkBook
+from slam.line_slam.line_noise import LineModelErrorEstimator
 from slam.line_slam.local_map import LocalMap, build_local_map
 from slam.line_slam.loop_closer import LoopCloser
 from slam.line_slam.observations import usable_lines
 from slam.line_slam.odometry_noise import MotionNoiseEstimator
 from slam.line_slam.report import ScanReport, SlamWarning, degradation
+from slam.models.anchored import model_error_covariance
 from slam.result import SlamResult
 from slam.types import Scan, check_lines, check_scan
 from slam.validate import check_config
@@ -102,6 +104,15 @@ COUNTERS = (
     "keyframes_lost_association",
 )
 """The counters of a run, in ``summary.json`` (``docs/real-logs.md`` says what each counts)."""
+
+LINE_NOISE_FIRST = 20
+"""Keyframes before the first estimate of the lines' model error."""
+
+LINE_NOISE_INTERVAL = 50
+"""Keyframes between two later estimates of the lines' model error."""
+
+LINE_NOISE_CHANGE = 0.2
+"""Relative change of the estimated model error that re-weights the line factors."""
 
 
 class LineSlam:
@@ -157,6 +168,11 @@ class LineSlam:
         self.track = KeyframeTrack(cfg.keyframes)
         self.drift = DriftAccumulator(cfg.frontend.drift_xy_per_m, cfg.frontend.drift_theta_per_m)
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
+        self.line_noise = LineModelErrorEstimator(
+            cfg.line_model_sigma_r_m, cfg.line_model_sigma_alpha_rad
+        )
+        self._line_noise_due = EveryKeyframes()
+        self._lines_weighted_with = self.line_noise.sigmas
         self.book = LandmarkBook(self.graph, cfg.frontend)
         self.audit = MergeAudit(self.book, cfg.fusion, self.counters)
         self.fusion = LandmarkFusion(
@@ -257,7 +273,7 @@ class LineSlam:
         cfg = self.config
         g = self.graph
         # 2. usable lines
-        obs, rejected = usable_lines(lines, cfg)
+        obs, rejected = usable_lines(lines, cfg, self.line_noise.sigmas)
         K = len(obs)
         self.counters["lines_rejected"] += rejected
         self.counters["lines_used"] += K
@@ -308,6 +324,9 @@ class LineSlam:
         with self.clock("backend"):
             self.backend.update(g)
         self.book.update_extents(assoc.factors, self.backend.estimate_moved)
+        interval = LINE_NOISE_INTERVAL if self.line_noise.updates else LINE_NOISE_FIRST
+        if self._line_noise_due.tick(cfg.line_model_error == "estimated", interval):
+            self._estimate_line_noise()
         # 9. fusion and 10. loop closing
         merged = self.fusion.round(reg.pose_world_laser) if self.fusion.due() else 0
         closures = self.loop_closer.attempt(i) if self.loop_closer.due() else 0
@@ -338,6 +357,8 @@ class LineSlam:
         g = self.graph
         if g.n_poses == 0:
             return stats
+        if self.config.line_model_error == "estimated":
+            self._estimate_line_noise()
         for _ in range(3):
             interrupts.check()
             stats = self.backend.optimize(g)
@@ -362,6 +383,34 @@ class LineSlam:
         self.clock.time_s["optimize"] += time.perf_counter() - t0
         return stats
 
+    def _estimate_line_noise(self) -> None:
+        """Estimate the lines' model error; re-weight the line factors when it has moved.
+
+        The factors are re-weighted (and the back-end restarted) when either component differs
+        by more than :data:`LINE_NOISE_CHANGE` (relative) from what they were weighted with: the
+        estimate settles within the first few hundred keyframes, while the graph is small.
+        """
+        if not self.line_noise.update(self.graph, self.book.fit_cov):
+            return
+        new = self.line_noise.sigmas
+        old = self._lines_weighted_with
+        if any(
+            abs(n - o) > LINE_NOISE_CHANGE * max(o, 1e-6) for n, o in zip(new, old, strict=True)
+        ):
+            self._reweight_lines()
+            self._lines_weighted_with = new
+
+    def _reweight_lines(self) -> None:
+        """Every line factor's covariance: its fit's plus the current model error; restart."""
+        g = self.graph
+        f = np.arange(g.n_line_factors)
+        sigma_o, sigma_a = self.line_noise.sigmas
+        cov = self.book.fit_cov + model_error_covariance(
+            g.factor_z, g.factor_endpoints, sigma_o, sigma_a
+        )
+        g.set_line_factor_covariances(f, cov)
+        self.backend.reset(g)
+
     def result(self) -> SlamResult:
         """The current estimate of every scan's pose and the map, with covariances."""
         stats: dict[str, Any] = {}
@@ -380,6 +429,8 @@ class LineSlam:
         stats["backend"] = self.backend.stats()
         stats["loop_closures_log"] = [a.as_log() for a in self.loop_closer.attempts]
         stats["odometry_noise"] = self.odometry_noise.summary()
+        if self.config.line_model_error == "estimated":
+            stats["line_model_error"] = self.line_noise.summary()
         stats["drift_scale"] = {"xy": self.drift.scale_xy, "theta": self.drift.scale_theta}
         stats["runtime_s"] = {
             "total": float(np.sum(self.track.scan_runtime_s)) + time_s["optimize"],

@@ -1,0 +1,139 @@
+"""The lines' model error, estimated from the residuals of repeated observations of the walls.
+
+A fitted line's covariance (the paper's Props. 1-3) knows only the per-beam noise (Eq. 8).  Real
+walls are not the fit's straight lines — they bend, beams have a footprint, ranges are biased by
+the surface — so every measured line gets a model error: an offset ``σ_o`` along its normal
+and an angle ``σ_a`` about its mid-point (:func:`slam.models.anchored.model_error_covariance`).
+Simulated walls have none; real walls have what their residuals show.
+
+Every graph landmark seen many times is an estimate of one wall; the residuals of its line
+factors at the current estimate, taken at each segment's mid-point (offset along the normal
+there, and angle), are the fit's error plus the model error.  For each component separately,
+``σ²`` is chosen so that the median of ``e² / (fit variance + σ²)`` is the median of χ²₁
+(0.455): a moment estimate that the factors of a wrong association (a few, with large
+residuals) do not move.  Factors of landmarks with fewer than ``min_observations`` factors are
+left out (their residuals are shrunk by the landmark's own fit to them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from slam.graph.factors import line_factor_residuals
+from slam.graph.problem import LineGraph
+
+__all__ = ["LineModelErrorEstimator", "midpoint_residuals"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+_MEDIAN_CHI2_1 = float(chi2.ppf(0.5, 1))
+
+
+def midpoint_residuals(
+    graph: LineGraph, factors: IntArray, fit_cov: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Residuals of line factors at their segments' mid-points, and the fit's variances.
+
+    Returns ``(e, var)``, each ``(F, 2)``: column 0 the offset along the normal at the mid-point
+    (m), column 1 the angle (rad); ``var`` the fit's variances of the same.
+    """
+    g = graph
+    f = np.asarray(factors, dtype=np.intp)
+    lm = g.factor_landmark[f]
+    # unwhitened residuals: (r, α) predicted minus measured
+    eye = np.broadcast_to(np.eye(2), (f.size, 2, 2))
+    e = line_factor_residuals(g.poses[g.factor_pose[f]], g.landmarks[lm], g.anchors[lm],
+                              g.factor_z[f], eye)  # fmt: skip
+    z = g.factor_z[f]
+    mid = g.factor_endpoints[f].mean(axis=1)
+    a = z[:, 1]
+    s_m = -np.sin(a) * mid[:, 0] + np.cos(a) * mid[:, 1]
+    # offset at the mid-point: δr − s_m δα
+    T = np.zeros((f.size, 2, 2))
+    T[:, 0, 0] = 1.0
+    T[:, 0, 1] = -s_m
+    T[:, 1, 1] = 1.0
+    em = np.einsum("fij,fj->fi", T, e)
+    C = T @ np.asarray(fit_cov, dtype=float)[f] @ np.swapaxes(T, 1, 2)
+    return em, np.stack([C[:, 0, 0], C[:, 1, 1]], axis=-1)
+
+
+def _sigma2_for_median(e2: FloatArray, var: FloatArray) -> float:
+    """``σ² ≥ 0`` with median of ``e² / (var + σ²)`` equal to the median of χ²₁."""
+    ratio = lambda s2: float(np.median(e2 / (var + s2)))  # noqa: E731
+    if ratio(0.0) <= _MEDIAN_CHI2_1:
+        return 0.0
+    lo, hi = 0.0, max(float(np.median(e2)), 1e-12)
+    while ratio(hi) > _MEDIAN_CHI2_1:
+        hi *= 4.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if ratio(mid) > _MEDIAN_CHI2_1:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+class LineModelErrorEstimator:
+    """Estimates ``(σ_o, σ_a)`` from the graph's line factors (module docstring).
+
+    Parameters
+    ----------
+    sigma_offset_m, sigma_angle_rad : float
+        The configured values: used until there are ``min_samples`` residuals.
+    min_observations : int
+        Only factors of landmarks with at least this many factors count.
+    min_samples : int
+        Least number of such factors for an estimate.
+    """
+
+    def __init__(
+        self,
+        sigma_offset_m: float,
+        sigma_angle_rad: float,
+        min_observations: int = 5,
+        min_samples: int = 50,
+    ) -> None:
+        self.sigma_offset_m = sigma_offset_m
+        self.sigma_angle_rad = sigma_angle_rad
+        self.min_observations = min_observations
+        self.min_samples = min_samples
+        self.samples = 0
+        self.updates = 0
+
+    @property
+    def sigmas(self) -> tuple[float, float]:
+        """The current ``(σ_o, σ_a)`` (m, rad)."""
+        return self.sigma_offset_m, self.sigma_angle_rad
+
+    def update(self, graph: LineGraph, fit_cov: FloatArray) -> bool:
+        """Estimate from the graph's current line factors; returns whether it did.
+
+        ``fit_cov`` ``(F, 2, 2)``: each factor's fit covariance (without model error).
+        """
+        g = graph
+        if g.n_line_factors == 0:
+            return False
+        counts = g.observation_counts()
+        f = np.flatnonzero(counts[g.factor_landmark] >= self.min_observations)
+        if f.size < self.min_samples:
+            return False
+        e, var = midpoint_residuals(g, f, fit_cov)
+        self.sigma_offset_m = float(np.sqrt(_sigma2_for_median(e[:, 0] ** 2, var[:, 0])))
+        self.sigma_angle_rad = float(np.sqrt(_sigma2_for_median(e[:, 1] ** 2, var[:, 1])))
+        self.samples = int(f.size)
+        self.updates += 1
+        return True
+
+    def summary(self) -> dict[str, float | int]:
+        """The estimate and how it was obtained (for ``summary.json``)."""
+        return {
+            "sigma_offset_m": self.sigma_offset_m,
+            "sigma_angle_rad": self.sigma_angle_rad,
+            "samples": self.samples,
+            "updates": self.updates,
+        }
