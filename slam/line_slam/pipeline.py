@@ -38,6 +38,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -348,6 +349,25 @@ class LineSlam:
             self.book.refresh_extents()
         self.clock.time_s["optimize"] += time.perf_counter() - t0
         return stats
+
+    def write_graph_g2o(self, path: str | Path, result: SlamResult | None = None) -> Path:
+        """Write the factor graph as ``graph.g2o`` (:func:`slam.io.g2o.write_line_graph_g2o`).
+
+        With the run's ``result`` the file also says which scan each keyframe is and how
+        every other scan hangs from its keyframe (odometry offset, the final motion model), so
+        that the run's covariances can be recomputed from it (:mod:`slam.graph.relative`).
+        """
+        from slam.io.g2o import write_line_graph_g2o
+
+        solver = self.config.solver
+        return write_line_graph_g2o(
+            path,
+            self.graph,
+            result,
+            scan_offsets=np.array(self.track.scan_offset).reshape(-1, 3),
+            motion_noise=self.odometry_noise.model,
+            robust_kernel=(solver.robust_kernel, solver.robust_k),
+        )
 
     def result(self) -> SlamResult:
         """The current estimate of every scan's pose and the map, with covariances."""
