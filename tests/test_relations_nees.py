@@ -230,6 +230,7 @@ def test_lineslam_evaluate_reports_the_relations_nees(tmp_path):
     assert nees["n"] == metrics["relations"]["n_used"] > 50
     assert set(nees) >= {"mean", "bounds_95", "fraction_inside_95", "n", "median"}
     assert 0.0 < nees["mean"] < 20.0 and 0.0 <= nees["fraction_inside_95"] <= 1.0
+    assert sum(g["n"] for g in nees["by_gap"]) == nees["n"]
     results = read_results(out)
     cov = RunCovariances.from_results(out, results.summary)
     t = results.trajectory.timestamps

@@ -15,7 +15,8 @@ interval is indicative, as for a single run's pose NEES), the median (``χ²₃`
 fraction of relations whose error lies inside its own 95 % ellipsoid (NEES ≤ ``χ²₃(95 %)``
 = 7.81; 0.95 expected), and the means of the translation part (``e_xyᵀ C_xy⁻¹ e_xy``, 2
 expected) and of the heading part (``e_θ² / C_θθ``, 1 expected), which say which part of the
-covariance is off.
+covariance is off, and the same per time gap between the two scans (< 10 s: the local
+covariances; ≥ 60 s: across loop closures).
 """
 
 from __future__ import annotations
@@ -37,6 +38,9 @@ from slam.io.trajectory import Trajectory
 __all__ = ["RelationCovariances", "RelationsNees", "relation_error_vectors", "relations_nees"]
 
 FloatArray = NDArray[np.float64]
+
+GAP_CLASSES_S = ((0.0, 10.0), (10.0, 60.0), (60.0, float("inf")))
+"""Time gaps ``|t2 − t1|`` (s) of :meth:`RelationsNees.by_gap`."""
 
 RelationCovariances = Callable[[FloatArray, FloatArray], FloatArray]
 """``cov(t1, t2) -> (m, 3, 3)``: covariance of each ``pose(t1)⁻¹ pose(t2)`` (right tangent
@@ -65,7 +69,28 @@ class RelationsNees:
     mean_rotation: float
     single_bound_95: float
     values: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
+    gaps_s: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
     dof: int = 3
+
+    def by_gap(self) -> list[dict[str, Any]]:
+        """Count, mean and median per time gap ``|t2 − t1|`` (< 10 s, 10-60 s, ≥ 60 s).
+
+        Short relations test the local covariances (odometry, lines), long ones those across
+        loop closures.
+        """
+        out = []
+        for lo, hi in GAP_CLASSES_S:
+            sel = (self.gaps_s >= lo) & (self.gaps_s < hi)
+            v = self.values[sel]
+            out.append(
+                {
+                    "gap_s": [lo, hi if np.isfinite(hi) else None],
+                    "n": int(v.size),
+                    "mean": float(v.mean()) if v.size else None,
+                    "median": float(np.median(v)) if v.size else None,
+                }
+            )
+        return out
 
     @property
     def consistent(self) -> bool:
@@ -85,6 +110,7 @@ class RelationsNees:
             "single_bound_95": self.single_bound_95,
             "mean_translation": self.mean_translation,
             "mean_rotation": self.mean_rotation,
+            "by_gap": self.by_gap(),
         }
 
 
@@ -130,4 +156,5 @@ def relations_nees(
         mean_rotation=float(rot.mean()),
         single_bound_95=single,
         values=values,
+        gaps_s=np.abs(sub.t2 - sub.t1),
     )

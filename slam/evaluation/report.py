@@ -113,9 +113,22 @@ class EvaluationReport:
                     "relations inside 95%",
                     f"{q.fraction_inside_95:.3f} (NEES <= {q.single_bound_95:.2f}; 0.95 expected)",
                 ),
+                (
+                    "relations NEES by gap",
+                    "; ".join(
+                        f"{_gap_label(g['gap_s'])}: {g['mean']:.2f} (n={g['n']})"
+                        for g in q.by_gap()
+                        if g["n"]
+                    ),
+                ),
             ]
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def _gap_label(gap: list[float | None]) -> str:
+    lo, hi = gap
+    return f">= {lo:g} s" if hi is None else f"{lo:g}-{hi:g} s"
 
 
 def evaluate_results(
