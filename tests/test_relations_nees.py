@@ -211,7 +211,7 @@ def _cli(argv: list[str]) -> int:
     return 0
 
 
-def test_lineslam_evaluate_reports_the_relations_nees(tmp_path):
+def test_lineslam_evaluate_reports_the_relations_nees(tmp_path, capsys):
     """simulate → slam (batch, exact line model) → evaluate --relations: metrics.json holds
     relations_nees; the relative covariance from the first scan (pinned by the prior) to any
     scan, keyframe or not, is that scan's covariance in trajectory_covariance.txt."""
@@ -240,9 +240,20 @@ def test_lineslam_evaluate_reports_the_relations_nees(tmp_path):
     import gtsam
 
     graph, values = gtsam.readG2o(str(out / "graph.g2o"), False)  # the extension is skipped
-    assert values.size() == t.size - offsets.size and graph.size() >= values.size() - 1
+    text = (out / "graph.g2o").read_text()
+    assert values.size() == t.size - offsets.size == text.count("VERTEX_SE2 ")
+    assert graph.size() == text.count("\nEDGE_SE2 ")  # every odometry edge, nothing else
     rel = cov.relative_covariances(np.full(t.size, t[0]), t)
     np.testing.assert_allclose(rel[1:], results.covariances[1:], rtol=0.02, atol=1e-7)
     assert _cli(["evaluate", str(out), "--relations", str(sim / "relations.txt"),
                  "--no-relations-nees", "--quiet"]) == 0  # fmt: skip
+    assert "relations_nees" not in json.loads((out / "metrics.json").read_text())
+    # a graph.g2o of an older lineslam (none of the lines for the covariances): a warning,
+    # the rest evaluated
+    newer = ("LINESLAM_SCAN_OFFSET", "LINESLAM_MOTION_NOISE", "LINESLAM_ROBUST_KERNEL",
+             "LINESLAM_PRIOR_SE2")  # fmt: skip
+    lines = (out / "graph.g2o").read_text().splitlines(keepends=True)
+    (out / "graph.g2o").write_text("".join(x for x in lines if not x.startswith(newer)))
+    assert _cli(["evaluate", str(out), "--relations", str(sim / "relations.txt")]) == 0
+    assert "no relations NEES" in capsys.readouterr().err
     assert "relations_nees" not in json.loads((out / "metrics.json").read_text())

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from slam.cli._app import app
-from slam.errors import DatasetError
+from slam.errors import DatasetError, EvaluationError
 from slam.evaluation.report import evaluate_results
 from slam.io.catalog import resolve_log
 from slam.io.relations import read_relations
@@ -92,9 +92,13 @@ def evaluate(
     if rel is not None and relations_nees and graph_file.is_file():
         from slam.graph.relative import RunCovariances
 
-        run_cov = RunCovariances.from_results(results_dir, results.summary)
-        covariances = bind(run_cov.relative_covariances, tolerance_s=tolerance)
-        sources["graph_file"] = str(graph_file)
+        try:
+            run_cov = RunCovariances.from_results(results_dir, results.summary)
+        except EvaluationError as exc:  # a graph.g2o of an older lineslam: the rest still runs
+            typer.echo(f"lineslam: warning: {graph_file}: no relations NEES: {exc}", err=True)
+        else:
+            covariances = bind(run_cov.relative_covariances, tolerance_s=tolerance)
+            sources["graph_file"] = str(graph_file)
     gt = None
     if ground_truth is not None:
         gt = read_tum(ground_truth)
