@@ -240,11 +240,9 @@ def run_estimator_on_log(
         interrupts.check()
         t0 = time.perf_counter()
         result.write_files(work, min_observations)
-        graph = getattr(estimator, "graph", None)
-        if graph is not None:
-            from slam.io.g2o import write_line_graph_g2o
-
-            write_line_graph_g2o(work / "graph.g2o", graph, result)
+        write_graph = getattr(estimator, "write_graph_g2o", None)
+        if write_graph is not None:
+            write_graph(work / "graph.g2o", result)
         if plot:
             from slam.plotting.trajectory_map import plot_slam_result, raw_points_world
 

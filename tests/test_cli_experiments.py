@@ -63,6 +63,28 @@ def test_consistency_command_writes_summary(tmp_path):
     assert (out / "nees.png").is_file() and (out / "error.png").is_file()
 
 
+def test_consistency_long_run_reports_the_anees_per_loop(tmp_path):
+    """A tiny long run: the simulator's noise set from the command line (the estimators told
+    the same), the ANEES per loop in the table and in consistency.json."""
+    from slam.experiments.linesim import SIM_ODOMETRY
+
+    out = tmp_path / "long"
+    argv = ["consistency", "--out", str(out), "--runs", "2", "--loops", "2", "--quiet"]
+    argv += ["--estimators", "ekf,odometry", "--odometry-scale", "2"]
+    argv += ["--line-range-sigma", "0.05", "--line-point-spacing", "0.25"]
+    main(argv)
+    doc = json.loads((out / "consistency.json").read_text())
+    assert doc["linesim"]["sigma_range_m"] == 0.05 and doc["linesim"]["point_spacing_m"] == 0.25
+    odo = doc["linesim"]["odometry"]
+    assert odo["sigma_theta_per_rad"] == pytest.approx(2 * SIM_ODOMETRY.sigma_theta_per_rad)
+    assert odo["sigma_xy_min_m"] == SIM_ODOMETRY.sigma_xy_min_m  # floors kept
+    for est in doc["estimators"].values():
+        per_loop = est["anees_per_loop"]
+        assert len(per_loop) == 2
+        assert np.mean(per_loop) == pytest.approx(est["mean_anees"], rel=0.05)
+    assert (out / "nees.png").stat().st_size > 1000
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [

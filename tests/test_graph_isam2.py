@@ -288,3 +288,28 @@ def test_joint_pose_covariance_of_both_backends_matches_the_marginals(incrementa
     close_covariances(backend_b.joint_pose_covariance(longer, new_pair), P_exact, 1e-6)
     with pytest.raises(EstimationError, match="distinct"):
         backend_b.joint_pose_covariance(longer, np.array([3, 3]))
+
+
+def test_final_weight_refresh_gives_the_covariances_at_the_estimate():
+    """With the Cauchy kernel iSAM2's blocks carry IRLS weights from the linearisation point
+    θ, which lags the estimate: its marginals are those of the graph weighted at θ (larger).
+    The final weight refresh rebuilds iSAM2 at the estimate: its marginals then equal the
+    batch marginals of the graph weighted at its estimate."""
+    src = synthetic_problem(120, seed=13).graph
+    cauchy = SolverConfig(robust_kernel="cauchy", robust_k=3.0)
+    coarse = dict(relinearize_threshold_m=0.03, relinearize_threshold_rad=0.03)
+    traces = {}
+    for refresh in (False, True):
+        solver = Isam2Solver(Isam2Config(**coarse, final_weight_refresh=refresh), cauchy)
+        g = feed(src, solver)
+        solver.optimize(g, exact=True)
+        assert solver.stats.final_relinearizations == int(refresh)
+        at_estimate = BatchSolver(cauchy).marginals(g)
+        ratio = [
+            np.trace(solver.pose_covariance(i))
+            / np.trace(at_estimate.marginalCovariance(keys_of("x", np.array([i]))[0]))
+            for i in (30, 60, 119)
+        ]
+        traces[refresh] = np.array(ratio)
+    assert np.all(traces[False] > 1.05)  # weights at θ: less information
+    np.testing.assert_allclose(traces[True], 1.0, atol=0.02)

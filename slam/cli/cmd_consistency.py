@@ -3,8 +3,10 @@
 Runs ``--runs`` seeded simulations (line-level simulator, :mod:`slam.experiments.linesim`)
 through each estimator, serially, on ``--workers`` local processes, or on a Dask cluster
 (``--dask ADDRESS``) — the same numbers either way.  Writes ``config.toml``,
-``consistency.json`` (per estimator: ANEES over time, bounds, fraction inside, RMSE, run time)
-and the figures ``nees.png`` and ``error.png``.
+``consistency.json`` (per estimator: ANEES over time and per loop, bounds, fraction inside,
+RMSE, run time) and the figures ``nees.png`` (with ``--loops`` ≥ 2 the mean per loop drawn
+over the curves) and ``error.png``.  ``--odometry-scale``, ``--line-range-sigma`` and
+``--line-point-spacing`` set the simulator's noise (the estimators are told the same models).
 """
 
 from __future__ import annotations
@@ -44,6 +46,27 @@ def consistency(
     estimators: Annotated[
         str, typer.Option("--estimators", help="Comma-separated estimator names.")
     ] = "ekf,graph-isam2,graph-batch,odometry",
+    odometry_scale: Annotated[
+        float,
+        typer.Option(
+            "--odometry-scale",
+            help="Odometry noise of the simulator (and of the estimators' model) times this.",
+        ),
+    ] = 1.0,
+    line_range_sigma: Annotated[
+        float | None,
+        typer.Option(
+            "--line-range-sigma",
+            help="Range noise (m) of the points behind each simulated line fit (default 0.01).",
+        ),
+    ] = None,
+    line_point_spacing: Annotated[
+        float | None,
+        typer.Option(
+            "--line-point-spacing",
+            help="Spacing (m) of those points along the wall (default 0.05).",
+        ),
+    ] = None,
     workers: Annotated[
         int, typer.Option("--workers", help="Local worker processes (1: serial).")
     ] = 1,
@@ -55,15 +78,25 @@ def consistency(
     quiet: QuietOpt = False,
 ) -> None:
     """Monte-Carlo consistency (pose NEES over time with chi-square bounds)."""
+    from dataclasses import replace
+
     from slam.experiments.consistency import ConsistencyConfig, run_consistency
+    from slam.experiments.linesim import LineSimConfig
 
     run_config = build_config(config, sigma_d, sigma_phi, seed)
+    sim = LineSimConfig()
+    sim = replace(sim, odometry=sim.odometry.scaled(odometry_scale))
+    if line_range_sigma is not None:
+        sim = replace(sim, sigma_range_m=line_range_sigma)
+    if line_point_spacing is not None:
+        sim = replace(sim, point_spacing_m=line_point_spacing)
     study = ConsistencyConfig(
         world=world,
         loops=loops,
         n_runs=runs,
         estimators=tuple(e.strip() for e in estimators.split(",") if e.strip()),
         seed=run_config.seed,
+        linesim=sim,
     )
     check_out_dir(out)
     with results_dir(out, run_config) as work:
@@ -81,6 +114,7 @@ def consistency(
             work / "nees.png",
             n_runs=runs,
             title=f"Pose NEES over time, {world} x{loops:g}, {runs} runs",
+            segments=result.n_loops,
         )
         interrupts.check()
         plot_errors_over_time(

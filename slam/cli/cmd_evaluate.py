@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from functools import partial as bind
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from slam.cli._app import app
-from slam.errors import DatasetError
+from slam.errors import DatasetError, EvaluationError
 from slam.evaluation.report import evaluate_results
 from slam.io.catalog import resolve_log
 from slam.io.relations import read_relations
@@ -65,6 +66,15 @@ def evaluate(
             "runs with --max-scans are partial).",
         ),
     ] = None,
+    relations_nees: Annotated[
+        bool,
+        typer.Option(
+            "--relations-nees/--no-relations-nees",
+            help="With --relations and DIR/graph.g2o: the NEES of every relation against the "
+            "covariance of the estimated relative pose (joint marginals recomputed from the "
+            "graph).",
+        ),
+    ] = True,
     quiet: Annotated[bool, typer.Option("--quiet", help="Do not print the table.")] = False,
 ) -> None:
     """Evaluate DIR/trajectory.tum; print a table and write DIR/metrics.json."""
@@ -77,6 +87,18 @@ def evaluate(
         rel_path = relations_path(relations)
         rel = read_relations(rel_path)
         sources["relations_file"] = str(rel_path)
+    covariances = None
+    graph_file = results_dir / "graph.g2o"
+    if rel is not None and relations_nees and graph_file.is_file():
+        from slam.graph.relative import RunCovariances
+
+        try:
+            run_cov = RunCovariances.from_results(results_dir, results.summary)
+        except EvaluationError as exc:  # a graph.g2o of an older lineslam: the rest still runs
+            typer.echo(f"lineslam: warning: {graph_file}: no relations NEES: {exc}", err=True)
+        else:
+            covariances = bind(run_cov.relative_covariances, tolerance_s=tolerance)
+            sources["graph_file"] = str(graph_file)
     gt = None
     if ground_truth is not None:
         gt = read_tum(ground_truth)
@@ -90,6 +112,7 @@ def evaluate(
         max_unmatched_fraction=max_unmatched,
         sources=sources,
         partial=partial,
+        relative_covariances=covariances,
     )
     path = write_metrics(results_dir, report.to_dict())  # whole or not at all
     if not quiet:

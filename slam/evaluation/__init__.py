@@ -1,8 +1,9 @@
-"""Evaluation of trajectories: the relations metric (Cartographer's), ATE, RPE, NEES.
+"""Evaluation of trajectories: relations metric (Cartographer's), ATE, RPE, NEES, relations NEES.
 
 Main entry points::
 
     from slam.evaluation import relations_metric, ate, rpe, pose_nees, evaluate_results
+    from slam.evaluation import relations_nees      # with relative-pose covariances
 
     metric = relations_metric(trajectory, read_relations(path))   # Kümmerle et al.
     print(metric.cartographer_report())
@@ -19,6 +20,7 @@ from slam.evaluation.relations_metric import (
     relations_metric,
     relations_within,
 )
+from slam.evaluation.relations_nees import RelationsNees, relation_error_vectors, relations_nees
 from slam.evaluation.report import EvaluationReport, evaluate_results
 from slam.evaluation.rpe import RpeResult, distance_pairs, rpe, rpe_errors
 from slam.evaluation.stats import ErrorStats
@@ -31,6 +33,7 @@ __all__ = [
     "MeanStd",
     "NeesResult",
     "RelationsMetric",
+    "RelationsNees",
     "RpeResult",
     "align_se2",
     "associate",
@@ -42,8 +45,10 @@ __all__ = [
     "nees_values",
     "pose_nees",
     "pose_nees_values",
+    "relation_error_vectors",
     "relation_errors",
     "relations_metric",
+    "relations_nees",
     "relations_within",
     "rpe",
     "rpe_errors",

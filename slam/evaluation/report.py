@@ -17,6 +17,7 @@ from slam.errors import EvaluationError
 from slam.evaluation.ate import AteResult, ate
 from slam.evaluation.nees import NeesResult, pose_nees
 from slam.evaluation.relations_metric import RelationsMetric, relations_metric, relations_within
+from slam.evaluation.relations_nees import RelationCovariances, RelationsNees, relations_nees
 from slam.evaluation.rpe import RpeResult, rpe
 from slam.io.relations import Relations
 from slam.io.results import Results
@@ -37,6 +38,7 @@ class EvaluationReport:
     nees: NeesResult | None = None
     sources: dict[str, str] = field(default_factory=dict)
     relations_inside_run: tuple[int, int] | None = None
+    relations_nees: RelationsNees | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The content of ``metrics.json``."""
@@ -52,6 +54,8 @@ class EvaluationReport:
             out["rpe"] = [r.to_dict() for r in self.rpe]
         if self.nees is not None:
             out["nees"] = self.nees.to_dict()
+        if self.relations_nees is not None:
+            out["relations_nees"] = self.relations_nees.to_dict()
         return out
 
     def format_table(self) -> str:
@@ -92,8 +96,39 @@ class EvaluationReport:
             rows.append(
                 ("pose NEES mean", f"{s.mean:.3f} in [{s.lower:.3f}, {s.upper:.3f}]: {verdict}")
             )
+        if self.relations_nees is not None:
+            q = self.relations_nees
+            verdict = "consistent" if q.consistent else "NOT consistent"
+            rows += [
+                (
+                    "relations NEES mean",
+                    f"{q.mean:.3f} in [{q.lower:.3f}, {q.upper:.3f}]: {verdict} (n={q.n})",
+                ),
+                (
+                    "relations NEES median",
+                    f"{q.median:.3f} (chi2_3: 2.366); translation {q.mean_translation:.3f} "
+                    f"(2), heading {q.mean_rotation:.3f} (1)",
+                ),
+                (
+                    "relations inside 95%",
+                    f"{q.fraction_inside_95:.3f} (NEES <= {q.single_bound_95:.2f}; 0.95 expected)",
+                ),
+                (
+                    "relations NEES by gap",
+                    "; ".join(
+                        f"{_gap_label(g['gap_s'])}: {g['mean']:.2f} (n={g['n']})"
+                        for g in q.by_gap()
+                        if g["n"]
+                    ),
+                ),
+            ]
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def _gap_label(gap: list[float | None]) -> str:
+    lo, hi = gap
+    return f">= {lo:g} s" if hi is None else f"{lo:g}-{hi:g} s"
 
 
 def evaluate_results(
@@ -106,10 +141,13 @@ def evaluate_results(
     max_unmatched_fraction: float = 0.02,
     sources: dict[str, str] | None = None,
     partial: bool | None = None,
+    relative_covariances: RelationCovariances | None = None,
 ) -> EvaluationReport:
     """Relations metric (with ``relations``), ATE, RPE and NEES (with ``ground_truth``).
 
-    NEES is computed when ``results`` carries pose covariances and ground truth is given.
+    NEES is computed when ``results`` carries pose covariances and ground truth is given; the
+    relations NEES (:mod:`slam.evaluation.relations_nees`) when relations and
+    ``relative_covariances`` (covariances of relative poses between time stamps) are given.
 
     A run over part of a log (``partial``; default: what the results' ``summary.json`` says,
     ``"partial": true`` for ``--max-scans`` runs) is scored on the relations whose two time
@@ -137,8 +175,11 @@ def evaluate_results(
                 f"none of the {total} relations has both time stamps inside the partial run "
                 f"({len(trajectory)} poses): run over more of the log"
             )
+    rel_nees = None
     if relations is not None:
         rel = relations_metric(trajectory, relations, tolerance_s=tol, max_unmatched_fraction=frac)
+        if relative_covariances is not None:
+            rel_nees = relations_nees(trajectory, relations, relative_covariances, tolerance_s=tol)
     ate_result = nees_result = None
     rpe_results: tuple[RpeResult, ...] = ()
     if ground_truth is not None:
@@ -160,4 +201,5 @@ def evaluate_results(
         nees=nees_result,
         sources=dict(sources or {}),
         relations_inside_run=inside_run,
+        relations_nees=rel_nees,
     )

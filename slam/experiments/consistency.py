@@ -14,9 +14,10 @@ Filtering estimators (EKF) are evaluated on their filtered pose at each time; sm
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -193,6 +194,16 @@ class EstimatorConsistency:
         ok = np.isfinite(self.anees)
         return float(np.mean(self.anees[ok] > self.bounds[1])) if np.any(ok) else float("nan")
 
+    def anees_per_segment(self, n_segments: int) -> FloatArray:
+        """ANEES averaged over each of ``n_segments`` equal stretches of the run (e.g. loops)."""
+        bounds = np.linspace(0, self.anees.shape[0], max(n_segments, 1) + 1).round().astype(int)
+        out = []
+        for a, b in itertools.pairwise(bounds):
+            part = self.anees[a:b]
+            ok = np.isfinite(part)
+            out.append(float(np.mean(part[ok])) if np.any(ok) else float("nan"))
+        return np.array(out)
+
     @property
     def run_mean_nees(self) -> FloatArray:
         """Each run's NEES averaged over its time steps, shape (n_runs,)."""
@@ -226,8 +237,14 @@ class ConsistencyResult:
     estimators: dict[str, EstimatorConsistency]
     wall_time_s: float = 0.0
 
+    @property
+    def n_loops(self) -> int:
+        """Whole repetitions of the route (at least 1): the stretches of :meth:`table`."""
+        return max(round(self.config.loops), 1)
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary."""
+        """JSON-ready summary (``anees_per_loop``: each estimator's ANEES over each loop)."""
+        sim = self.config.linesim
         return {
             "world": self.config.world,
             "loops": self.config.loops,
@@ -235,7 +252,16 @@ class ConsistencyResult:
             "seed": self.config.seed,
             "probability": self.config.probability,
             "wall_time_s": self.wall_time_s,
-            "estimators": {k: v.to_dict() for k, v in self.estimators.items()},
+            "linesim": {
+                "sigma_range_m": sim.sigma_range_m,
+                "point_spacing_m": sim.point_spacing_m,
+                "max_range_m": sim.max_range_m,
+                "odometry": asdict(sim.odometry),
+            },
+            "estimators": {
+                k: {**v.to_dict(), "anees_per_loop": v.anees_per_segment(self.n_loops).tolist()}
+                for k, v in self.estimators.items()
+            },
         }
 
     def table(self) -> str:
@@ -256,6 +282,11 @@ class ConsistencyResult:
                 f"{est.fraction_above:>7.2f} {np.mean(est.pos_rmse_m):>8.4f} "
                 f"{np.mean(est.runtime_s):>7.2f} {np.mean(est.landmarks):>9.1f}"
             )
+        if self.n_loops >= 2:
+            lines.append(f"ANEES per loop ({self.n_loops} loops):")
+            for est in self.estimators.values():
+                per = " ".join(f"{v:.2f}" for v in est.anees_per_segment(self.n_loops))
+                lines.append(f"{est.name:<12} {per}")
         return "\n".join(lines)
 
 

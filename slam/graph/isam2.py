@@ -18,7 +18,10 @@ Design (measured in ``scripts/bench_graph.py``; see ``docs/graph.md``):
   new ``θ``, in the same ``ISAM2.update`` call.  With the default thresholds the line factors
   are thus always linearised where iSAM2 linearises its native factors.
 * **Robust kernels** weight a block when it is (re)built, from the residual at ``θ`` (IRLS with
-  weights refreshed on relinearisation).
+  weights refreshed on relinearisation).  ``θ`` lags the estimate by up to the relinearisation
+  thresholds, so the final convergence rebuilds iSAM2 at the estimate once
+  (``Isam2Config.final_weight_refresh``): the final estimate and covariances then carry the
+  weights at the estimate, as the batch solver's do.
 * **Landmark fusion**: the blocks of keyframes that saw the retired landmark are rebuilt
   against the kept one; the retired variable keeps a weak prior (σ = 1) so that the system
   stays well posed (iSAM2 cannot delete a variable).
@@ -377,8 +380,10 @@ class Isam2Solver:
 
         With ``exact``, iSAM2 is then rebuilt at the estimate (:meth:`restart`: every factor
         relinearised, one Gauss-Newton step) until the step's largest component is below
-        ``final_step_tolerance``, ``final_relinearizations`` times at most.  Updates below the
-        relinearisation thresholds stay linear in iSAM2; they do not in the result.
+        ``final_step_tolerance``, ``final_relinearizations`` times at most (at least once with
+        a robust kernel and ``final_weight_refresh``: the blocks' IRLS weights were taken at
+        ``θ``).  Updates below the relinearisation thresholds stay linear in iSAM2; they do
+        not in the result.
 
         Returns the number of updates run (restarts not counted).
         """
@@ -394,7 +399,10 @@ class Isam2Solver:
         self.read_all(graph)
         if not exact:
             return runs
-        for _ in range(self.config.final_relinearizations):
+        rebuilds = self.config.final_relinearizations
+        if self.config.final_weight_refresh and self.solver.robust_kernel != "none":
+            rebuilds = max(rebuilds, 1)  # the kernel's weights at the estimate, not at θ
+        for _ in range(rebuilds):
             interrupts.check()
             poses, landmarks = graph.poses.copy(), graph.landmarks.copy()
             self.restart(graph)

@@ -34,13 +34,29 @@ g2o and GTSAM skip as unknown tags)::
     LINESLAM_SCAN i timestamp                   keyframe i is the scan of this log time stamp
     LINESLAM_VERTEX_LINE2D k r alpha            landmark k (ids after the poses), world line
     LINESLAM_EDGE_SE2_LINE2D i k r alpha I_rr I_ralpha I_alphaalpha
+    LINESLAM_PRIOR_SE2 i x y theta I11 I12 I13 I22 I23 I33
+    LINESLAM_ROBUST_KERNEL name k               kernel on the line factors (none/huber/cauchy)
+    LINESLAM_MOTION_NOISE sxy_min sxy_per_m sxy_per_rad sth_min sth_per_m sth_per_rad
+    LINESLAM_SCAN_OFFSET i timestamp dx dy dtheta
 
 A ``LINESLAM_EDGE_SE2_LINE2D`` is a line measurement: the line ``(r, α)`` measured in the
 laser frame of pose ``i`` (``{p : p·(cos α, sin α) = r}``), predicted from landmark ``k`` by
 :func:`slam.geometry` Eq. 30 (:mod:`slam.graph.factors`), with the inverse of its 2×2
 covariance (upper triangle).  Only landmarks still in the graph (not fused into another) and
 their factors are written; a landmark's id is ``n_poses +`` its index among them.  The file
-has no ``#`` comment lines: ``gtsam.readG2o`` (4.2/4.3) stops reading edges at one.
+has no ``#`` comment lines: ``gtsam.readG2o`` (4.2/4.3) stops reading edges at one, and at
+some unknown tags (a line whose first fields are not integers), so the extension lines that
+are not of that shape come after every ``EDGE_SE2``.
+
+The rest makes the file enough to recompute the run's covariances (``lineslam evaluate``'s
+relations NEES, :mod:`slam.graph.relative`): ``LINESLAM_PRIOR_SE2`` is the prior that fixes
+the gauge (information in the tangent space of pose ``i``; ``FIX`` says the same to g2o),
+``LINESLAM_ROBUST_KERNEL`` the kernel and its width (whitened units) on the line factors, and
+every scan that is not a keyframe has a ``LINESLAM_SCAN_OFFSET``: it hangs from keyframe ``i``
+with the odometry offset ``(dx, dy, dθ)`` (laser frame of the keyframe), its pose covariance
+being the keyframe's moved along the offset plus the motion noise of the offset,
+``LINESLAM_MOTION_NOISE`` (σ's of :class:`slam.models.motion.MotionNoiseConfig`: m, m/√m,
+m/√rad, rad, rad/√m, rad/√rad).
 """
 
 from __future__ import annotations
@@ -217,9 +233,30 @@ def read_g2o(path: str | Path) -> PoseGraph2D:
 _LINE_VERTEX = "LINESLAM_VERTEX_LINE2D"
 _LINE_EDGE = "LINESLAM_EDGE_SE2_LINE2D"
 _SCAN = "LINESLAM_SCAN"
+_PRIOR = "LINESLAM_PRIOR_SE2"
+_ROBUST = "LINESLAM_ROBUST_KERNEL"
+_MOTION = "LINESLAM_MOTION_NOISE"
+_OFFSET = "LINESLAM_SCAN_OFFSET"
+_MOTION_FIELDS = (
+    "sigma_xy_min_m",
+    "sigma_xy_per_m",
+    "sigma_xy_per_rad",
+    "sigma_theta_min_rad",
+    "sigma_theta_per_m",
+    "sigma_theta_per_rad",
+)
+_KERNELS = ("none", "huber", "cauchy")
 
 
-def write_line_graph_g2o(path: str | Path, graph: Any, result: Any = None) -> Path:
+def write_line_graph_g2o(
+    path: str | Path,
+    graph: Any,
+    result: Any = None,
+    *,
+    scan_offsets: ArrayLike | None = None,
+    motion_noise: Any = None,
+    robust_kernel: tuple[str, float] | None = None,
+) -> Path:
     """Write a :class:`slam.graph.problem.LineGraph` as g2o with the line extension (module doc).
 
     Parameters
@@ -227,18 +264,34 @@ def write_line_graph_g2o(path: str | Path, graph: Any, result: Any = None) -> Pa
     path
         The ``.g2o`` file.
     graph
-        The estimator's graph (``LineSlam.graph``): poses, odometry and line factors.
+        The estimator's graph (``LineSlam.graph``): poses, odometry, line factors, the prior.
     result
         The run's :class:`slam.result.SlamResult`, for the keyframes' time stamps
-        (``LINESLAM_SCAN`` comments); optional.
+        (``LINESLAM_SCAN``) and, with ``scan_offsets``, the other scans' keyframes; optional.
+    scan_offsets : array_like, shape (N, 3), optional
+        Each scan's odometry offset from the keyframe it hangs from (zero for keyframes), in
+        the order of ``result``'s scans: ``LINESLAM_SCAN_OFFSET`` lines.
+    motion_noise : optional
+        The motion model of those offsets (the six σ attributes of
+        :class:`slam.models.motion.MotionNoiseConfig`): ``LINESLAM_MOTION_NOISE``.
+    robust_kernel : (name, k), optional
+        The kernel on the line factors: ``LINESLAM_ROBUST_KERNEL``.
     """
     poses = np.asarray(graph.poses, dtype=float)
     n = poses.shape[0]
     stamps: FloatArray | None = None
+    offset_rows: FloatArray | None = None
     if result is not None:
         kf = np.asarray(result.is_keyframe, dtype=bool)
         if int(kf.sum()) == n:
             stamps = np.asarray(result.timestamps, dtype=float)[kf]
+            if scan_offsets is not None:
+                off = np.asarray(scan_offsets, dtype=float).reshape(-1, 3)
+                if off.shape[0] != kf.shape[0]:
+                    raise InputError(f"scan_offsets: need {kf.shape[0]} rows, got {off.shape[0]}")
+                t = np.asarray(result.timestamps, dtype=float)
+                k = np.asarray(result.keyframe_of_scan, dtype=np.int64)
+                offset_rows = np.column_stack([k[~kf], t[~kf], off[~kf]])
     alive = np.flatnonzero(np.asarray(graph.landmark_alive, dtype=bool))
     line_id = np.full(np.asarray(graph.landmark_alive).shape[0], -1, dtype=np.int64)
     line_id[alive] = n + np.arange(alive.shape[0])
@@ -277,6 +330,25 @@ def write_line_graph_g2o(path: str | Path, graph: Any, result: Any = None) -> Pa
             upper = np.column_stack([f_info[:, 0, 0], f_info[:, 0, 1], f_info[:, 1, 1]])
             table = np.column_stack([f_pose, f_id, z, upper])
             np.savetxt(handle, table, fmt=[f"{_LINE_EDGE} %d", "%d"] + ["%.9f"] * 2 + ["%.9g"] * 3)
+        # after every edge: gtsam.readG2o stops reading edges at some unknown lines
+        if offset_rows is not None and offset_rows.shape[0]:
+            np.savetxt(handle, offset_rows, fmt=[f"{_OFFSET} %d", "%.6f", "%.9f", "%.9f", "%.9f"])
+        if robust_kernel is not None:
+            name, width = robust_kernel
+            if name not in _KERNELS:
+                raise InputError(f"robust kernel must be one of {_KERNELS}, got {name!r}")
+            handle.write(f"{_ROBUST} {name} {float(width):.17g}\n")
+        if motion_noise is not None:
+            sigmas = " ".join(f"{float(getattr(motion_noise, f)):.17g}" for f in _MOTION_FIELDS)
+            handle.write(f"{_MOTION} {sigmas}\n")
+        prior_pose = getattr(graph, "prior_pose", None)
+        prior_cov = getattr(graph, "prior_cov", None)
+        if n and prior_pose is not None and prior_cov is not None:
+            p_info = np.linalg.inv(np.asarray(prior_cov, dtype=float))
+            p_info = 0.5 * (p_info + p_info.T)
+            values = " ".join(f"{v:.9f}" for v in np.asarray(prior_pose, dtype=float))
+            info_text = " ".join(f"{v:.9g}" for v in p_info[_UPPER[0], _UPPER[1]])
+            handle.write(f"{_PRIOR} 0 {values} {info_text}\n")
         if n:
             handle.write("FIX 0\n")
     return path
@@ -299,6 +371,16 @@ class LineGraphFile:
     factor_information : ndarray, shape (F, 2, 2)
     timestamps : ndarray, shape (N,) or None
         The keyframes' scan time stamps, if written.
+    prior_pose : ndarray, shape (3,) or None
+    prior_information : ndarray, shape (3, 3) or None
+        The gauge prior on pose 0 (``LINESLAM_PRIOR_SE2``), if written.
+    robust_kernel : (str, float) or None
+        Kernel name and width on the line factors, if written.
+    motion_noise : dict or None
+        The six σ of the non-keyframe scans' motion model (``MotionNoiseConfig`` fields).
+    offset_timestamps, offset_keyframes, offsets : ndarray or None
+        The scans that are not keyframes: time stamp ``(S,)``, keyframe they hang from ``(S,)``
+        and odometry offset from it ``(S, 3)``, if written.
     """
 
     pose_graph: PoseGraph2D
@@ -309,6 +391,13 @@ class LineGraphFile:
     factor_z: FloatArray
     factor_information: FloatArray
     timestamps: FloatArray | None
+    prior_pose: FloatArray | None = None
+    prior_information: FloatArray | None = None
+    robust_kernel: tuple[str, float] | None = None
+    motion_noise: dict[str, float] | None = None
+    offset_timestamps: FloatArray | None = None
+    offset_keyframes: NDArray[np.int64] | None = None
+    offsets: FloatArray | None = None
 
 
 def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
@@ -318,6 +407,11 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
     lines_v: list[list[float]] = []
     lines_e: list[list[float]] = []
     stamps: dict[int, float] = {}
+    offsets: list[list[float]] = []
+    prior: list[float] | None = None
+    robust: tuple[str, float] | None = None
+    motion: dict[str, float] | None = None
+    ours = (_LINE_VERTEX, _LINE_EDGE, _SCAN, _PRIOR, _ROBUST, _MOTION, _OFFSET)
     for line_number, line in iter_text_lines(path):
         tokens = line.split()
         if not tokens:
@@ -329,7 +423,15 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
                 lines_e.append([float(t) for t in tokens[1:]])
             elif tokens[0] == _SCAN and len(tokens) == 3:
                 stamps[int(tokens[1])] = float(tokens[2])
-            elif tokens[0] in (_LINE_VERTEX, _LINE_EDGE, _SCAN):
+            elif tokens[0] == _OFFSET and len(tokens) == 6:
+                offsets.append([float(tokens[2]), int(tokens[1]), *map(float, tokens[3:])])
+            elif tokens[0] == _PRIOR and len(tokens) == 11 and int(tokens[1]) == 0:
+                prior = [float(t) for t in tokens[2:]]
+            elif tokens[0] == _ROBUST and len(tokens) == 3 and tokens[1] in _KERNELS:
+                robust = (tokens[1], float(tokens[2]))
+            elif tokens[0] == _MOTION and len(tokens) == 7:
+                motion = dict(zip(_MOTION_FIELDS, map(float, tokens[1:]), strict=True))
+            elif tokens[0] in ours:
                 raise ValueError
             else:
                 plain.append(line)
@@ -349,6 +451,16 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
     info[:, 0, 0], info[:, 0, 1], info[:, 1, 0], info[:, 1, 1] = e[:, 4], e[:, 5], e[:, 5], e[:, 6]
     n = pose_graph.vertex_ids.shape[0]
     timestamps = np.array([stamps[i] for i in range(n)]) if stamps and len(stamps) == n else None
+    prior_pose = prior_info = None
+    if prior is not None:
+        prior_pose = np.array(prior[:3])
+        prior_info = np.zeros((3, 3))
+        prior_info[_UPPER[0], _UPPER[1]] = prior[3:]
+        prior_info[_UPPER[1], _UPPER[0]] = prior[3:]
+    off = np.asarray(offsets, dtype=float).reshape(-1, 5)
+    written = bool(offsets) or motion is not None  # a file of this writer: every scan stated
+    if off.shape[0] and (off[:, 1].min() < 0 or off[:, 1].max() >= n):
+        raise LogFormatError(f"{_OFFSET}: a keyframe index is not a pose of the graph", where)
     return LineGraphFile(
         pose_graph=pose_graph,
         line_ids=v[:, 0].astype(np.int64),
@@ -358,4 +470,11 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
         factor_z=e[:, 2:4],
         factor_information=info,
         timestamps=timestamps,
+        prior_pose=prior_pose,
+        prior_information=prior_info,
+        robust_kernel=robust,
+        motion_noise=motion,
+        offset_timestamps=off[:, 0].copy() if written else None,
+        offset_keyframes=off[:, 1].astype(np.int64) if written else None,
+        offsets=off[:, 2:].copy() if written else None,
     )

@@ -23,8 +23,19 @@ from scipy.stats import chi2
 
 from slam.graph.factors import line_factor_residuals
 from slam.graph.problem import LineGraph
+from slam.line_slam.keyframes import EveryKeyframes
+from slam.models.anchored import model_error_covariance
 
-__all__ = ["LineModelErrorEstimator", "midpoint_residuals"]
+__all__ = ["LineModelErrorEstimator", "LineReweighting", "midpoint_residuals"]
+
+FIRST_ESTIMATE_KEYFRAMES = 20
+"""Keyframes before the first estimate of the lines' model error."""
+
+ESTIMATE_INTERVAL_KEYFRAMES = 50
+"""Keyframes between two later estimates."""
+
+REWEIGHT_CHANGE = 0.2
+"""Relative change of the estimated model error that re-weights the line factors."""
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -137,3 +148,46 @@ class LineModelErrorEstimator:
             "samples": self.samples,
             "updates": self.updates,
         }
+
+
+class LineReweighting:
+    """Estimates the model error on schedule and re-weights the graph's line factors with it.
+
+    The factors are re-weighted when either component differs by more than
+    :data:`REWEIGHT_CHANGE` (relative) from what they were weighted with: the estimate settles
+    within the first few hundred keyframes, while the graph is small.  A back-end holding the
+    factors must be restarted after a re-weighting.
+
+    Parameters
+    ----------
+    estimator : LineModelErrorEstimator
+    enabled : bool
+        False: nothing is ever estimated (the configured model error is kept).
+    """
+
+    def __init__(self, estimator: LineModelErrorEstimator, enabled: bool) -> None:
+        self.estimator = estimator
+        self.enabled = enabled
+        self.weighted_with = estimator.sigmas
+        self._due = EveryKeyframes()
+
+    def keyframe(self, graph: LineGraph, fit_cov: FloatArray) -> bool:
+        """Count a keyframe; estimate when due.  Returns whether the factors were re-weighted."""
+        est = self.estimator
+        interval = ESTIMATE_INTERVAL_KEYFRAMES if est.updates else FIRST_ESTIMATE_KEYFRAMES
+        return self._due.tick(self.enabled, interval) and self.estimate(graph, fit_cov)
+
+    def estimate(self, graph: LineGraph, fit_cov: FloatArray) -> bool:
+        """Estimate now; re-weight when moved.  Returns whether the factors were re-weighted."""
+        if not self.enabled or not self.estimator.update(graph, fit_cov):
+            return False
+        new, old = self.estimator.sigmas, self.weighted_with
+        if all(abs(n - o) <= REWEIGHT_CHANGE * max(o, 1e-6) for n, o in zip(new, old, strict=True)):
+            return False
+        g = graph
+        cov = np.asarray(fit_cov) + model_error_covariance(
+            g.factor_z, g.factor_endpoints, new[0], new[1]
+        )
+        g.set_line_factor_covariances(np.arange(g.n_line_factors), cov)
+        self.weighted_with = new
+        return True

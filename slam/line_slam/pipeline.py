@@ -38,6 +38,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -59,15 +60,14 @@ from slam.line_slam.config import SlamConfig
 from slam.line_slam.drift import DriftAccumulator
 from slam.line_slam.front_end import add_registration_factor, register_keyframe
 from slam.line_slam.fusion import LandmarkFusion
-from slam.line_slam.keyframes import EveryKeyframes, KeyframeTrack, OdometryStep
+from slam.line_slam.keyframes import KeyframeTrack, OdometryStep
 from slam.line_slam.landmarks import LandmarkBook
-from slam.line_slam.line_noise import LineModelErrorEstimator
+from slam.line_slam.line_noise import LineModelErrorEstimator, LineReweighting
 from slam.line_slam.local_map import LocalMap, build_local_map
 from slam.line_slam.loop_closer import LoopCloser
 from slam.line_slam.observations import usable_lines
 from slam.line_slam.odometry_noise import MotionNoiseEstimator
-from slam.line_slam.report import ScanReport, SlamWarning, degradation
-from slam.models.anchored import model_error_covariance
+from slam.line_slam.report import COUNTERS, ScanReport, SlamWarning, degradation
 from slam.result import SlamResult
 from slam.types import Scan, check_lines, check_scan
 from slam.validate import check_config
@@ -75,44 +75,6 @@ from slam.validate import check_config
 FloatArray = NDArray[np.float64]
 
 __all__ = ["COUNTERS", "LineSlam", "ScanReport", "SlamWarning"]
-
-COUNTERS = (
-    "points",
-    "lines_fit",
-    "lines_used",
-    "lines_matched",
-    "lines_new",
-    "lines_ambiguous",
-    "lines_rejected",
-    "landmarks_merged",
-    "merges_undone",
-    "tentative_started",
-    "tentative_promoted",
-    "tentative_expired",
-    "registrations_failed",
-    "registrations_rejected",
-    "relocalisations",
-    "relocalisations_used",
-    "loop_closure_attempts",
-    "loop_closure_candidates",
-    "loop_closures",
-    "loop_closures_undone",
-    "loop_closures_repeated",
-    "loop_closures_gated",
-    "keyframes_without_lines",
-    "keyframes_parallel_lines",
-    "keyframes_lost_association",
-)
-"""The counters of a run, in ``summary.json`` (``docs/real-logs.md`` says what each counts)."""
-
-LINE_NOISE_FIRST = 20
-"""Keyframes before the first estimate of the lines' model error."""
-
-LINE_NOISE_INTERVAL = 50
-"""Keyframes between two later estimates of the lines' model error."""
-
-LINE_NOISE_CHANGE = 0.2
-"""Relative change of the estimated model error that re-weights the line factors."""
 
 
 class LineSlam:
@@ -171,8 +133,7 @@ class LineSlam:
         self.line_noise = LineModelErrorEstimator(
             cfg.line_model_sigma_r_m, cfg.line_model_sigma_alpha_rad
         )
-        self._line_noise_due = EveryKeyframes()
-        self._lines_weighted_with = self.line_noise.sigmas
+        self.line_weights = LineReweighting(self.line_noise, cfg.line_model_error == "estimated")
         self.book = LandmarkBook(self.graph, cfg.frontend)
         self.audit = MergeAudit(self.book, cfg.fusion, self.counters)
         self.fusion = LandmarkFusion(
@@ -324,9 +285,8 @@ class LineSlam:
         with self.clock("backend"):
             self.backend.update(g)
         self.book.update_extents(assoc.factors, self.backend.estimate_moved)
-        interval = LINE_NOISE_INTERVAL if self.line_noise.updates else LINE_NOISE_FIRST
-        if self._line_noise_due.tick(cfg.line_model_error == "estimated", interval):
-            self._estimate_line_noise()
+        if self.line_weights.keyframe(g, self.book.fit_cov):
+            self.backend.reset(g)  # the line factors re-weighted with the model error estimated
         # 9. fusion and 10. loop closing
         merged = self.fusion.round(reg.pose_world_laser) if self.fusion.due() else 0
         closures = self.loop_closer.attempt(i) if self.loop_closer.due() else 0
@@ -357,8 +317,8 @@ class LineSlam:
         g = self.graph
         if g.n_poses == 0:
             return stats
-        if self.config.line_model_error == "estimated":
-            self._estimate_line_noise()
+        if self.line_weights.estimate(g, self.book.fit_cov):
+            self.backend.reset(g)
         for _ in range(3):
             interrupts.check()
             stats = self.backend.optimize(g)
@@ -383,33 +343,24 @@ class LineSlam:
         self.clock.time_s["optimize"] += time.perf_counter() - t0
         return stats
 
-    def _estimate_line_noise(self) -> None:
-        """Estimate the lines' model error; re-weight the line factors when it has moved.
+    def write_graph_g2o(self, path: str | Path, result: SlamResult | None = None) -> Path:
+        """Write the factor graph as ``graph.g2o`` (:func:`slam.io.g2o.write_line_graph_g2o`).
 
-        The factors are re-weighted (and the back-end restarted) when either component differs
-        by more than :data:`LINE_NOISE_CHANGE` (relative) from what they were weighted with: the
-        estimate settles within the first few hundred keyframes, while the graph is small.
+        With the run's ``result`` the file also says which scan each keyframe is and how
+        every other scan hangs from its keyframe (odometry offset, the final motion model), so
+        that the run's covariances can be recomputed from it (:mod:`slam.graph.relative`).
         """
-        if not self.line_noise.update(self.graph, self.book.fit_cov):
-            return
-        new = self.line_noise.sigmas
-        old = self._lines_weighted_with
-        if any(
-            abs(n - o) > LINE_NOISE_CHANGE * max(o, 1e-6) for n, o in zip(new, old, strict=True)
-        ):
-            self._reweight_lines()
-            self._lines_weighted_with = new
+        from slam.io.g2o import write_line_graph_g2o
 
-    def _reweight_lines(self) -> None:
-        """Every line factor's covariance: its fit's plus the current model error; restart."""
-        g = self.graph
-        f = np.arange(g.n_line_factors)
-        sigma_o, sigma_a = self.line_noise.sigmas
-        cov = self.book.fit_cov + model_error_covariance(
-            g.factor_z, g.factor_endpoints, sigma_o, sigma_a
+        solver = self.config.solver
+        return write_line_graph_g2o(
+            path,
+            self.graph,
+            result,
+            scan_offsets=np.array(self.track.scan_offset).reshape(-1, 3),
+            motion_noise=self.odometry_noise.model,
+            robust_kernel=(solver.robust_kernel, solver.robust_k),
         )
-        g.set_line_factor_covariances(f, cov)
-        self.backend.reset(g)
 
     def result(self) -> SlamResult:
         """The current estimate of every scan's pose and the map, with covariances."""

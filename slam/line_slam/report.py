@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "COUNTERS",
     "PARALLEL_TOLERANCE_RAD",
     "WARN_LOST",
     "WARN_NO_LINES",
@@ -25,6 +26,36 @@ __all__ = [
     "all_parallel",
     "degradation",
 ]
+
+COUNTERS = (
+    "points",
+    "lines_fit",
+    "lines_used",
+    "lines_matched",
+    "lines_new",
+    "lines_ambiguous",
+    "lines_rejected",
+    "landmarks_merged",
+    "merges_undone",
+    "tentative_started",
+    "tentative_promoted",
+    "tentative_expired",
+    "registrations_failed",
+    "registrations_rejected",
+    "relocalisations",
+    "relocalisations_used",
+    "loop_closure_attempts",
+    "loop_closure_candidates",
+    "loop_closures",
+    "loop_closures_undone",
+    "loop_closures_repeated",
+    "loop_closures_gated",
+    "keyframes_without_lines",
+    "keyframes_parallel_lines",
+    "keyframes_lost_association",
+)
+"""The counters of a run, in ``summary.json`` (``docs/real-logs.md`` says what each counts)."""
+
 
 FloatArray = NDArray[np.float64]
 

@@ -68,6 +68,22 @@ class MotionNoiseConfig:
         positive("sigma_xy_min_m", self.sigma_xy_min_m)
         positive("sigma_theta_min_rad", self.sigma_theta_min_rad)
 
+    def scaled(self, factor: float) -> MotionNoiseConfig:
+        """The same model with the four growth rates ``sigma_*_per_*`` times ``factor``.
+
+        The floors per step are kept.  Used by experiments with noisier odometry
+        (``lineslam consistency --odometry-scale``).
+        """
+        positive("factor", factor)
+        return MotionNoiseConfig(
+            sigma_xy_per_m=self.sigma_xy_per_m * factor,
+            sigma_xy_per_rad=self.sigma_xy_per_rad * factor,
+            sigma_theta_per_m=self.sigma_theta_per_m * factor,
+            sigma_theta_per_rad=self.sigma_theta_per_rad * factor,
+            sigma_xy_min_m=self.sigma_xy_min_m,
+            sigma_theta_min_rad=self.sigma_theta_min_rad,
+        )
+
     def covariance(self, delta: FloatArray) -> FloatArray:
         """Covariance ``(..., 3, 3)`` of relative motions ``delta`` ``(..., 3)``."""
         d = np.asarray(delta, dtype=float)

@@ -5,6 +5,7 @@ Every function writes one PNG and returns its path; none of them shows a window 
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -44,13 +45,32 @@ def plot_nees_over_time(
     dof: int = 3,
     title: str = "",
     n_runs: int | None = None,
+    segments: int = 1,
 ) -> Path:
-    """Average pose NEES over time per estimator with the χ² band of a consistent estimator."""
+    """Average pose NEES over time per estimator with the χ² band of a consistent estimator.
+
+    With ``segments > 1`` (the loops of a long run) each curve is drawn thin and its mean over
+    each of ``segments`` equal stretches is drawn over it as a thick step, with the stretches'
+    boundaries marked: growth over the run shows as rising steps.
+    """
     fig, ax = plt.subplots(figsize=(8, 4.2))
-    for name, values in anees.items():
-        ax.plot(np.arange(values.shape[0]), values, lw=1.2, label=name)
-    lo, hi = bounds
     n = max(v.shape[0] for v in anees.values())
+    edges = np.linspace(0, n, max(segments, 1) + 1).round().astype(int)
+    for name, values in anees.items():
+        if segments <= 1:
+            ax.plot(np.arange(values.shape[0]), values, lw=1.2, label=name)
+            continue
+        (line,) = ax.plot(np.arange(values.shape[0]), values, lw=0.6, alpha=0.45)
+        means = []
+        for a, b in itertools.pairwise(edges):
+            part = values[a:b]
+            ok = np.isfinite(part)
+            means.append(float(np.mean(part[ok])) if np.any(ok) else np.nan)
+        ax.stairs(means, edges, color=line.get_color(), lw=2.2, label=f"{name} (mean per loop)")
+    if segments > 1:
+        for e in edges[1:-1]:
+            ax.axvline(e, color="0.6", lw=0.6, ls=":")
+    lo, hi = bounds
     ax.fill_between([0, n - 1], lo, hi, color="0.85", label=f"95% bounds ({dof} dof)")
     ax.axhline(dof, color="0.4", lw=0.8, ls="--")
     runs = f", {n_runs} runs" if n_runs else ""

@@ -1,0 +1,267 @@
+"""Covariances of the relative pose between any two scans of a run, from its ``graph.g2o``.
+
+The relations NEES of ``lineslam evaluate`` (:mod:`slam.evaluation.relations_nees`) needs, for a
+relation between the scans at ``t1`` and ``t2``, the covariance of the estimated relative pose
+``ρ = p₁⁻¹ p₂``.  Per-pose marginals (``trajectory_covariance.txt``) cannot give it: the two
+poses are correlated, and for a short relation the correlation is nearly all of their
+covariance.  The results folder of ``lineslam slam`` holds the whole factor graph
+(``graph.g2o``, :func:`slam.io.g2o.write_line_graph_g2o`: keyframe poses as estimated, odometry
+and line factors with their information, the gauge prior, the robust kernel, and how every
+other scan hangs from its keyframe), so the covariances are recomputed here exactly as the
+batch back-end computes its own (:meth:`slam.graph.batch.BatchSolver.marginals`: the graph
+linearised at the estimate, the kernel's IRLS weights at the estimate, ``gtsam.Marginals``):
+
+* keyframes ``k₁ ≠ k₂``: their joint marginal ``Σ`` (6×6, ``jointMarginalCovariance``); a scan
+  ``s`` hanging from keyframe ``k`` with odometry offset ``δ_s`` has the right perturbation
+  ``ξ_s = Ad(δ_s⁻¹) ξ_k + w_s``, ``w_s ~ N(0, Q(δ_s))`` (the run's final motion model, as
+  :func:`slam.line_slam.assembly.assemble_result` computes each scan's own covariance),
+  independent between keyframes;
+* both scans on one keyframe: the keyframe cancels, ``Cov(ρ) = Q(δ₁⁻¹ δ₂)`` (the odometry
+  between them, the earlier scan first; moved to ``ρ``'s tangent space when the relation runs
+  backwards);
+* then ``η = −Ad(ρ⁻¹) ξ₁ + ξ₂`` (right perturbation of ``ρ``), and in the reported frame
+  ``base`` (``pose_world_base = pose_world_laser ∘ M⁻¹``, ``M = pose_base_laser``)
+  ``η_base = Ad(M) η``.
+
+The small interpolation by which a reported non-keyframe pose shares the correction between
+its two keyframes (:func:`slam.line_slam.assembly.scan_poses`) is not in the covariance model,
+as it is not in the per-pose covariances.
+
+Main entry point::
+
+    cov = RunCovariances.from_file("out/graph.g2o", pose_base_laser=None)
+    cov.relative_covariances(t1, t2)    # (m, 3, 3) in the reported frame
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gtsam
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from slam.errors import EstimationError, EvaluationError, LogFormatError
+from slam.evaluation.timestamps import match_timestamps
+from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse
+from slam.graph.batch import BatchSolver
+from slam.graph.config import SolverConfig
+from slam.graph.linear import keys_of
+from slam.graph.problem import LineGraph
+from slam.io.g2o import LineGraphFile, read_line_graph_g2o
+from slam.models.motion import MotionNoiseConfig
+
+__all__ = ["DEFAULT_PRIOR_SIGMAS", "RunCovariances", "line_graph_from_file"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+DEFAULT_PRIOR_SIGMAS = (1e-4, 1e-4, 1e-5)
+"""Prior on pose 0 (m, m, rad) for a file without ``LINESLAM_PRIOR_SE2`` (``FIX 0`` only):
+``SlamConfig``'s default ``prior_sigma_*``; relative covariances hardly depend on it."""
+
+
+def line_graph_from_file(graph_file: LineGraphFile) -> LineGraph:
+    """A :class:`LineGraph` holding the file's poses, landmarks and factors at its estimate.
+
+    Each landmark's anchor is the foot of its first observing pose on the line (the anchor
+    only chooses the landmark's chart, which the pose marginals do not depend on).  The
+    measured segments are not in the file: the factors get zero-length end points, which
+    only the extents (not used here) would read.  Landmarks without a factor are left out.
+    """
+    pg = graph_file.pose_graph
+    n = pg.vertex_ids.shape[0]
+    if not np.array_equal(pg.vertex_ids, np.arange(n)):
+        raise LogFormatError("graph.g2o: pose ids must be 0..n-1 in order")
+    g = LineGraph()
+    for p in pg.poses:
+        g.add_pose(p)
+    if graph_file.prior_pose is not None and graph_file.prior_information is not None:
+        g.set_prior(
+            graph_file.prior_pose, np.asarray(np.linalg.inv(graph_file.prior_information), float)
+        )
+    elif n:
+        g.set_prior(pg.poses[0], np.diag(np.square(DEFAULT_PRIOR_SIGMAS)))
+    for (i, j), z, info in zip(pg.edges, pg.measurements, pg.information, strict=True):
+        g.add_odometry(int(i), int(j), z, np.linalg.inv(info))
+    if graph_file.factor_pose.size == 0:
+        return g
+    row_of = {int(k): r for r, k in enumerate(graph_file.line_ids)}
+    try:
+        rows = np.array([row_of[int(k)] for k in graph_file.factor_line], dtype=np.intp)
+    except KeyError as exc:
+        raise LogFormatError(f"graph.g2o: a line factor names unknown line {exc}") from None
+    used, first = np.unique(rows, return_index=True)
+    lines = graph_file.lines_r_alpha[used]
+    nrm = np.column_stack([np.cos(lines[:, 1]), np.sin(lines[:, 1])])
+    seen_from = pg.poses[graph_file.factor_pose[first], :2]
+    anchors = seen_from - (np.sum(seen_from * nrm, axis=1) - lines[:, 0])[:, None] * nrm
+    index = np.full(graph_file.line_ids.shape[0], -1, dtype=np.intp)
+    index[used] = g.add_landmarks(lines, anchors)
+    lm = index[rows]
+    inv = np.asarray(np.linalg.inv(graph_file.factor_information), dtype=np.float64)
+    cov: FloatArray = 0.5 * (inv + np.swapaxes(inv, 1, 2))
+    order = np.argsort(graph_file.factor_pose, kind="stable")
+    poses_sorted = graph_file.factor_pose[order]
+    starts = np.flatnonzero(np.r_[True, poses_sorted[1:] != poses_sorted[:-1]])
+    for sel in np.split(order, starts[1:]):
+        k = sel.shape[0]
+        g.add_line_factors(
+            int(graph_file.factor_pose[sel[0]]),
+            lm[sel],
+            graph_file.factor_z[sel],
+            cov[sel],
+            np.zeros((k, 2, 2)),
+        )
+    return g
+
+
+class RunCovariances:
+    """Relative-pose covariances between a run's scans (module docstring).
+
+    Parameters
+    ----------
+    graph_file : LineGraphFile
+        ``graph.g2o`` read back; it must state the keyframes' time stamps and the other
+        scans' offsets (``lineslam slam`` writes both).
+    pose_base_laser : array_like, shape (3,), optional
+        The mounting when the trajectory is reported in the base frame (``summary.json``
+        ``"frame": "base"``); None for the laser frame.
+
+    Raises
+    ------
+    EvaluationError
+        The file lacks the time stamps or the scans' offsets (written by an older version).
+    """
+
+    def __init__(self, graph_file: LineGraphFile, pose_base_laser: ArrayLike | None = None):
+        f = graph_file
+        if f.timestamps is None or f.offset_timestamps is None or f.motion_noise is None:
+            raise EvaluationError(
+                "graph.g2o does not say how every scan hangs from the graph (no "
+                "LINESLAM_SCAN / LINESLAM_SCAN_OFFSET / LINESLAM_MOTION_NOISE lines): "
+                "run lineslam slam again to write it"
+            )
+        assert f.offset_keyframes is not None and f.offsets is not None
+        self.graph_file = f
+        self.graph = line_graph_from_file(f)
+        kernel, width = f.robust_kernel if f.robust_kernel is not None else ("none", 1.0)
+        self.solver = BatchSolver(SolverConfig(robust_kernel=kernel, robust_k=width))  # type: ignore[arg-type]
+        self.motion = MotionNoiseConfig(**f.motion_noise)
+        n_kf = f.timestamps.shape[0]
+        self.scan_timestamps = np.concatenate([f.timestamps, f.offset_timestamps])
+        self.scan_keyframe = np.concatenate([np.arange(n_kf), f.offset_keyframes])
+        self.scan_offset = np.concatenate([np.zeros((n_kf, 3)), f.offsets])
+        self.mount = None if pose_base_laser is None else np.asarray(pose_base_laser, float)
+        self._marginals: gtsam.Marginals | None = None
+
+    @classmethod
+    def from_file(
+        cls, path: str | Path, pose_base_laser: ArrayLike | None = None
+    ) -> RunCovariances:
+        """Read ``graph.g2o`` (:func:`slam.io.g2o.read_line_graph_g2o`)."""
+        return cls(read_line_graph_g2o(path), pose_base_laser)
+
+    @classmethod
+    def from_results(cls, directory: str | Path, summary: dict[str, Any]) -> RunCovariances:
+        """From a results folder: its ``graph.g2o`` and the frame ``summary.json`` states."""
+        mount = None
+        if summary.get("frame", "laser") == "base":
+            mount = (summary.get("input") or {}).get("pose_base_laser")
+        return cls.from_file(Path(directory) / "graph.g2o", mount)
+
+    @property
+    def marginals(self) -> gtsam.Marginals:
+        """``gtsam.Marginals`` of the graph linearised at its estimate (built once)."""
+        if self._marginals is None:
+            self._marginals = self.solver.marginals(self.graph)
+        return self._marginals
+
+    def keyframe_covariances(self, keyframes: ArrayLike) -> FloatArray:
+        """Marginal covariances ``(m, 3, 3)`` of keyframes (laser, right tangent space)."""
+        keys = keys_of("x", np.asarray(keyframes, dtype=np.intp).reshape(-1))
+        return np.array([self.marginals.marginalCovariance(k) for k in keys]).reshape(-1, 3, 3)
+
+    def _joint(self, k1: int, k2: int) -> FloatArray:
+        keys = gtsam.KeyVector(keys_of("x", np.array([k1, k2])))
+        try:
+            return np.asarray(self.marginals.jointMarginalCovariance(keys).fullMatrix(), float)
+        except RuntimeError as exc:
+            raise EstimationError(f"joint marginal of keyframes {k1}, {k2}: {exc}") from exc
+
+    def scans_of(self, timestamps: ArrayLike, tolerance_s: float = 1e-5) -> IntArray:
+        """Row of each time stamp among the run's scans (EvaluationError if one is missing)."""
+        t = np.asarray(timestamps, dtype=float).reshape(-1)
+        idx, found = match_timestamps(t, self.scan_timestamps, tolerance_s)
+        if not found.all():
+            bad = float(t[np.flatnonzero(~found)[0]])
+            raise EvaluationError(f"time stamp {bad:.6f} is not a scan of graph.g2o")
+        return idx.astype(np.intp)
+
+    def relative_covariances(
+        self, t1: ArrayLike, t2: ArrayLike, tolerance_s: float = 1e-5
+    ) -> FloatArray:
+        """Covariance ``(m, 3, 3)`` of ``pose(t1)⁻¹ pose(t2)`` for each pair of time stamps.
+
+        In the right tangent space of the relative pose, in the reported frame (module
+        docstring).
+        """
+        s1 = self.scans_of(t1, tolerance_s)
+        s2 = self.scans_of(t2, tolerance_s)
+        out = np.zeros((s1.shape[0], 3, 3))
+        joint: dict[tuple[int, int], FloatArray] = {}
+        for m, (a, b) in enumerate(zip(s1.tolist(), s2.tolist(), strict=True)):
+            out[m] = self._relative(a, b, joint)
+        if self.mount is not None:
+            F = adjoint_pose2(self.mount)
+            out = F @ out @ F.T
+        return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+    def _relative(self, a: int, b: int, joint: dict[tuple[int, int], FloatArray]) -> FloatArray:
+        """Covariance of ``scan_a⁻¹ scan_b`` in the laser frame (module docstring)."""
+        ka, kb = int(self.scan_keyframe[a]), int(self.scan_keyframe[b])
+        da, db = self.scan_offset[a], self.scan_offset[b]
+        if ka == kb:
+            # the same keyframe: only the odometry between the two scans, earlier one first
+            forward = self._earlier(a, b)
+            first, second = (da, db) if forward else (db, da)
+            rho = pose_between(first, second)
+            Q = self.motion.covariance(rho)
+            if forward:
+                return np.asarray(Q)
+            F = adjoint_pose2(rho)  # η of ρ⁻¹ = −Ad(ρ) η of ρ
+            return np.asarray(F @ Q @ F.T)
+        key = (min(ka, kb), max(ka, kb))
+        if key not in joint:
+            joint[key] = self._joint(*key)
+        J = joint[key]
+        if ka > kb:
+            J = np.block([[J[3:, 3:], J[3:, :3]], [J[:3, 3:], J[:3, :3]]])
+        Fa = adjoint_pose2(pose_inverse(da))
+        Fb = adjoint_pose2(pose_inverse(db))
+        P = np.zeros((6, 6))
+        P[:3, :3] = Fa @ J[:3, :3] @ Fa.T + self.motion.covariance(da) * (not self._is_kf(a))
+        P[3:, 3:] = Fb @ J[3:, 3:] @ Fb.T + self.motion.covariance(db) * (not self._is_kf(b))
+        P[:3, 3:] = Fa @ J[:3, 3:] @ Fb.T
+        P[3:, :3] = P[:3, 3:].T
+        graph_poses = self.graph.poses
+        pa = pose_compose(graph_poses[ka], da)
+        pb = pose_compose(graph_poses[kb], db)
+        rho = pose_between(pa, pb)
+        A = np.hstack([-adjoint_pose2(pose_inverse(rho)), np.eye(3)])
+        return np.asarray(A @ P @ A.T)
+
+    def _is_kf(self, scan: int) -> bool:
+        return bool(scan < self.graph_file.pose_graph.vertex_ids.shape[0])
+
+    def _earlier(self, a: int, b: int) -> bool:
+        """Whether scan ``a`` comes before scan ``b`` on their keyframe's stretch.
+
+        The keyframe comes first; the offsets are in file order (not time-stamp order).
+        """
+        if self._is_kf(a):
+            return True
+        if self._is_kf(b):
+            return False
+        return a <= b

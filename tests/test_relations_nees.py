@@ -1,0 +1,259 @@
+"""Relations NEES: relative-pose covariances recomputed from graph.g2o (slam.graph.relative)."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from slam.evaluation.relations_nees import relation_error_vectors, relations_nees
+from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_exp, pose_inverse
+from slam.graph.batch import BatchSolver
+from slam.graph.config import SolverConfig
+from slam.graph.linear import keys_of
+from slam.graph.relative import RunCovariances
+from slam.graph.synthetic import synthetic_problem
+from slam.io.g2o import read_line_graph_g2o, write_line_graph_g2o
+from slam.io.relations import Relations
+from slam.io.trajectory import Trajectory
+from slam.models.motion import MotionNoiseConfig
+
+MOTION = MotionNoiseConfig(
+    sigma_xy_min_m=1e-5,
+    sigma_xy_per_m=0.03,
+    sigma_xy_per_rad=0.0,
+    sigma_theta_min_rad=1e-6,
+    sigma_theta_per_m=0.02,
+    sigma_theta_per_rad=0.03,
+)
+OFFSETS = np.array([[0.1, 0.005, 0.04], [0.2, 0.01, 0.09]])  # true offsets of two scans
+
+
+def _noisy_step(rng: np.random.Generator, u: np.ndarray) -> np.ndarray:
+    """``u ∘ Exp(w)``, ``w ~ N(0, Q(u))`` (the motion model's odometry)."""
+    w = np.linalg.cholesky(MOTION.covariance(u)) @ rng.standard_normal(3)
+    return np.asarray(pose_compose(u, pose_exp(w)))
+
+
+def _synthetic_run(seed: int, tmp_path, n_kf: int = 30):
+    """A solved synthetic graph written as graph.g2o, with two non-keyframe scans per keyframe.
+
+    Returns the run's trajectory (all scans), the true scan poses, and the scans' keyframes.
+    The scans' odometry is a random walk from their keyframe (the model of the covariances).
+    """
+    rng = np.random.default_rng(seed)
+    prob = synthetic_problem(n_kf, seed=seed, motion=MOTION)
+    BatchSolver(SolverConfig(robust_kernel="none")).solve(prob.graph)
+    est_kf = prob.graph.poses.copy()
+    poses, truth, kf_of, offsets, is_kf = [], [], [], [], []
+    for k in range(n_kf):
+        poses.append(est_kf[k])
+        truth.append(prob.poses_true[k])
+        kf_of.append(k)
+        offsets.append(np.zeros(3))
+        is_kf.append(True)
+        d1 = _noisy_step(rng, OFFSETS[0])
+        d2 = pose_compose(d1, _noisy_step(rng, pose_between(OFFSETS[0], OFFSETS[1])))
+        for u, d in zip(OFFSETS, (d1, d2), strict=True):
+            poses.append(pose_compose(est_kf[k], d))
+            truth.append(pose_compose(prob.poses_true[k], u))
+            kf_of.append(k)
+            offsets.append(np.asarray(d))
+            is_kf.append(False)
+    n = len(poses)
+    stamps = 1000.0 + 0.125 * np.arange(n)
+    result = SimpleNamespace(
+        timestamps=stamps,
+        is_keyframe=np.array(is_kf),
+        keyframe_of_scan=np.array(kf_of),
+    )
+    path = tmp_path / f"graph{seed}.g2o"
+    write_line_graph_g2o(
+        path,
+        prob.graph,
+        result,
+        scan_offsets=np.array(offsets),
+        motion_noise=MOTION,
+        robust_kernel=("none", 1.0),
+    )
+    return Trajectory(stamps, np.array(poses)), np.array(truth), np.array(kf_of), path
+
+
+def _relations(truth: np.ndarray, stamps: np.ndarray, pairs: np.ndarray) -> Relations:
+    rel = pose_between(truth[pairs[:, 0]], truth[pairs[:, 1]])
+    m = pairs.shape[0]
+    return Relations(
+        stamps[pairs[:, 0]],
+        stamps[pairs[:, 1]],
+        rel,
+        np.zeros(m),
+        np.zeros(m),
+        np.zeros(m),
+        np.arange(m, dtype=np.int64),
+    )
+
+
+def _pairs(n_kf: int) -> dict[str, np.ndarray]:
+    """Scan pairs by kind (scan 3k is keyframe k, 3k+1 and 3k+2 hang from it)."""
+    k = np.arange(n_kf - 6)
+    return {
+        "keyframes": np.column_stack([3 * k, 3 * k + 3]),
+        "keyframe to its scan": np.column_stack([3 * k, 3 * k + 2]),
+        "one keyframe, two scans": np.column_stack([3 * k + 1, 3 * k + 2]),
+        "backwards, one keyframe": np.column_stack([3 * k + 2, 3 * k + 1]),
+        "scans of two keyframes": np.column_stack([3 * k + 2, 3 * k + 7]),
+        "long, backwards": np.column_stack([3 * k + 16, 3 * k + 1]),
+    }
+
+
+def test_g2o_states_how_every_scan_hangs_from_the_graph(tmp_path):
+    traj, _, kf_of, path = _synthetic_run(0, tmp_path, n_kf=8)
+    back = read_line_graph_g2o(path)
+    assert back.robust_kernel == ("none", 1.0)
+    assert back.motion_noise is not None
+    assert MotionNoiseConfig(**back.motion_noise) == MOTION
+    assert back.prior_pose is not None and back.prior_information is not None
+    not_kf = np.arange(traj.timestamps.shape[0]) % 3 != 0
+    np.testing.assert_array_equal(back.offset_keyframes, kf_of[not_kf])
+    np.testing.assert_allclose(back.offset_timestamps, traj.timestamps[not_kf])
+    assert back.timestamps is not None
+    np.testing.assert_allclose(back.timestamps, traj.timestamps[::3])
+
+
+def test_keyframe_marginals_round_trip_through_the_file(tmp_path):
+    """The graph rebuilt from graph.g2o gives the solver's own marginals."""
+    prob = synthetic_problem(25, seed=4, motion=MOTION)
+    solver = BatchSolver(SolverConfig(robust_kernel="cauchy", robust_k=3.0))
+    solver.solve(prob.graph)
+    marg = solver.marginals(prob.graph)
+    stamps = 10.0 + np.arange(25) * 0.5
+    result = SimpleNamespace(
+        timestamps=stamps, is_keyframe=np.ones(25, bool), keyframe_of_scan=np.arange(25)
+    )
+    path = tmp_path / "g.g2o"
+    write_line_graph_g2o(
+        path,
+        prob.graph,
+        result,
+        scan_offsets=np.zeros((25, 3)),
+        motion_noise=MOTION,
+        robust_kernel=("cauchy", 3.0),
+    )
+    cov = RunCovariances.from_file(path)
+    mine = cov.keyframe_covariances(np.arange(25))
+    ref = np.array([marg.marginalCovariance(k) for k in keys_of("x", np.arange(25))])
+    np.testing.assert_allclose(mine, ref, rtol=1e-5, atol=1e-14)
+
+
+def test_relations_nees_is_chi2_3_with_exact_models(tmp_path):
+    """Monte Carlo on solved synthetic graphs with non-keyframe scans on a random walk: the
+    NEES of every kind of relation (keyframes, scans of one keyframe, of two, backwards) is
+    about 3, and the per-pose-marginal shortcut would not be."""
+    n_kf = 30
+    by_kind: dict[str, list[np.ndarray]] = {k: [] for k in _pairs(n_kf)}
+    naive = []
+    for seed in range(12):
+        traj, truth, _, path = _synthetic_run(seed, tmp_path, n_kf)
+        cov = RunCovariances.from_file(path)
+        for kind, pairs in _pairs(n_kf).items():
+            rel = _relations(truth, traj.timestamps, pairs)
+            res = relations_nees(traj, rel, cov.relative_covariances)
+            by_kind[kind].append(res.values)
+        # the shortcut: relative covariance from the per-pose marginals, no correlation
+        pairs = _pairs(n_kf)["keyframes"]
+        rel = _relations(truth, traj.timestamps, pairs)
+        P = cov.keyframe_covariances(pairs[:, 0] // 3), cov.keyframe_covariances(pairs[:, 1] // 3)
+        rho = pose_between(traj.poses[pairs[:, 0]], traj.poses[pairs[:, 1]])
+        F = adjoint_pose2(pose_inverse(rho))
+        C = F @ P[0] @ np.swapaxes(F, 1, 2) + P[1]
+        e = relation_error_vectors(traj.poses[pairs[:, 0]], traj.poses[pairs[:, 1]], rel)
+        naive.append(np.einsum("mi,mij,mj->m", e, np.linalg.inv(C), e))
+    for kind, values in by_kind.items():
+        v = np.concatenate(values)
+        assert 2.4 < v.mean() < 3.6, (kind, v.mean())
+    allv = np.concatenate([np.concatenate(v) for v in by_kind.values()])
+    assert 2.7 < allv.mean() < 3.3
+    assert np.mean(allv <= 7.8147) == pytest.approx(0.95, abs=0.03)
+    assert np.concatenate(naive).mean() < 1.5  # without the correlation: far too large
+
+
+def test_reported_base_frame_moves_the_covariance_with_the_mounting(tmp_path):
+    """A base-frame trajectory (pose ∘ M⁻¹) and the relations moved to the base give the
+    same NEES as the laser frame."""
+    traj, truth, _, path = _synthetic_run(7, tmp_path, n_kf=20)
+    pairs = np.concatenate(list(_pairs(20).values()))
+    mount = np.array([0.2, -0.05, 0.1])
+    minv = np.broadcast_to(pose_inverse(mount), traj.poses.shape)
+    base_traj = Trajectory(traj.timestamps, pose_compose(traj.poses, minv))
+    base_truth = pose_compose(truth, minv)
+    laser = relations_nees(
+        traj,
+        _relations(truth, traj.timestamps, pairs),
+        RunCovariances.from_file(path).relative_covariances,
+    )
+    base = relations_nees(
+        base_traj,
+        _relations(base_truth, traj.timestamps, pairs),
+        RunCovariances.from_file(path, pose_base_laser=mount).relative_covariances,
+    )
+    np.testing.assert_allclose(base.values, laser.values, rtol=1e-6)
+
+
+def _cli(argv: list[str]) -> int:
+    from slam.cli import main
+
+    try:
+        main(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    return 0
+
+
+def test_lineslam_evaluate_reports_the_relations_nees(tmp_path, capsys):
+    """simulate → slam (batch, exact line model) → evaluate --relations: metrics.json holds
+    relations_nees; the relative covariance from the first scan (pinned by the prior) to any
+    scan, keyframe or not, is that scan's covariance in trajectory_covariance.txt."""
+    from slam.io.results import read_results
+
+    sim, out = tmp_path / "sim", tmp_path / "run"
+    config = tmp_path / "exact.toml"
+    config.write_text("[slam]\nline_model_sigma_r_m = 0.0\nline_model_sigma_alpha_rad = 0.0\n")
+    assert _cli(["simulate", "loop", "--out", str(sim), "--spacing", "0.1", "--seed", "5",
+                 "--quiet", "--no-beam-hits"]) == 0  # fmt: skip
+    assert _cli(["slam", str(sim / "log.clf"), "--out", str(out), "--config", str(config),
+                 "--backend", "batch", "--max-scans", "120", "--quiet"]) == 0  # fmt: skip
+    assert _cli(["evaluate", str(out), "--relations", str(sim / "relations.txt"), "--quiet"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    nees = metrics["relations_nees"]
+    assert nees["n"] == metrics["relations"]["n_used"] > 50
+    assert set(nees) >= {"mean", "bounds_95", "fraction_inside_95", "n", "median"}
+    assert 0.0 < nees["mean"] < 20.0 and 0.0 <= nees["fraction_inside_95"] <= 1.0
+    assert sum(g["n"] for g in nees["by_gap"]) == nees["n"]
+    results = read_results(out)
+    cov = RunCovariances.from_results(out, results.summary)
+    t = results.trajectory.timestamps
+    assert results.covariances is not None
+    offsets = read_line_graph_g2o(out / "graph.g2o").offset_timestamps
+    assert offsets is not None and 0 < offsets.size < t.size  # scans that are not keyframes
+    import gtsam
+
+    graph, values = gtsam.readG2o(str(out / "graph.g2o"), False)  # the extension is skipped
+    text = (out / "graph.g2o").read_text()
+    assert values.size() == t.size - offsets.size == text.count("VERTEX_SE2 ")
+    assert graph.size() == text.count("\nEDGE_SE2 ")  # every odometry edge, nothing else
+    rel = cov.relative_covariances(np.full(t.size, t[0]), t)
+    np.testing.assert_allclose(rel[1:], results.covariances[1:], rtol=0.02, atol=1e-7)
+    assert _cli(["evaluate", str(out), "--relations", str(sim / "relations.txt"),
+                 "--no-relations-nees", "--quiet"]) == 0  # fmt: skip
+    assert "relations_nees" not in json.loads((out / "metrics.json").read_text())
+    # a graph.g2o of an older lineslam (none of the lines for the covariances): a warning,
+    # the rest evaluated
+    newer = ("LINESLAM_SCAN_OFFSET", "LINESLAM_MOTION_NOISE", "LINESLAM_ROBUST_KERNEL",
+             "LINESLAM_PRIOR_SE2")  # fmt: skip
+    lines = (out / "graph.g2o").read_text().splitlines(keepends=True)
+    (out / "graph.g2o").write_text("".join(x for x in lines if not x.startswith(newer)))
+    assert _cli(["evaluate", str(out), "--relations", str(sim / "relations.txt")]) == 0
+    assert "no relations NEES" in capsys.readouterr().err
+    assert "relations_nees" not in json.loads((out / "metrics.json").read_text())
