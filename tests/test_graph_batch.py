@@ -302,3 +302,52 @@ def test_pairing_order_groups_poses_and_spreads_repeated_landmarks():
     assert lm[o][pose[o] == 3].tolist() == [7, 8, 9, 7]
     _, paired = line_factor_groups(pose[o], lm[o])
     assert (~paired).sum() == 2  # pose 1: (4, 5) then 4 alone; pose 2: alone
+
+
+@pytest.mark.parametrize("free_from", [0, 120])
+@pytest.mark.parametrize("lam", [0.0, 1e-2])
+def test_sparse_normal_equations_solve_the_same_system_as_gtsam(free_from, lam):
+    """One (damped) step of the sparse LDLᵀ path equals GTSAM's elimination to rounding."""
+    from slam.graph.batch import BatchSolver as Solver
+
+    g = synthetic_problem(250, seed=3).graph
+    solver = Solver(SolverConfig())
+    lms = solver.active_landmarks(g)
+    solved = None
+    if free_from:
+        seen = np.zeros(g.n_landmarks, dtype=bool)
+        seen[g.factor_landmark[g.factor_pose >= free_from]] = True
+        lms = lms[seen[lms]]
+        solved = np.zeros(g.n_landmarks, dtype=bool)
+        solved[lms] = True
+    system, parts = solver._region(g, free_from, lms, solved)
+    lin = solver._assemble(g, g.poses, g.landmarks, system, parts)
+    gfg, lin_ref, used = solver._linearize(g, g.poses, g.landmarks, free_from, solved)
+    np.testing.assert_array_equal(parts["used"], used)
+    assert lin is not None and lin_ref is not None
+    np.testing.assert_array_equal(lin.b, lin_ref.b)
+    scale = solver.damping_scale(g, g.poses, g.landmarks, lin, used)
+    damping = lam * np.r_[scale[1][lms].ravel(), scale[0][free_from:].ravel()]
+    delta = system.solve(damping if lam else None)
+    ref_graph = solver._damped(gfg, lms, scale[0], scale[1], lam, free_from) if lam else gfg
+    ref = ref_graph.optimize(solver._ordering(gfg))
+    ref_vec = np.asarray(ref.vector())
+    np.testing.assert_allclose(delta, ref_vec, rtol=0, atol=1e-10 * np.max(np.abs(ref_vec)))
+    # the model's decrease of the undamped system, as GTSAM's error() gives it
+    predicted = float(gfg.error(ref.scale(0.0)) - gfg.error(ref))
+    assert system.predicted_decrease(delta) == pytest.approx(predicted, rel=1e-9)
+
+
+def test_sparse_and_gtsam_solves_agree_and_singular_systems_raise():
+    a = synthetic_problem(200, seed=4).graph
+    b = synthetic_problem(200, seed=4).graph
+    st_a = BatchSolver(SolverConfig()).solve(a)
+    st_b = BatchSolver(SolverConfig(linear_solver="gtsam")).solve(b)
+    assert st_a.iterations == st_b.iterations and st_a.reason == st_b.reason
+    np.testing.assert_allclose(a.poses, b.poses, atol=1e-9)
+    np.testing.assert_allclose(a.landmarks, b.landmarks, atol=1e-9)
+    # a pose without any factor: its block of the normal equations is zero
+    g = synthetic_problem(20, seed=5).graph
+    g.add_pose(g.poses[-1])
+    with pytest.raises(EstimationError, match="could not be solved"):
+        BatchSolver(SolverConfig()).solve(g)

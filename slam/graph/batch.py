@@ -50,6 +50,7 @@ from slam.graph.linear import (
 )
 from slam.graph.odometry import between_costs, linearize_between, linearize_prior
 from slam.graph.problem import LineGraph
+from slam.graph.sparse import BlockTerms, NormalEquations
 from slam.models.anchored import retract_landmarks
 
 __all__ = ["BatchSolver", "SolveStats"]
@@ -229,6 +230,107 @@ class BatchSolver:
                 gfg.push_back(f)
         return gfg, lin, used
 
+    def _region(
+        self, graph: LineGraph, free_from: int, lms: IntArray, solved: NDArray[np.bool_] | None
+    ) -> tuple[NormalEquations, dict[str, Any]]:
+        """The factors of a solve and the structure of its normal equations (once per solve).
+
+        The same factors as :meth:`_linearize`: the prior (``free_from == 0``), odometry into
+        a solved pose (one-variable when its first pose is held), line factors on solved
+        landmarks (one-variable when their pose is held).  Variables: the solved landmarks,
+        then the solved poses (the order of :func:`slam.graph.linear.split_delta`).
+        """
+        n_l = lms.shape[0]
+        lm_var = np.full(graph.n_landmarks, -1, dtype=np.intp)
+        lm_var[lms] = np.arange(n_l)
+        dims = np.r_[np.full(n_l, 2), np.full(graph.n_poses - free_from, 3)].astype(np.int64)
+        terms: list[BlockTerms] = []
+        parts: dict[str, Any] = {}
+        with_prior = free_from == 0 and graph.prior_pose is not None
+        if with_prior:
+            terms.append(BlockTerms(np.array([n_l]), 3))
+        parts["prior"] = with_prior
+        e = np.flatnonzero(graph.odometry_second >= free_from)
+        both = graph.odometry_first[e] >= free_from
+        parts["odometry"] = e
+        parts["odometry_both"] = both
+        pose_var = n_l - free_from
+        if np.any(both):
+            terms.append(
+                BlockTerms(
+                    graph.odometry_first[e[both]] + pose_var,
+                    3,
+                    graph.odometry_second[e[both]] + pose_var,
+                    3,
+                )
+            )
+        if not np.all(both):
+            terms.append(BlockTerms(graph.odometry_second[e[~both]] + pose_var, 3))
+        used = (
+            np.arange(graph.n_line_factors)
+            if solved is None
+            else np.flatnonzero(solved[graph.factor_landmark])
+        )
+        fp = graph.factor_pose[used]
+        lm = graph.factor_landmark[used]
+        free = fp >= free_from
+        parts["used"] = used
+        parts["free"] = free
+        if np.any(free):
+            terms.append(BlockTerms(fp[free] + pose_var, 3, lm_var[lm[free]], 2))
+        if not np.all(free):
+            terms.append(BlockTerms(lm_var[lm[~free]], 2))
+        return NormalEquations(dims, terms, self.config.ordering), parts
+
+    def _assemble(
+        self,
+        graph: LineGraph,
+        poses: FloatArray,
+        landmarks: FloatArray,
+        system: NormalEquations,
+        parts: dict[str, Any],
+    ) -> LineLinearization | None:
+        """Linearise the solve's factors at ``(poses, landmarks)`` into ``system``.
+
+        Returns the line factors' linearisation (for :meth:`damping_scale`).
+        """
+        values: list[tuple[FloatArray, FloatArray | None, FloatArray]] = []
+        if parts["prior"]:
+            assert graph.prior_pose is not None and graph.prior_sqrt_info is not None
+            A, b, _ = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
+            values.append((A[None], None, b[None]))
+        e, both = parts["odometry"], parts["odometry_both"]
+        if e.size:
+            A1, A2, b = linearize_between(
+                poses[graph.odometry_first[e]],
+                poses[graph.odometry_second[e]],
+                graph.odometry_measured[e],
+                graph.odometry_sqrt_info[e],
+            )
+            if np.any(both):
+                values.append((A1[both], A2[both], b[both]))
+            if not np.all(both):
+                values.append((A2[~both], None, b[~both]))
+        used, free = parts["used"], parts["free"]
+        lin: LineLinearization | None = None
+        if used.size:
+            lm = graph.factor_landmark[used]
+            lin = linearize_line_factors(
+                poses[graph.factor_pose[used]],
+                landmarks[lm],
+                graph.anchors[lm],
+                graph.factor_z[used],
+                graph.factor_sqrt_info[used],
+                self.config.robust_kernel,
+                self.config.robust_k,
+            )
+            if np.any(free):
+                values.append((lin.A_pose[free], lin.A_landmark[free], lin.b[free]))
+            if not np.all(free):
+                values.append((lin.A_landmark[~free], None, lin.b[~free]))
+        system.assemble(values)
+        return lin
+
     def damping_scale(
         self,
         graph: LineGraph,
@@ -371,6 +473,12 @@ class BatchSolver:
         scale: tuple[FloatArray, FloatArray] | None = None
         lin: LineLinearization | None = None
         used = np.zeros(0, dtype=np.intp)
+        sparse = cfg.linear_solver == "sparse"
+        if sparse:
+            t0 = time.perf_counter()
+            system, parts = self._region(graph, free_from, lms, solved)
+            used = parts["used"]
+            stats.time_s["linearize"] += time.perf_counter() - t0
         ordering = None
         gfg = gtsam.GaussianFactorGraph()
         relinearize = True
@@ -380,29 +488,46 @@ class BatchSolver:
                     stats.reason = "iteration limit"
                     break
                 t0 = time.perf_counter()
-                gfg, lin, used = self._linearize(graph, poses, landmarks, free_from, solved)
+                if sparse:
+                    lin = self._assemble(graph, poses, landmarks, system, parts)
+                else:
+                    gfg, lin, used = self._linearize(graph, poses, landmarks, free_from, solved)
+                    if ordering is None:
+                        ordering = self._ordering(gfg)
                 stats.iterations += 1
                 scale = None
-                if ordering is None:
-                    ordering = self._ordering(gfg)
                 stats.time_s["linearize"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            if lam > 0.0:
-                if scale is None:
-                    scale = self.damping_scale(graph, poses, landmarks, lin, used)
-                system = self._damped(gfg, lms, scale[0], scale[1], lam, free_from)
+            if lam > 0.0 and scale is None:
+                scale = self.damping_scale(graph, poses, landmarks, lin, used)
+            if sparse:
+                damping = None
+                if lam > 0.0:
+                    assert scale is not None
+                    damping = lam * np.r_[scale[1][lms].ravel(), scale[0][free_from:].ravel()]
+                delta_vector = system.solve(damping)  # EstimationError when not solvable
+                # the model's predicted decrease, for the gain ratio of a damped step only
+                predicted = system.predicted_decrease(delta_vector) if lam > 0.0 else 0.0
+                n_l = 2 * lms.shape[0]
+                d_lm = delta_vector[:n_l].reshape(-1, 2)
+                d_pose = delta_vector[n_l:].reshape(-1, 3)
             else:
-                system = gfg
-            assert ordering is not None
-            try:
-                delta = system.optimize(ordering)
-            except RuntimeError as exc:
-                raise EstimationError(f"linear system could not be solved: {exc}") from exc
-            # the model's predicted decrease, for the gain ratio of a damped step only
-            predicted = float(gfg.error(delta.scale(0.0)) - gfg.error(delta)) if lam > 0.0 else 0.0
+                if lam > 0.0:
+                    assert scale is not None
+                    damped = self._damped(gfg, lms, scale[0], scale[1], lam, free_from)
+                else:
+                    damped = gfg
+                assert ordering is not None
+                try:
+                    delta = damped.optimize(ordering)
+                except RuntimeError as exc:
+                    raise EstimationError(f"linear system could not be solved: {exc}") from exc
+                predicted = (
+                    float(gfg.error(delta.scale(0.0)) - gfg.error(delta)) if lam > 0.0 else 0.0
+                )
+                d_lm, d_pose = split_delta(delta, lms.shape[0], graph.n_poses - free_from)
             stats.time_s["solve"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            d_lm, d_pose = split_delta(delta, lms.shape[0], graph.n_poses - free_from)
             step = float(max(np.max(np.abs(d_pose)), np.max(np.abs(d_lm), initial=0.0)))
             new_poses = poses.copy()
             new_poses[free_from:] = pose_retract(poses[free_from:], d_pose)
