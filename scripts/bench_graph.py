@@ -10,7 +10,7 @@ the later iterations of a solve):
   (``linearize_line_factors``, robust IRLS weights included), per line factor;
 * ``lin/f``: the batch solver's linearisation of the whole graph into its normal equations
   (line factors + odometry factors + prior linearised in numpy, ``H = AᵀA`` and ``Aᵀb``
-  assembled; ``BatchSolver._assemble``), per factor (line + odometry factors + prior, the
+  assembled; ``BatchSolver._linearize_point``), per factor (line + odometry factors + prior, the
   count used by every ``/f`` column); ``elim``: solving that system (the compiled sparse
   ``LDLᵀ``, numeric factorisation and solve; the structure, COLAMD ordering and symbolic
   analysis, done once per solve, outside the timing); ``iter/f``: the two together, one whole
@@ -246,8 +246,13 @@ def gauss_newton_step(
 
 def sparse_step(solver: BatchSolver, g: LineGraph, system: NormalEquations, parts: Any) -> Any:
     """One Gauss-Newton iteration of the sparse path: assemble ``H``, ``g``; factorise; solve."""
-    solver._assemble(g, g.poses, g.landmarks, system, parts)
+    system.assemble(solver._linearize_point(g, g.poses, g.landmarks, parts)[0])
     return system.solve()
+
+
+def assemble(solver: BatchSolver, g: LineGraph, system: NormalEquations, parts: Any) -> None:
+    """The linearisation of one iteration: every factor in numpy, then ``H`` and ``g``."""
+    system.assemble(solver._linearize_point(g, g.poses, g.landmarks, parts)[0])
 
 
 def main() -> None:
@@ -280,9 +285,8 @@ def main() -> None:
         t_np = best_of(fast_numpy, 5) / F
         n_factors = F + g.n_odometry + 1  # line factors, odometry, prior
         system, parts = solver._region(g, 0, solver.active_landmarks(g), None)
-        assemble = partial(solver._assemble, g, g.poses, g.landmarks, system, parts)
-        assemble()
-        t_lin = best_of(assemble, 5) / n_factors
+        assemble(solver, g, system, parts)
+        t_lin = best_of(partial(assemble, solver, g, system, parts), 5) / n_factors
         t_elim = best_of(system.solve, 5)
         t_iter = best_of(partial(sparse_step, solver, g, system, parts), 5)
         gfg = solver.linearize(g)

@@ -50,6 +50,7 @@ from slam.graph.linear import (
 )
 from slam.graph.odometry import between_costs, linearize_between, linearize_prior
 from slam.graph.problem import LineGraph
+from slam.graph.robust import robust_cost
 from slam.graph.sparse import BlockTerms, NormalEquations
 from slam.models.anchored import retract_landmarks
 
@@ -282,24 +283,25 @@ class BatchSolver:
             terms.append(BlockTerms(lm_var[lm[~free]], 2))
         return NormalEquations(dims, terms, self.config.ordering), parts
 
-    def _assemble(
-        self,
-        graph: LineGraph,
-        poses: FloatArray,
-        landmarks: FloatArray,
-        system: NormalEquations,
-        parts: dict[str, Any],
-    ) -> LineLinearization | None:
-        """Linearise the solve's factors at ``(poses, landmarks)`` into ``system``.
+    def _linearize_point(
+        self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray, parts: dict[str, Any]
+    ) -> tuple[
+        list[tuple[FloatArray, FloatArray | None, FloatArray]], LineLinearization | None, float
+    ]:
+        """The solve's factors (:meth:`_region`) linearised at ``(poses, landmarks)``.
 
-        Returns the line factors' linearisation (for :meth:`damping_scale`).
+        Returns the blocks for :meth:`NormalEquations.assemble`, the line factors'
+        linearisation (for :meth:`damping_scale`) and the cost of these factors there, the
+        same number :meth:`cost` gives for them (the same residuals, summed in the same order).
         """
         values: list[tuple[FloatArray, FloatArray | None, FloatArray]] = []
+        prior_cost = 0.0
         if parts["prior"]:
             assert graph.prior_pose is not None and graph.prior_sqrt_info is not None
-            A, b, _ = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
+            A, b, prior_cost = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
             values.append((A[None], None, b[None]))
         e, both = parts["odometry"], parts["odometry_both"]
+        odometry_cost = None
         if e.size:
             A1, A2, b = linearize_between(
                 poses[graph.odometry_first[e]],
@@ -307,12 +309,14 @@ class BatchSolver:
                 graph.odometry_measured[e],
                 graph.odometry_sqrt_info[e],
             )
+            odometry_cost = float(np.sum(0.5 * np.sum(b**2, axis=-1)))  # b = −W e
             if np.any(both):
                 values.append((A1[both], A2[both], b[both]))
             if not np.all(both):
                 values.append((A2[~both], None, b[~both]))
         used, free = parts["used"], parts["free"]
         lin: LineLinearization | None = None
+        total = 0.0
         if used.size:
             lm = graph.factor_landmark[used]
             lin = linearize_line_factors(
@@ -324,12 +328,21 @@ class BatchSolver:
                 self.config.robust_kernel,
                 self.config.robust_k,
             )
+            rho = robust_cost(
+                self.config.robust_kernel,
+                np.linalg.norm(lin.whitened_residual, axis=-1),
+                self.config.robust_k,
+            )
+            total += float(np.sum(rho))
             if np.any(free):
                 values.append((lin.A_pose[free], lin.A_landmark[free], lin.b[free]))
             if not np.all(free):
                 values.append((lin.A_landmark[~free], None, lin.b[~free]))
-        system.assemble(values)
-        return lin
+        if odometry_cost is not None:
+            total += odometry_cost
+        if parts["prior"]:
+            total += prior_cost
+        return values, lin, total
 
     def damping_scale(
         self,
@@ -481,6 +494,8 @@ class BatchSolver:
             stats.time_s["linearize"] += time.perf_counter() - t0
         ordering = None
         gfg = gtsam.GaussianFactorGraph()
+        at_point: tuple[Any, LineLinearization | None, float] | None = None
+        trial: tuple[Any, LineLinearization | None, float] | None = None
         relinearize = True
         while True:
             if relinearize:
@@ -489,7 +504,11 @@ class BatchSolver:
                     break
                 t0 = time.perf_counter()
                 if sparse:
-                    lin = self._assemble(graph, poses, landmarks, system, parts)
+                    if at_point is None:  # else the accepted trial's linearisation
+                        at_point = self._linearize_point(graph, poses, landmarks, parts)
+                    system.assemble(at_point[0])
+                    lin = at_point[1]
+                    at_point = None
                 else:
                     gfg, lin, used = self._linearize(graph, poses, landmarks, free_from, solved)
                     if ordering is None:
@@ -535,13 +554,18 @@ class BatchSolver:
             new_landmarks[lms] = retract_landmarks(landmarks[lms], d_lm)
             stats.time_s["retract"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            new_cost = self.cost(graph, new_poses, new_landmarks, **varying) + constant
+            if sparse:  # linearised at the trial point already: reused if it is accepted
+                trial = self._linearize_point(graph, new_poses, new_landmarks, parts)
+                new_cost = trial[2] + constant
+            else:
+                new_cost = self.cost(graph, new_poses, new_landmarks, **varying) + constant
             stats.time_s["cost"] += time.perf_counter() - t0
             accepted = bool(np.isfinite(new_cost)) and new_cost <= cost * (1.0 + 1e-12) + 1e-15
             stats.history.append((new_cost, lam, accepted))
             if accepted:
                 decrease = cost - new_cost
                 poses, landmarks, cost = new_poses, new_landmarks, new_cost
+                at_point = trial
                 relinearize = True
                 if lam > 0.0:
                     rho = decrease / predicted if predicted > 0.0 else 0.0
