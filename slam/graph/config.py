@@ -15,7 +15,7 @@ __all__ = ["Isam2Config", "SolverConfig"]
 
 @dataclass(frozen=True)
 class SolverConfig:
-    """Batch Gauss-Newton / Levenberg-Marquardt (own loop, GTSAM elimination) and kernels.
+    """Batch Gauss-Newton / Levenberg-Marquardt (own loop, sparse LDLᵀ) and kernels.
 
     Attributes
     ----------
