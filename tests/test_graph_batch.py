@@ -353,7 +353,47 @@ def test_sparse_and_gtsam_solves_agree_and_singular_systems_raise():
     BatchSolver(SolverConfig(ordering="metis")).solve(c)
     np.testing.assert_allclose(c.poses, a.poses, atol=1e-9)
     # a pose without any factor: its block of the normal equations is zero
+    for linear_solver, match in (("sparse", "at pose 20"), ("gtsam", "has no factor")):
+        g = synthetic_problem(20, seed=5).graph
+        g.add_pose(g.poses[-1])
+        with pytest.raises(EstimationError, match=match):
+            BatchSolver(SolverConfig(linear_solver=linear_solver)).solve(g)
+
+
+@pytest.mark.parametrize("linear_solver", ["sparse", "gtsam"])
+def test_a_pose_determined_by_one_line_only_is_an_indeterminant_system(linear_solver):
+    """Rank 2 of 3 (a pose seeing one line, no odometry): an error, not a wild step."""
     g = synthetic_problem(20, seed=5).graph
-    g.add_pose(g.poses[-1])
-    with pytest.raises(EstimationError, match="could not be solved"):
+    i = g.add_pose(g.poses[-1])
+    f = np.flatnonzero(g.factor_pose == i - 1)[:1]
+    ends = np.array([[[0.0, 0.0], [1.0, 1.0]]])
+    for _ in range(2):  # the same line twice is still rank 2
+        g.add_line_factors(i, g.factor_landmark[f], g.factor_z[f], g.factor_cov[f], ends)
+    match = "at pose 20" if linear_solver == "sparse" else "could not be solved"
+    with pytest.raises(EstimationError, match=match):
+        BatchSolver(SolverConfig(linear_solver=linear_solver)).solve(g)
+
+
+@pytest.mark.parametrize("free_from", [0, 100])
+def test_sparse_and_gtsam_take_the_same_damped_steps(free_from):
+    """From a bad start (rejected steps, Levenberg-Marquardt damping) both paths agree."""
+    runs = []
+    for linear_solver in ("sparse", "gtsam"):
+        g = synthetic_problem(200, seed=4).graph
         BatchSolver(SolverConfig()).solve(g)
+        rng = np.random.default_rng(1)
+        g.poses[free_from + 1 :] += rng.normal(0.0, [3.0, 3.0, 1.5], (199 - free_from, 3))
+        held = g.poses[:free_from].copy()
+        st = BatchSolver(SolverConfig(linear_solver=linear_solver)).solve(g, free_from=free_from)
+        np.testing.assert_array_equal(g.poses[:free_from], held)
+        runs.append((st, g))
+    (st_s, g_s), (st_g, g_g) = runs
+    accepted = [h[2] for h in st_s.history]
+    assert not all(accepted)  # the damped path was taken
+    assert accepted == [h[2] for h in st_g.history]
+    np.testing.assert_allclose([h[1] for h in st_s.history], [h[1] for h in st_g.history])
+    np.testing.assert_allclose(
+        [h[0] for h in st_s.history], [h[0] for h in st_g.history], rtol=1e-9
+    )
+    np.testing.assert_allclose(g_s.poses, g_g.poses, atol=1e-9)
+    np.testing.assert_allclose(g_s.landmarks, g_g.landmarks, atol=1e-9)

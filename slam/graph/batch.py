@@ -284,7 +284,11 @@ class BatchSolver:
             terms.append(BlockTerms(fp[free] + pose_var, 3, lm_var[lm[free]], 2))
         if not np.all(free):
             terms.append(BlockTerms(lm_var[lm[~free]], 2))
-        return NormalEquations(dims, terms, self.config.ordering), parts
+
+        def describe(v: int) -> str:
+            return f"landmark {int(lms[v])}" if v < n_l else f"pose {v - n_l + free_from}"
+
+        return NormalEquations(dims, terms, self.config.ordering, describe), parts
 
     def _linearize_point(
         self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray, parts: dict[str, Any]
@@ -449,7 +453,9 @@ class BatchSolver:
         Raises
         ------
         EstimationError
-            No prior, a non-finite cost, or a linear system GTSAM cannot solve.
+            No prior, a non-finite cost, or a linear system that cannot be solved (not
+            positive definite: a variable the factors do not determine; the sparse path
+            names the pose or landmark).
         """
         cfg = self.config
         iters = cfg.max_iterations if max_iterations is None else max_iterations

@@ -10,11 +10,16 @@ Python object), and solved by a sparse ``LDLᵀ`` factorisation in a fill-reduci
   computed once, as are the elimination tree and the column counts of ``L`` (symbolic
   analysis).  The ordering is GTSAM's COLAMD (or METIS) on the variables' adjacency, the same
   ordering method as GTSAM's own elimination.
-* **Values, every iteration**: the block products ``A_aᵀA_b`` of every factor (vectorised
-  ``einsum``) are summed into place with one ``np.bincount``; ``L`` and ``D`` come from an
-  up-looking ``LDLᵀ`` (the algorithm of QDLDL: each row of ``L`` by a sparse triangular solve
-  along the elimination tree) compiled with numba; Levenberg-Marquardt damping adds to the
-  diagonal of the same pattern.
+* **Values, every iteration**: the block products ``A_aᵀA_a``, ``A_aᵀA_b``, ``A_bᵀA_b`` and
+  ``A_aᵀb``, ``A_bᵀb`` of every factor are added into place by compiled loops; ``L`` and ``D``
+  come from an up-looking ``LDLᵀ`` (the algorithm of QDLDL: each row of ``L`` by a sparse
+  triangular solve along the elimination tree) compiled with numba; Levenberg-Marquardt damping
+  adds to the diagonal of the same pattern.
+* **Singular systems**: a pivot of ``D`` that is not positive (zero, negative or NaN: a
+  variable the factors do not determine, e.g. a pose without odometry seeing one line, or
+  rounding in a badly conditioned system) raises
+  :class:`~slam.errors.EstimationError` naming the variable (``describe``), as GTSAM's
+  elimination stops with an indeterminant system on a non-positive pivot.
 
 Why not GTSAM's elimination: for the planar problems here (a few thousand 3-D and 2-D
 variables, ``L`` of a few hundred thousand entries) GTSAM's multifrontal elimination costs
@@ -27,6 +32,7 @@ another order).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import gtsam
@@ -281,10 +287,20 @@ class NormalEquations:
     terms : list of BlockTerms
         The factors' structure, in the order their values are given to :meth:`assemble`.
     ordering : {"colamd", "metis"}
+    describe : callable, optional
+        ``describe(v)``: the name of variable ``v`` in error messages (default
+        ``"variable v"``).
     """
 
-    def __init__(self, dims: IntArray, terms: list[BlockTerms], ordering: str = "colamd") -> None:
+    def __init__(
+        self,
+        dims: IntArray,
+        terms: list[BlockTerms],
+        ordering: str = "colamd",
+        describe: Callable[[int], str] | None = None,
+    ) -> None:
         dims = np.asarray(dims, dtype=np.int64)
+        self._describe = describe or (lambda v: f"variable {v}")
         V = dims.shape[0]
         self.terms = terms
         self.n = n = int(dims.sum())
@@ -300,6 +316,8 @@ class NormalEquations:
         start = np.empty(V, np.int64)
         start[order] = np.r_[0, np.cumsum(dims[order])[:-1]]
         self._start = start
+        self._order = order
+        self._order_start = start[order]  # increasing: first permuted index of each in order
         perm = np.empty(n, np.int64)  # permuted position of each natural scalar index
         for d in np.unique(dims).tolist():
             v = np.flatnonzero(dims == d)
@@ -399,7 +417,8 @@ class NormalEquations:
         """``δ`` (natural order) solving ``(H + diag(damping)) δ = g``.
 
         ``damping`` is per natural scalar index (default none).  Raises EstimationError when
-        the matrix is not positive definite.
+        the matrix is not positive definite, naming the variable of the first pivot that is
+        not positive.
         """
         Ax = self.Ax
         if damping is not None:
@@ -409,9 +428,10 @@ class NormalEquations:
             self.n, self.Ap, self.Ai, Ax, self.Lp, self._parent, self._Li, self._Lx, self._D
         )
         if bad >= 0:
+            v = int(self._order[np.searchsorted(self._order_start, bad, side="right") - 1])
             raise EstimationError(
-                "linear system could not be solved: not positive definite "
-                f"(pivot {bad} of {self.n})"
+                "linear system could not be solved: not positive definite at "
+                f"{self._describe(v)} (too few factors determine it, or too ill-conditioned)"
             )
         x = self.g.copy()
         _solve(self.n, self.Lp, self._Li, self._Lx, self._D, x)
