@@ -2,9 +2,11 @@
 
 Side by side, in one run, at 250, 1000, 3000 and 4000 poses.
 
-What each column times (process CPU time, all threads, best of several repetitions, so that
-other jobs on a shared machine change the figures little; the problem is at its solution, as in
-the later iterations of a solve):
+What each column times (process CPU time, all threads; the problem is at its solution, as in
+the later iterations of a solve).  The batch columns are measured interleaved: each of
+``--rounds`` rounds calls every timed function once (A B C … A B C …), each column is the best
+round, and each ratio is printed with the range of its per-round values, so that both sides of
+a ratio saw the same load:
 
 * ``numpy``: the fast path's linearisation of every line factor in numpy
   (``linearize_line_factors``, robust IRLS weights included), per line factor;
@@ -15,9 +17,15 @@ the later iterations of a solve):
   ``LDLᵀ``, numeric factorisation and solve; the structure, COLAMD ordering and symbolic
   analysis, done once per solve, outside the timing); ``iter/f``: the two together, one whole
   Gauss-Newton iteration of the batch solver (``linear_solver = "sparse"``), per factor;
-* ``GT iter/f``: the same iteration with ``linear_solver = "gtsam"``: the ``JacobianFactor``
+* ``GT it/f``: the same iteration with ``linear_solver = "gtsam"``: the ``JacobianFactor``
   objects built and GTSAM's multifrontal elimination (``GaussianFactorGraph.optimize``, COLAMD
-  ordering computed outside the timing);
+  ordering computed outside the timing); ``GT elim``: that elimination alone;
+* ``setup``: what each path does once per solve: the sparse path's structure (pattern, COLAMD
+  ordering, symbolic analysis; ``BatchSolver._region``) and, ``GT setup``, GTSAM's COLAMD
+  ordering of the linearised graph;
+* ``solve``: a whole ``BatchSolver.solve`` from the problem's dead-reckoned start to
+  convergence, setup included, ``linear_solver = "sparse"`` against ``"gtsam"`` (ratio printed;
+  the same iterations on both sides);
 * ``CF GN/f``: the same Gauss-Newton iteration (``NonlinearFactorGraph.linearize`` then
   ``GaussianFactorGraph.optimize``, same ordering method) over ``gtsam.CustomFactor`` line
   factors (a Python callback per factor) with the fast path's objective: the line factors'
@@ -37,7 +45,8 @@ the later iterations of a solve):
 Prints the table and the growth of each per-factor cost from the smallest to the largest size
 (target ≤ 1.5 for the fast path's whole iteration, elimination included).
 
-    .venv/bin/python scripts/bench_graph.py [--sizes 250 1000 3000 4000] [--no-isam2]
+    .venv/bin/python scripts/bench_graph.py [--sizes 250 1000 3000 4000] [--rounds 5]
+        [--no-isam2]
 """
 
 from __future__ import annotations
@@ -47,6 +56,7 @@ import os
 import platform
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -77,6 +87,23 @@ def best_of(fn: Callable[[], object], repeat: int) -> float:
         fn()
         times.append(time.process_time() - t0)
     return min(times)
+
+
+def interleaved(fns: dict[str, Callable[[], object]], rounds: int) -> dict[str, list[float]]:
+    """Process CPU time (s) of each function, per round; every round calls each one once."""
+    times: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(rounds):
+        for k, fn in fns.items():
+            t0 = time.process_time()
+            fn()
+            times[k].append(time.process_time() - t0)
+    return times
+
+
+def ratio(times: dict[str, list[float]], a: str, b: str) -> str:
+    """``a / b`` of the best rounds, with the range of the per-round ratios."""
+    per = np.asarray(times[a]) / np.asarray(times[b])
+    return f"{min(times[a]) / min(times[b]):.2f}x ({per.min():.2f}-{per.max():.2f})"
 
 
 def robust_noise(cov: np.ndarray, config: SolverConfig) -> gtsam.noiseModel.Base:
@@ -250,6 +277,13 @@ def sparse_step(solver: BatchSolver, g: LineGraph, system: NormalEquations, part
     return system.solve()
 
 
+def full_solve(g: LineGraph, start: tuple[np.ndarray, np.ndarray], config: SolverConfig) -> None:
+    """A whole batch solve of ``g`` from the estimate ``start`` (poses, landmarks)."""
+    g.poses[:] = start[0]
+    g.landmarks[:] = start[1]
+    BatchSolver(config).solve(g)
+
+
 def assemble(solver: BatchSolver, g: LineGraph, system: NormalEquations, parts: Any) -> None:
     """The linearisation of one iteration: every factor in numpy, then ``H`` and ``g``."""
     system.assemble(solver._linearize_point(g, g.poses, g.landmarks, parts)[0])
@@ -258,9 +292,14 @@ def assemble(solver: BatchSolver, g: LineGraph, system: NormalEquations, parts: 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[250, 1000, 3000, 4000])
+    parser.add_argument("--rounds", type=int, default=5, help="interleaved rounds (default 5)")
     parser.add_argument("--no-isam2", action="store_true")
     args = parser.parse_args()
-    print(f"machine: {cpu_model()}; load average {os.getloadavg()[0]:.2f} at start", flush=True)
+    print(
+        f"machine: {cpu_model()}; load average {os.getloadavg()[0]:.2f} at start;"
+        f" {args.rounds} interleaved rounds, process CPU time",
+        flush=True,
+    )
     rows = []
     config = SolverConfig()
     for n in args.sizes:
@@ -284,22 +323,32 @@ def main() -> None:
 
         t_np = best_of(fast_numpy, 5) / F
         n_factors = F + g.n_odometry + 1  # line factors, odometry, prior
-        system, parts = solver._region(g, 0, solver.active_landmarks(g), None)
+        lms = solver.active_landmarks(g)
+        system, parts = solver._region(g, 0, lms, None)
         assemble(solver, g, system, parts)
-        t_lin = best_of(partial(assemble, solver, g, system, parts), 5) / n_factors
-        t_elim = best_of(system.solve, 5)
-        t_iter = best_of(partial(sparse_step, solver, g, system, parts), 5)
         gfg = solver.linearize(g)
-        ordering = gtsam.Ordering.ColamdGaussianFactorGraph(gfg)
-        t_gt = best_of(partial(gauss_newton_step, partial(solver.linearize, g), ordering), 3)
+        ordering = solver._ordering(gfg)
         nfg, values = custom_graph(g, config)
-        reps = 1 if n >= 3000 else 2
-        t_cf_lin = best_of(partial(nfg.linearize, values), reps) / nfg.size()
         cf_ordering = gtsam.Ordering.ColamdGaussianFactorGraph(nfg.linearize(values))
-        t_cf_it = (
-            best_of(partial(gauss_newton_step, partial(nfg.linearize, values), cf_ordering), reps)
-            / nfg.size()
+        dr = synthetic_problem(n, lines_per_pose=5, seed=1).graph  # dead-reckoned
+        start = (dr.poses.copy(), dr.landmarks.copy())
+        times = interleaved(
+            {
+                "solve": partial(full_solve, dr, start, replace(config, linear_solver="sparse")),
+                "GT solve": partial(full_solve, dr, start, replace(config, linear_solver="gtsam")),
+                "setup": partial(solver._region, g, 0, lms, None),
+                "GT setup": partial(solver._ordering, gfg),
+                "lin": partial(assemble, solver, g, system, parts),
+                "elim": system.solve,
+                "GT elim": partial(gfg.optimize, ordering),
+                "iter": partial(sparse_step, solver, g, system, parts),
+                "GT iter": partial(gauss_newton_step, partial(solver.linearize, g), ordering),
+                "CF lin": partial(nfg.linearize, values),
+                "CF GN": partial(gauss_newton_step, partial(nfg.linearize, values), cf_ordering),
+            },
+            args.rounds,
         )
+        best = {k: min(v) for k, v in times.items()}
         t_isam = (float("nan"),) * 4
         if not args.no_isam2:
             t_isam = isam2_feed(synthetic_problem(n, lines_per_pose=5, seed=1), config)
@@ -308,38 +357,45 @@ def main() -> None:
                 n,
                 F,
                 t_np,
-                t_lin,
-                t_elim,
-                t_iter / n_factors,
-                t_gt / n_factors,
-                t_cf_lin,
-                t_cf_it,
+                best["lin"] / n_factors,
+                best["elim"],
+                best["iter"] / n_factors,
+                best["GT iter"] / n_factors,
+                best["CF lin"] / nfg.size(),
+                best["CF GN"] / nfg.size(),
                 *t_isam,
                 system.nnz_factor,
+                best["GT elim"],
+                best["setup"],
+                best["GT setup"],
+                times,
             )
         )
         print(f"done {n} poses (load average {os.getloadavg()[0]:.2f})", flush=True)
 
     print()
     print(
-        f"{'poses':>6} {'line f.':>8} | {'numpy':>7} {'lin/f':>7} {'elim':>7} {'iter/f':>7}"
-        f" {'GT it/f':>7} | {'CF lin/f':>8} {'CF GN/f':>8} | {'iSAM2':>7} {'native':>7}"
-        f" {'ratio':>6} {'build':>7} {'update':>7}"
+        f"{'poses':>6} {'line f.':>8} | {'numpy':>7} {'lin/f':>7} {'elim':>7} {'GT elim':>7}"
+        f" {'setup':>7} {'GT set.':>7} {'iter/f':>7} {'GT it/f':>7} | {'CF lin/f':>8}"
+        f" {'CF GN/f':>8} | {'iSAM2':>7} {'native':>7} {'ratio':>6} {'build':>7} {'update':>7}"
     )
     print(
-        f"{'':>6} {'':>8} | {'µs/f':>7} {'µs/f':>7} {'ms':>7} {'µs/f':>7} {'µs/f':>7} |"
-        f" {'µs/f':>8} {'µs/f':>8} | {'ms/upd':>7} {'ms/upd':>7} {'':>6} {'ms':>7} {'ms':>7}"
+        f"{'':>6} {'':>8} | {'µs/f':>7} {'µs/f':>7} {'ms':>7} {'ms':>7} {'ms':>7} {'ms':>7}"
+        f" {'µs/f':>7} {'µs/f':>7} | {'µs/f':>8} {'µs/f':>8} | {'ms/upd':>7} {'ms/upd':>7}"
+        f" {'':>6} {'ms':>7} {'ms':>7}"
     )
     for r in rows:
-        n, F, t_np, t_li, t_el, t_it, t_gt, t_cfl, t_cfi, t_up, t_nat, t_b, t_u, _ = r
+        n, F, t_np, t_li, t_el, t_it, t_gt, t_cfl, t_cfi, t_up, t_nat, t_b, t_u = r[:13]
+        t_gel, t_set, t_gset = r[14:17]
         print(
             f"{n:>6} {F:>8} | {1e6 * t_np:7.2f} {1e6 * t_li:7.2f} {1e3 * t_el:7.2f}"
+            f" {1e3 * t_gel:7.2f} {1e3 * t_set:7.2f} {1e3 * t_gset:7.2f}"
             f" {1e6 * t_it:7.2f} {1e6 * t_gt:7.2f} | {1e6 * t_cfl:8.1f} {1e6 * t_cfi:8.1f} |"
             f" {1e3 * t_up:7.2f} {1e3 * t_nat:7.2f} {t_up / t_nat:6.2f} {1e3 * t_b:7.2f}"
             f" {1e3 * t_u:7.2f}"
         )
     for r in rows:
-        print(f"entries of L at {r[0]} poses: {r[-1]} ({r[-1] / (r[1] + r[0]):.1f} per factor)")
+        print(f"entries of L at {r[0]} poses: {r[13]} ({r[13] / (r[1] + r[0]):.1f} per factor)")
     if len(rows) > 1:
         a, b = rows[0], rows[-1]
         print()
@@ -351,18 +407,27 @@ def main() -> None:
             f"the same with GTSAM's elimination (linear_solver = gtsam), {b[0]} vs {a[0]} poses:"
             f" {b[6] / a[6]:.2f}x"
         )
+    print()
+    print("ratios of the best rounds (range of the per-round ratios), interleaved in this run:")
+    for r in rows:
+        t = r[17]
+        print(f"at {r[0]} poses:")
+        print(
+            f"  whole solve from dead reckoning, GTSAM / sparse: {ratio(t, 'GT solve', 'solve')}"
+            f" (sparse {1e3 * min(t['solve']):.0f} ms, GTSAM {1e3 * min(t['GT solve']):.0f} ms)"
+        )
+        print(f"  one Gauss-Newton iteration, GTSAM / sparse: {ratio(t, 'GT iter', 'iter')}")
+        print(f"  the elimination alone, GTSAM / sparse: {ratio(t, 'GT elim', 'elim')}")
+        print(f"  once per solve, sparse setup / GTSAM ordering: {ratio(t, 'setup', 'GT setup')}")
+        print(f"  CustomFactor iteration / sparse iteration: {ratio(t, 'CF GN', 'iter')}")
+    if len(rows) > 1 and np.isfinite(rows[0][9]):
+        a, b = rows[0], rows[-1]
+        print(f"iSAM2 time per update, {b[0]} vs {a[0]} poses: {b[9] / a[9]:.2f}x")
         for r in rows:
             print(
-                f"at {r[0]} poses, one Gauss-Newton iteration: GTSAM elimination / sparse"
-                f" {r[6] / r[5]:.1f}x, CustomFactor / sparse {r[8] / r[5]:.1f}x"
+                f"iSAM2 per update at {r[0]} poses: ours {1e3 * r[9]:.2f} ms, native"
+                f" {1e3 * r[10]:.2f} ms: {r[9] / r[10]:.2f}x (target <= 1.2 at 3,000)"
             )
-        if np.isfinite(rows[0][9]):
-            print(f"iSAM2 time per update, {b[0]} vs {a[0]} poses: {b[9] / a[9]:.2f}x")
-            for r in rows:
-                print(
-                    f"iSAM2 per update at {r[0]} poses: ours {1e3 * r[9]:.2f} ms, native"
-                    f" {1e3 * r[10]:.2f} ms: {r[9] / r[10]:.2f}x (target <= 1.2 at 3,000)"
-                )
 
 
 if __name__ == "__main__":
