@@ -148,8 +148,9 @@ def custom_graph(
 def native_isam2(params: gtsam.ISAM2Params, p: SyntheticProblem, config: SolverConfig) -> Any:
     """A feeder of ``p`` into ``gtsam.ISAM2`` with native factors only (see the docstring).
 
-    Line factors become ``BearingRangeFactor2D``s on point landmarks (the point of each line
-    nearest its first observer, measured from the true poses with the line noise's σ), with
+    Line factors become ``BearingRangeFactor2D``s on point landmarks (a point of each line at
+    least as far from all its observers as any within 4 m of the point nearest its first
+    observer, so that no range is near zero; measured from the true poses, σ 4 mrad, 1 cm), with
     the solver's robust kernel; landmarks are initialised from their first measurement at the
     dead-reckoned pose.  Returns a function of the pose index that feeds that pose.
     """
@@ -162,7 +163,14 @@ def native_isam2(params: gtsam.ISAM2Params, p: SyntheticProblem, config: SolverC
     obs = truth[fp[first]]
     n = np.column_stack([np.cos(lm[:, 1]), np.sin(lm[:, 1])])
     dist = lm[:, 0] - np.einsum("jd,jd->j", obs[:, :2], n)
-    points = obs[:, :2] + dist[:, None] * n
+    foot = obs[:, :2] + dist[:, None] * n
+    # the point of the line farthest from its nearest observer among points within 4 m of the
+    # foot: a path that crosses a line would otherwise give ranges near 0 (bearing undefined)
+    along = np.linspace(-4.0, 4.0, 17)
+    cand = foot[:, None, :] + along[None, :, None] * np.column_stack([-n[:, 1], n[:, 0]])[:, None]
+    nearest = np.full((g.n_landmarks, along.size), np.inf)
+    np.minimum.at(nearest, fl, np.linalg.norm(cand[fl] - truth[fp, None, :2], axis=-1))
+    points = cand[np.arange(g.n_landmarks), np.argmax(nearest, axis=1)]
     rng = np.random.default_rng(7)
     d = points[fl] - truth[fp, :2]
     bearing = np.arctan2(d[:, 1], d[:, 0]) - truth[fp, 2] + rng.normal(0.0, 0.004, fp.shape[0])
