@@ -6,16 +6,17 @@ Each iteration:
    (:func:`slam.graph.factors.linearize_line_factors`, IRLS weights when a robust kernel is
    configured), odometry and the gauge prior (:mod:`slam.graph.odometry`, GTSAM's
    ``BetweenFactorPose2`` / ``PriorFactorPose2`` semantics);
-2. sum the pre-whitened blocks into the normal equations ``H δ = g`` and solve them by a
-   compiled sparse ``LDLᵀ`` (:mod:`slam.graph.sparse`: pattern, COLAMD or METIS ordering and
-   symbolic analysis once per solve); with ``SolverConfig.linear_solver = "gtsam"``, hand the
-   blocks to GTSAM as ``JacobianFactor``s (unit noise) and eliminate the
-   ``GaussianFactorGraph`` (multifrontal Cholesky) instead: the same step to rounding;
+2. hand the pre-whitened blocks to GTSAM as ``JacobianFactor``s (unit noise) and eliminate
+   the ``GaussianFactorGraph`` (multifrontal Cholesky; COLAMD or METIS ordering, computed once
+   per solve), or, with ``SolverConfig.linear_solver = "sparse"``, sum them into the normal
+   equations ``H δ = g`` and solve those by a compiled sparse ``LDLᵀ``
+   (:mod:`slam.graph.sparse`: pattern, ordering and symbolic analysis once per solve): the
+   same step to rounding, several times faster;
 3. retract in numpy (poses ``x·Exp(ξ)``, landmarks additively in their anchored chart) and
-   evaluate the cost in numpy (at a trial point by linearising it, which the next iteration
-   reuses if the step is accepted).
+   evaluate the cost in numpy (the sparse path linearises the trial point, the same cost, and
+   reuses that linearisation in the next iteration if the step is accepted).
 
-Nothing in the loop costs more per factor as the graph grows except the factorisation itself,
+Nothing in the loop costs more per factor as the graph grows except the elimination itself,
 whose fill per factor stays flat on the planar problems here (``scripts/bench_graph.py``).
 
 Step control: Gauss-Newton first; a step that raises the cost is rejected and retried with

@@ -15,7 +15,7 @@ __all__ = ["Isam2Config", "SolverConfig"]
 
 @dataclass(frozen=True)
 class SolverConfig:
-    """Batch Gauss-Newton / Levenberg-Marquardt (own loop, sparse LDLᵀ) and kernels.
+    """Batch Gauss-Newton / Levenberg-Marquardt (own loop, GTSAM or sparse LDLᵀ) and kernels.
 
     Attributes
     ----------
@@ -47,7 +47,10 @@ class SolverConfig:
         equations from the numpy linearisation and factorises them with a compiled sparse
         ``LDLᵀ`` (:mod:`slam.graph.sparse`); ``"gtsam"`` builds GTSAM ``JacobianFactor``s and
         eliminates the ``GaussianFactorGraph`` (multifrontal Cholesky).  The same solution to
-        rounding; the first is several times faster.
+        rounding; the first is several times faster (``docs/benchmarks.md``).  Default
+        ``"gtsam"``: the loop-closure judge runs this solver too, and on the real logs a
+        difference of rounding in a judgement can flip which closures pass
+        (``docs/real-logs.md``); the documented real-log results are those of ``"gtsam"``.
     """
 
     max_iterations: int = 30
@@ -61,7 +64,7 @@ class SolverConfig:
     robust_kernel: Literal["none", "huber", "cauchy"] = "cauchy"
     robust_k: float = 3.0
     ordering: Literal["colamd", "metis"] = "colamd"
-    linear_solver: Literal["sparse", "gtsam"] = "sparse"
+    linear_solver: Literal["sparse", "gtsam"] = "gtsam"
 
     def __post_init__(self) -> None:
         require(self.max_iterations >= 1, "max_iterations must be >= 1")
