@@ -21,13 +21,13 @@ Python object), and solved by a sparse ``LDLᵀ`` factorisation in a fill-reduci
   :class:`~slam.errors.EstimationError` naming the variable (``describe``), as GTSAM's
   elimination stops with an indeterminant system on a non-positive pivot.
 
-Why not GTSAM's elimination: for the planar problems here (a few thousand 3-D and 2-D
+Why beside GTSAM's elimination: for the planar problems here (a few thousand 3-D and 2-D
 variables, ``L`` of a few hundred thousand entries) GTSAM's multifrontal elimination costs
-about 8 µs per variable in per-clique overhead (dense containers, scatters), and building its
-``JacobianFactor`` objects from Python about 5 µs per factor; the compiled factorisation of the
-same system costs a few floating-point operations per entry of ``L``
-(``scripts/bench_graph.py``).  The solution equals GTSAM's to rounding (the sums are taken in
-another order).
+6-11 µs per variable (per-clique dense containers and scatters), 9-20× this compiled
+factorisation, and building its ``JacobianFactor`` objects from Python costs more than the
+numpy linearisation itself; a whole Gauss-Newton iteration is 3.6-6.8× cheaper here
+(``scripts/bench_graph.py``, ``docs/benchmarks.md``).  The solution equals GTSAM's to rounding
+(the sums are taken in another order); ``SolverConfig.linear_solver`` chooses.
 """
 
 from __future__ import annotations
