@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import gtsam
 import numpy as np
 import pytest
@@ -23,10 +25,11 @@ def pose_errors(est, truth):
     return pose_log(pose_between(truth, est))
 
 
-def test_converges_from_dead_reckoning_to_the_optimum():
+@pytest.mark.parametrize("linear_solver", ["sparse", "gtsam"])
+def test_converges_from_dead_reckoning_to_the_optimum(linear_solver):
     p = synthetic_problem(250, seed=1)
     g = p.graph
-    st = BatchSolver(GAUSSIAN).solve(g)
+    st = BatchSolver(replace(GAUSSIAN, linear_solver=linear_solver)).solve(g)
     assert st.converged and st.iterations <= 6
     # the same problem solved from the truth reaches the same minimum
     q = synthetic_problem(250, seed=1).graph
@@ -112,14 +115,16 @@ def test_marginals_are_consistent_monte_carlo():
     assert 3.0 * 0.72 < nees.mean() < 3.0 * 1.33
 
 
-def test_robust_kernel_resists_an_outlier():
+@pytest.mark.parametrize("linear_solver", ["sparse", "gtsam"])
+def test_robust_kernel_resists_an_outlier(linear_solver):
     clean = synthetic_problem(60, seed=7)
     BatchSolver().solve(clean.graph)
     results = {}
     for kernel in ("none", "huber", "cauchy"):
         p = synthetic_problem(60, seed=7)
         p.graph.factor_z[100, 0] += 1.0  # one gross outlier (≈ 100 σ)
-        BatchSolver(SolverConfig(robust_kernel=kernel, robust_k=2.0)).solve(p.graph)
+        cfg = SolverConfig(robust_kernel=kernel, robust_k=2.0, linear_solver=linear_solver)
+        BatchSolver(cfg).solve(p.graph)
         results[kernel] = np.max(np.abs(p.graph.poses[:, :2] - clean.graph.poses[:, :2]))
     assert results["none"] > 0.02
     assert results["huber"] < 0.3 * results["none"]
@@ -151,13 +156,19 @@ def test_revert_merges_restores_the_graph_exactly():
         g.revert_merges(n_log + 1)
 
 
-def test_solve_with_held_poses_returns_to_the_full_optimum():
+@pytest.mark.parametrize("linear_solver", ["sparse", "gtsam"])
+def test_solve_with_held_poses_returns_to_the_full_optimum(linear_solver):
     """Poses before ``free_from`` are constants; at the full optimum they are the right ones,
     so a perturbed rest of the graph must come back to the full optimum exactly."""
     p = synthetic_problem(40, seed=11)
     g = p.graph
     solver = BatchSolver(
-        SolverConfig(robust_kernel="none", relative_tolerance=1e-14, step_tolerance=1e-11)
+        SolverConfig(
+            robust_kernel="none",
+            relative_tolerance=1e-14,
+            step_tolerance=1e-11,
+            linear_solver=linear_solver,
+        )
     )
     solver.solve(g)
     best_poses, best_landmarks = g.poses.copy(), g.landmarks.copy()
@@ -275,7 +286,8 @@ def test_packed_factors_hold_the_same_rows():
         np.testing.assert_array_equal(c, a)
 
 
-def test_solve_stops_when_the_caller_says_so():
+@pytest.mark.parametrize("linear_solver", ["sparse", "gtsam"])
+def test_solve_stops_when_the_caller_says_so(linear_solver):
     """``stop`` sees every accepted step's estimate and can end the solve there."""
     g = synthetic_problem(60, seed=5).graph
     seen = []
@@ -284,7 +296,7 @@ def test_solve_stops_when_the_caller_says_so():
         seen.append((iterations, poses.shape, landmarks.shape))
         return iterations == 2
 
-    stats = BatchSolver(GAUSSIAN).solve(g, stop=stop)
+    stats = BatchSolver(replace(GAUSSIAN, linear_solver=linear_solver)).solve(g, stop=stop)
     assert stats.reason == "stopped" and stats.iterations == 2 and not stats.converged
     assert [s[0] for s in seen] == [1, 2]
     assert seen[0][1] == (g.n_poses, 3) and seen[0][2] == (g.n_landmarks, 2)
@@ -302,3 +314,98 @@ def test_pairing_order_groups_poses_and_spreads_repeated_landmarks():
     assert lm[o][pose[o] == 3].tolist() == [7, 8, 9, 7]
     _, paired = line_factor_groups(pose[o], lm[o])
     assert (~paired).sum() == 2  # pose 1: (4, 5) then 4 alone; pose 2: alone
+
+
+@pytest.mark.parametrize("free_from", [0, 120])
+@pytest.mark.parametrize("lam", [0.0, 1e-2])
+def test_sparse_normal_equations_solve_the_same_system_as_gtsam(free_from, lam):
+    """One (damped) step of the sparse LDLᵀ path equals GTSAM's elimination to rounding."""
+    from slam.graph.batch import BatchSolver as Solver
+
+    g = synthetic_problem(250, seed=3).graph
+    solver = Solver(SolverConfig())
+    lms = solver.active_landmarks(g)
+    solved = None
+    if free_from:
+        seen = np.zeros(g.n_landmarks, dtype=bool)
+        seen[g.factor_landmark[g.factor_pose >= free_from]] = True
+        lms = lms[seen[lms]]
+        solved = np.zeros(g.n_landmarks, dtype=bool)
+        solved[lms] = True
+    system, parts = solver._region(g, free_from, lms, solved)
+    values, lin, cost = solver._linearize_point(g, g.poses, g.landmarks, parts)
+    system.assemble(values)
+    if solved is None:  # the cost of every factor, as cost() sums it
+        assert cost == solver.cost(g, g.poses, g.landmarks)
+    gfg, lin_ref, used = solver._linearize(g, g.poses, g.landmarks, free_from, solved)
+    np.testing.assert_array_equal(parts["used"], used)
+    assert lin is not None and lin_ref is not None
+    np.testing.assert_array_equal(lin.b, lin_ref.b)
+    scale = solver.damping_scale(g, g.poses, g.landmarks, lin, used)
+    damping = lam * np.r_[scale[1][lms].ravel(), scale[0][free_from:].ravel()]
+    delta = system.solve(damping if lam else None)
+    ref_graph = solver._damped(gfg, lms, scale[0], scale[1], lam, free_from) if lam else gfg
+    ref = ref_graph.optimize(solver._ordering(gfg))
+    ref_vec = np.asarray(ref.vector())
+    np.testing.assert_allclose(delta, ref_vec, rtol=0, atol=1e-10 * np.max(np.abs(ref_vec)))
+    # the model's decrease of the undamped system, as GTSAM's error() gives it
+    predicted = float(gfg.error(ref.scale(0.0)) - gfg.error(ref))
+    assert system.predicted_decrease(delta) == pytest.approx(predicted, rel=1e-9)
+
+
+def test_sparse_and_gtsam_solves_agree_and_singular_systems_raise():
+    a = synthetic_problem(200, seed=4).graph
+    b = synthetic_problem(200, seed=4).graph
+    st_a = BatchSolver(SolverConfig(linear_solver="sparse")).solve(a)
+    st_b = BatchSolver(SolverConfig(linear_solver="gtsam")).solve(b)
+    assert st_a.iterations == st_b.iterations and st_a.reason == st_b.reason
+    np.testing.assert_allclose(a.poses, b.poses, atol=1e-9)
+    np.testing.assert_allclose(a.landmarks, b.landmarks, atol=1e-9)
+    c = synthetic_problem(200, seed=4).graph  # another elimination order, the same solution
+    BatchSolver(SolverConfig(ordering="metis", linear_solver="sparse")).solve(c)
+    np.testing.assert_allclose(c.poses, a.poses, atol=1e-9)
+    # a pose without any factor: its block of the normal equations is zero
+    for linear_solver, match in (("sparse", "at pose 20"), ("gtsam", "has no factor")):
+        g = synthetic_problem(20, seed=5).graph
+        g.add_pose(g.poses[-1])
+        with pytest.raises(EstimationError, match=match):
+            BatchSolver(SolverConfig(linear_solver=linear_solver)).solve(g)
+
+
+@pytest.mark.parametrize("linear_solver", ["sparse", "gtsam"])
+def test_a_pose_determined_by_one_line_only_is_an_indeterminant_system(linear_solver):
+    """Rank 2 of 3 (a pose seeing one line, no odometry): an error, not a wild step."""
+    g = synthetic_problem(20, seed=5).graph
+    i = g.add_pose(g.poses[-1])
+    f = np.flatnonzero(g.factor_pose == i - 1)[:1]
+    ends = np.array([[[0.0, 0.0], [1.0, 1.0]]])
+    for _ in range(2):  # the same line twice is still rank 2
+        g.add_line_factors(i, g.factor_landmark[f], g.factor_z[f], g.factor_cov[f], ends)
+    match = "at pose 20" if linear_solver == "sparse" else "could not be solved"
+    with pytest.raises(EstimationError, match=match):
+        BatchSolver(SolverConfig(linear_solver=linear_solver)).solve(g)
+
+
+@pytest.mark.parametrize("free_from", [0, 100])
+def test_sparse_and_gtsam_take_the_same_damped_steps(free_from):
+    """From a bad start (rejected steps, Levenberg-Marquardt damping) both paths agree."""
+    runs = []
+    for linear_solver in ("sparse", "gtsam"):
+        g = synthetic_problem(200, seed=4).graph
+        BatchSolver(SolverConfig()).solve(g)
+        rng = np.random.default_rng(1)
+        g.poses[free_from + 1 :] += rng.normal(0.0, [3.0, 3.0, 1.5], (199 - free_from, 3))
+        held = g.poses[:free_from].copy()
+        st = BatchSolver(SolverConfig(linear_solver=linear_solver)).solve(g, free_from=free_from)
+        np.testing.assert_array_equal(g.poses[:free_from], held)
+        runs.append((st, g))
+    (st_s, g_s), (st_g, g_g) = runs
+    accepted = [h[2] for h in st_s.history]
+    assert not all(accepted)  # the damped path was taken
+    assert accepted == [h[2] for h in st_g.history]
+    np.testing.assert_allclose([h[1] for h in st_s.history], [h[1] for h in st_g.history])
+    np.testing.assert_allclose(
+        [h[0] for h in st_s.history], [h[0] for h in st_g.history], rtol=1e-9
+    )
+    np.testing.assert_allclose(g_s.poses, g_g.poses, atol=1e-9)
+    np.testing.assert_allclose(g_s.landmarks, g_g.landmarks, atol=1e-9)

@@ -2,7 +2,7 @@
 
 :class:`LineGraph` holds the problem as numpy arrays (poses, anchored line landmarks, line and
 odometry factors); :class:`BatchSolver` runs its own Gauss-Newton / Levenberg-Marquardt loop with
-GTSAM's elimination; :class:`Isam2Solver` updates incrementally;
+GTSAM's elimination (or a compiled sparse LDLᵀ); :class:`Isam2Solver` updates incrementally;
 :func:`linearize_line_factors` is the vectorised fast path and :func:`line_custom_factor` the
 ``gtsam.CustomFactor`` reference it is tested against.  See ``docs/graph.md``.
 

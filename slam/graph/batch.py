@@ -6,14 +6,18 @@ Each iteration:
    (:func:`slam.graph.factors.linearize_line_factors`, IRLS weights when a robust kernel is
    configured), odometry and the gauge prior (:mod:`slam.graph.odometry`, GTSAM's
    ``BetweenFactorPose2`` / ``PriorFactorPose2`` semantics);
-2. hand the pre-whitened blocks to GTSAM as ``JacobianFactor``s (unit noise) and eliminate the
-   ``GaussianFactorGraph`` (multifrontal Cholesky; COLAMD or METIS ordering, computed once per
-   solve);
+2. hand the pre-whitened blocks to GTSAM as ``JacobianFactor``s (unit noise) and eliminate
+   the ``GaussianFactorGraph`` (multifrontal Cholesky; COLAMD or METIS ordering, computed once
+   per solve), or, with ``SolverConfig.linear_solver = "sparse"``, sum them into the normal
+   equations ``H δ = g`` and solve those by a compiled sparse ``LDLᵀ``
+   (:mod:`slam.graph.sparse`: pattern, ordering and symbolic analysis once per solve): the
+   same step to rounding, several times faster;
 3. retract in numpy (poses ``x·Exp(ξ)``, landmarks additively in their anchored chart) and
-   evaluate the cost in numpy.
+   evaluate the cost in numpy (the sparse path linearises the trial point, the same cost, and
+   reuses that linearisation in the next iteration if the step is accepted).
 
-Nothing in the loop costs more per factor as the graph grows except GTSAM's elimination itself
-(``scripts/bench_graph.py``).
+Nothing in the loop costs more per factor as the graph grows except the elimination itself,
+whose fill per factor stays flat on the planar problems here (``scripts/bench_graph.py``).
 
 Step control: Gauss-Newton first; a step that raises the cost is rejected and retried with
 Levenberg-Marquardt damping ``λ·D`` (``D`` ≈ ``diag(AᵀA)``, Marquardt's scaling) on every
@@ -51,6 +55,8 @@ from slam.graph.linear import (
 )
 from slam.graph.odometry import between_costs, linearize_between, linearize_prior
 from slam.graph.problem import LineGraph
+from slam.graph.robust import robust_cost
+from slam.graph.sparse import BlockTerms, NormalEquations
 from slam.models.anchored import retract_landmarks
 
 __all__ = ["BatchSolver", "SolveStats"]
@@ -89,7 +95,7 @@ class SolveStats:
 
 
 class BatchSolver:
-    """Own Gauss-Newton / Levenberg-Marquardt loop with GTSAM elimination.
+    """Own Gauss-Newton / Levenberg-Marquardt loop (sparse ``LDLᵀ`` or GTSAM elimination).
 
     Parameters
     ----------
@@ -230,6 +236,123 @@ class BatchSolver:
                 gfg.push_back(f)
         return gfg, lin, used
 
+    def _region(
+        self, graph: LineGraph, free_from: int, lms: IntArray, solved: NDArray[np.bool_] | None
+    ) -> tuple[NormalEquations, dict[str, Any]]:
+        """The factors of a solve and the structure of its normal equations (once per solve).
+
+        The same factors as :meth:`_linearize`: the prior (``free_from == 0``), odometry into
+        a solved pose (one-variable when its first pose is held), line factors on solved
+        landmarks (one-variable when their pose is held).  Variables: the solved landmarks,
+        then the solved poses (the order of :func:`slam.graph.linear.split_delta`).
+        """
+        n_l = lms.shape[0]
+        lm_var = np.full(graph.n_landmarks, -1, dtype=np.intp)
+        lm_var[lms] = np.arange(n_l)
+        dims = np.r_[np.full(n_l, 2), np.full(graph.n_poses - free_from, 3)].astype(np.int64)
+        terms: list[BlockTerms] = []
+        parts: dict[str, Any] = {}
+        with_prior = free_from == 0 and graph.prior_pose is not None
+        if with_prior:
+            terms.append(BlockTerms(np.array([n_l]), 3))
+        parts["prior"] = with_prior
+        e = np.flatnonzero(graph.odometry_second >= free_from)
+        both = graph.odometry_first[e] >= free_from
+        parts["odometry"] = e
+        parts["odometry_both"] = both
+        pose_var = n_l - free_from
+        if np.any(both):
+            terms.append(
+                BlockTerms(
+                    graph.odometry_first[e[both]] + pose_var,
+                    3,
+                    graph.odometry_second[e[both]] + pose_var,
+                    3,
+                )
+            )
+        if not np.all(both):
+            terms.append(BlockTerms(graph.odometry_second[e[~both]] + pose_var, 3))
+        used = (
+            np.arange(graph.n_line_factors)
+            if solved is None
+            else np.flatnonzero(solved[graph.factor_landmark])
+        )
+        fp = graph.factor_pose[used]
+        lm = graph.factor_landmark[used]
+        free = fp >= free_from
+        parts["used"] = used
+        parts["free"] = free
+        if np.any(free):
+            terms.append(BlockTerms(fp[free] + pose_var, 3, lm_var[lm[free]], 2))
+        if not np.all(free):
+            terms.append(BlockTerms(lm_var[lm[~free]], 2))
+
+        def describe(v: int) -> str:
+            return f"landmark {int(lms[v])}" if v < n_l else f"pose {v - n_l + free_from}"
+
+        return NormalEquations(dims, terms, self.config.ordering, describe), parts
+
+    def _linearize_point(
+        self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray, parts: dict[str, Any]
+    ) -> tuple[
+        list[tuple[FloatArray, FloatArray | None, FloatArray]], LineLinearization | None, float
+    ]:
+        """The solve's factors (:meth:`_region`) linearised at ``(poses, landmarks)``.
+
+        Returns the blocks for :meth:`NormalEquations.assemble`, the line factors'
+        linearisation (for :meth:`damping_scale`) and the cost of these factors there, the
+        same number :meth:`cost` gives for them (the same residuals, summed in the same order).
+        """
+        values: list[tuple[FloatArray, FloatArray | None, FloatArray]] = []
+        prior_cost = 0.0
+        if parts["prior"]:
+            assert graph.prior_pose is not None and graph.prior_sqrt_info is not None
+            A, b, prior_cost = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
+            values.append((A[None], None, b[None]))
+        e, both = parts["odometry"], parts["odometry_both"]
+        odometry_cost = None
+        if e.size:
+            A1, A2, b = linearize_between(
+                poses[graph.odometry_first[e]],
+                poses[graph.odometry_second[e]],
+                graph.odometry_measured[e],
+                graph.odometry_sqrt_info[e],
+            )
+            odometry_cost = float(np.sum(0.5 * np.sum(b**2, axis=-1)))  # b = −W e
+            if np.any(both):
+                values.append((A1[both], A2[both], b[both]))
+            if not np.all(both):
+                values.append((A2[~both], None, b[~both]))
+        used, free = parts["used"], parts["free"]
+        lin: LineLinearization | None = None
+        total = 0.0
+        if used.size:
+            lm = graph.factor_landmark[used]
+            lin = linearize_line_factors(
+                poses[graph.factor_pose[used]],
+                landmarks[lm],
+                graph.anchors[lm],
+                graph.factor_z[used],
+                graph.factor_sqrt_info[used],
+                self.config.robust_kernel,
+                self.config.robust_k,
+            )
+            rho = robust_cost(
+                self.config.robust_kernel,
+                np.linalg.norm(lin.whitened_residual, axis=-1),
+                self.config.robust_k,
+            )
+            total += float(np.sum(rho))
+            if np.any(free):
+                values.append((lin.A_pose[free], lin.A_landmark[free], lin.b[free]))
+            if not np.all(free):
+                values.append((lin.A_landmark[~free], None, lin.b[~free]))
+        if odometry_cost is not None:
+            total += odometry_cost
+        if parts["prior"]:
+            total += prior_cost
+        return values, lin, total
+
     def damping_scale(
         self,
         graph: LineGraph,
@@ -332,7 +455,9 @@ class BatchSolver:
         Raises
         ------
         EstimationError
-            No prior, a non-finite cost, or a linear system GTSAM cannot solve.
+            No prior, a non-finite cost, or a linear system that cannot be solved (not
+            positive definite: a variable the factors do not determine; the sparse path
+            names the pose or landmark).
         """
         cfg = self.config
         iters = cfg.max_iterations if max_iterations is None else max_iterations
@@ -372,8 +497,16 @@ class BatchSolver:
         scale: tuple[FloatArray, FloatArray] | None = None
         lin: LineLinearization | None = None
         used = np.zeros(0, dtype=np.intp)
+        sparse = cfg.linear_solver == "sparse"
+        if sparse:
+            t0 = time.perf_counter()
+            system, parts = self._region(graph, free_from, lms, solved)
+            used = parts["used"]
+            stats.time_s["linearize"] += time.perf_counter() - t0
         ordering = None
         gfg = gtsam.GaussianFactorGraph()
+        at_point: tuple[Any, LineLinearization | None, float] | None = None
+        trial: tuple[Any, LineLinearization | None, float] | None = None
         relinearize = True
         while True:
             interrupts.check()  # between iterations (slam.interrupts)
@@ -382,29 +515,50 @@ class BatchSolver:
                     stats.reason = "iteration limit"
                     break
                 t0 = time.perf_counter()
-                gfg, lin, used = self._linearize(graph, poses, landmarks, free_from, solved)
+                if sparse:
+                    if at_point is None:  # else the accepted trial's linearisation
+                        at_point = self._linearize_point(graph, poses, landmarks, parts)
+                    system.assemble(at_point[0])
+                    lin = at_point[1]
+                    at_point = None
+                else:
+                    gfg, lin, used = self._linearize(graph, poses, landmarks, free_from, solved)
+                    if ordering is None:
+                        ordering = self._ordering(gfg)
                 stats.iterations += 1
                 scale = None
-                if ordering is None:
-                    ordering = self._ordering(gfg)
                 stats.time_s["linearize"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            if lam > 0.0:
-                if scale is None:
-                    scale = self.damping_scale(graph, poses, landmarks, lin, used)
-                system = self._damped(gfg, lms, scale[0], scale[1], lam, free_from)
+            if lam > 0.0 and scale is None:
+                scale = self.damping_scale(graph, poses, landmarks, lin, used)
+            if sparse:
+                damping = None
+                if lam > 0.0:
+                    assert scale is not None
+                    damping = lam * np.r_[scale[1][lms].ravel(), scale[0][free_from:].ravel()]
+                delta_vector = system.solve(damping)  # EstimationError when not solvable
+                # the model's predicted decrease, for the gain ratio of a damped step only
+                predicted = system.predicted_decrease(delta_vector) if lam > 0.0 else 0.0
+                n_l = 2 * lms.shape[0]
+                d_lm = delta_vector[:n_l].reshape(-1, 2)
+                d_pose = delta_vector[n_l:].reshape(-1, 3)
             else:
-                system = gfg
-            assert ordering is not None
-            try:
-                delta = system.optimize(ordering)
-            except RuntimeError as exc:
-                raise EstimationError(f"linear system could not be solved: {exc}") from exc
-            # the model's predicted decrease, for the gain ratio of a damped step only
-            predicted = float(gfg.error(delta.scale(0.0)) - gfg.error(delta)) if lam > 0.0 else 0.0
+                if lam > 0.0:
+                    assert scale is not None
+                    damped = self._damped(gfg, lms, scale[0], scale[1], lam, free_from)
+                else:
+                    damped = gfg
+                assert ordering is not None
+                try:
+                    delta = damped.optimize(ordering)
+                except RuntimeError as exc:
+                    raise EstimationError(f"linear system could not be solved: {exc}") from exc
+                predicted = (
+                    float(gfg.error(delta.scale(0.0)) - gfg.error(delta)) if lam > 0.0 else 0.0
+                )
+                d_lm, d_pose = split_delta(delta, lms.shape[0], graph.n_poses - free_from)
             stats.time_s["solve"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            d_lm, d_pose = split_delta(delta, lms.shape[0], graph.n_poses - free_from)
             step = float(max(np.max(np.abs(d_pose)), np.max(np.abs(d_lm), initial=0.0)))
             new_poses = poses.copy()
             new_poses[free_from:] = pose_retract(poses[free_from:], d_pose)
@@ -412,13 +566,18 @@ class BatchSolver:
             new_landmarks[lms] = retract_landmarks(landmarks[lms], d_lm)
             stats.time_s["retract"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            new_cost = self.cost(graph, new_poses, new_landmarks, **varying) + constant
+            if sparse:  # linearised at the trial point already: reused if it is accepted
+                trial = self._linearize_point(graph, new_poses, new_landmarks, parts)
+                new_cost = trial[2] + constant
+            else:
+                new_cost = self.cost(graph, new_poses, new_landmarks, **varying) + constant
             stats.time_s["cost"] += time.perf_counter() - t0
             accepted = bool(np.isfinite(new_cost)) and new_cost <= cost * (1.0 + 1e-12) + 1e-15
             stats.history.append((new_cost, lam, accepted))
             if accepted:
                 decrease = cost - new_cost
                 poses, landmarks, cost = new_poses, new_landmarks, new_cost
+                at_point = trial
                 relinearize = True
                 if lam > 0.0:
                     rho = decrease / predicted if predicted > 0.0 else 0.0

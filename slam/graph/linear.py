@@ -18,6 +18,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.errors import EstimationError
 from slam.graph.factors import LineLinearization
 from slam.graph.problem import LineGraph
 
@@ -237,11 +238,18 @@ def split_delta(
 
     The solution must hold exactly ``n_landmarks`` landmarks and ``n_poses`` poses; the
     landmarks come first in key order.
+
+    Raises
+    ------
+    EstimationError
+        The solution lacks variables: GTSAM solves only the variables of some factor.
     """
     v = np.asarray(delta.vector(), dtype=float)
     n_l = 2 * n_landmarks
     if v.shape[0] != n_l + 3 * n_poses:
-        raise RuntimeError("solution does not match the graph's variables")  # pragma: no cover
+        raise EstimationError(
+            "linear system could not be solved: a variable has no factor (indeterminant)"
+        )
     return v[:n_l].reshape(n_landmarks, 2), v[n_l:].reshape(n_poses, 3)
 
 
