@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from linefit.config import LineFitConfig
 
-__all__ = ["FPARAMS", "IPARAMS", "extract_kernel", "kernel_params"]
+__all__ = ["DENSE_CELLS", "FPARAMS", "IPARAMS", "extract_kernel", "kernel_params"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -692,53 +692,133 @@ def _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag):
 # --------------------------------------------------------------------------------------------
 # Hough grouping of one scan (linefit.hough.hough_groups)
 # --------------------------------------------------------------------------------------------
-@jit
-def _cell_key(cells, c, n_rho):
-    """Heap key of cell ``c``: more votes first, then the first cell in (angle, distance) order."""
-    return np.int64(cells[c, 2]) * 16777216 - (np.int64(cells[c, 0]) * n_rho + cells[c, 1])
+#: Largest dense Hough accumulator (cells, int32) of a scan: beyond it :func:`extract_kernel`
+#: counts that scan's votes by sorting (same result); read at each call (tests lower it).
+DENSE_CELLS = 1 << 22
 
 
 @jit
-def _heap_push(heap, hcell, n):
-    """Sift the entry at ``n`` up into the max-heap ``heap[:n]``; the new size."""
-    k = n
-    key = heap[k]
-    c = hcell[k]
-    while k > 0:
-        parent = (k - 1) >> 1
-        if heap[parent] >= key:
-            break
-        heap[k] = heap[parent]
-        hcell[k] = hcell[parent]
-        k = parent
-    heap[k] = key
-    hcell[k] = c
-    return n + 1
+def _hough_rows(x32, y32, n, c32, s32, half, n_rho, row_off, row_key):
+    """Distance-bin window of every angle row; returns the number of dense cells needed.
+
+    Row ``j`` of the dense accumulator holds the bins ``[lo_j, hi_j]`` (a bound from the
+    points' bounding box, widened beyond any float32 rounding); a vote for bin ``b`` of row
+    ``j`` goes to cell ``b + row_off[j]``, whose argmax key ``j · n_ℛ + (b + half)`` is the cell
+    number ``+ row_key[j]``.
+    """
+    xmin = np.inf
+    xmax = -np.inf
+    ymin = np.inf
+    ymax = -np.inf
+    for p in range(n):
+        xv = np.float64(x32[p])
+        yv = np.float64(y32[p])
+        xmin = min(xmin, xv)
+        xmax = max(xmax, xv)
+        ymin = min(ymin, yv)
+        ymax = max(ymax, yv)
+    total = 0
+    for j in range(c32.shape[0]):
+        c = np.float64(c32[j])
+        s = np.float64(s32[j])
+        a = c * xmin
+        b = c * xmax
+        lo = min(a, b)
+        hi = max(a, b)
+        a = s * ymin
+        b = s * ymax
+        lo += min(a, b)
+        hi += max(a, b)
+        margin = 2.0 + (abs(lo) + abs(hi)) * 1e-6
+        b_lo = int(np.floor(lo - margin))
+        b_hi = int(np.floor(hi + margin))
+        row_off[j] = total - b_lo
+        row_key[j] = j * n_rho + half - row_off[j]
+        total += b_hi - b_lo + 1
+    return total
 
 
 @jit
-def _heap_pop(heap, hcell, n):
-    """Remove the top of the max-heap ``heap[:n]``; the new size."""
-    n -= 1
-    if n == 0:
-        return 0
-    key = heap[n]
-    c = hcell[n]
-    k = 0
-    while True:
-        child = 2 * k + 1
-        if child >= n:
-            break
-        if child + 1 < n and heap[child + 1] > heap[child]:
-            child += 1
-        if heap[child] <= key:
-            break
-        heap[k] = heap[child]
-        hcell[k] = hcell[child]
-        k = child
-    heap[k] = key
-    hcell[k] = c
-    return n
+def _hough_votes_dense(x32, y32, n, c32, s32, row_off, n_acc, acc, vote):
+    """Clear ``acc[:n_acc]``; ``vote[p, j]`` receives the cell of point ``p`` in angle row ``j``."""
+    n_beta = c32.shape[0]
+    for f in range(n_acc):
+        acc[f] = 0
+    for p in range(n):
+        xp = x32[p]
+        yp = y32[p]
+        row = vote[p]
+        for j in range(n_beta):
+            # float32 as linefit.hough.hough_accumulator: products rounded, then their sum
+            v = c32[j] * xp
+            v = v + s32[j] * yp
+            row[j] = np.int32(np.floor(v)) + row_off[j]
+
+
+@jit
+def _hough_count(vote, n, n_beta, min_votes, row_key, acc, cidx, ckey):
+    """Count the votes of ``vote[:n]`` into ``acc``; list the cells reaching ``min_votes``."""
+    n_cells = 0
+    for p in range(n):
+        row = vote[p]
+        for j in range(n_beta):
+            f = row[j]
+            v = acc[f] + 1
+            acc[f] = v
+            if v == min_votes:
+                cidx[n_cells] = f
+                ckey[n_cells] = f + row_key[j]
+                n_cells += 1
+    return n_cells
+
+
+@jit
+def _hough_votes_sorted(x32, y32, n, c32, s32, half, n_rho, min_votes, vote):
+    """Sparse form of the votes for an accumulator too large to hold densely.
+
+    The cells (keys ``j · n_ℛ + i``) are counted by sorting; ``vote[p, j]`` receives the index
+    of its cell in the returned counts when that cell has ``min_votes`` votes, else the index
+    of a spare slot that is never a cell.  Returns ``(counts, cidx, ckey, n_cells)``.
+    """
+    n_beta = c32.shape[0]
+    keys = np.empty(n * n_beta, dtype=np.int64)
+    for p in range(n):
+        xp = x32[p]
+        yp = y32[p]
+        for j in range(n_beta):
+            v = c32[j] * xp
+            v = v + s32[j] * yp
+            keys[p * n_beta + j] = j * np.int64(n_rho) + (np.int64(np.floor(v)) + half)
+    order = np.argsort(keys, kind="mergesort")
+    slot = np.empty(n * n_beta, dtype=np.int64)
+    counts = np.zeros(n * n_beta // max(1, min_votes) + 2, dtype=np.int32)
+    cidx = np.empty(counts.shape[0], dtype=np.int64)
+    ckey = np.empty(counts.shape[0], dtype=np.int64)
+    n_cells = 0
+    a = 0
+    m = n * n_beta
+    while a < m:
+        b = a
+        while b + 1 < m and keys[order[b + 1]] == keys[order[a]]:
+            b += 1
+        size = b - a + 1
+        if size >= min_votes:
+            counts[n_cells] = size
+            cidx[n_cells] = n_cells
+            ckey[n_cells] = keys[order[a]]
+            for t in range(a, b + 1):
+                slot[order[t]] = n_cells
+            n_cells += 1
+        else:
+            for t in range(a, b + 1):
+                slot[order[t]] = -1
+        a = b + 1
+    spare = n_cells
+    for p in range(n):
+        for j in range(n_beta):
+            s = slot[p * n_beta + j]
+            vote[p, j] = s if s >= 0 else spare
+    return counts, cidx, ckey, n_cells
 
 
 @jit
@@ -754,12 +834,11 @@ def _hough(
     x32,
     y32,
     vote,
-    bins,
-    cnt_row,
-    id_row,
-    cells,
-    heap,
-    hcell,
+    row_off,
+    row_key,
+    acc,
+    cidx,
+    ckey,
     alive,
     alist,
     grp,
@@ -770,10 +849,16 @@ def _hough(
     """Hough candidates of the ``n`` points of a scan.
 
     Group ``g`` is ``gm[gs[g] : gs[g + 1]]`` (point indices, ascending) with start angle
-    ``ga[g]``; returns the number of groups.  Only cells that ever hold ``hough_min_votes``
-    votes are kept (votes only decrease), as a compact list ``cells`` of (angle bin, distance
-    bin, votes); the peak is the first cell in (angle, distance) order with the most votes,
-    as ``argmax`` over the dense accumulator.
+    ``ga[g]``; returns the number of groups.
+
+    The votes are counted in a dense accumulator holding, for each angle row, the window of
+    distance bins the scan's points can reach (or, for an accumulator too large, by sorting);
+    ``vote[p, j]`` is the accumulator cell of point ``p`` in row ``j``, so removing a group
+    subtracts its votes directly.  Only the cells that ever hold ``hough_min_votes`` votes can
+    be peaks (votes only decrease): they are listed, and each peak is the one with the most
+    votes, then the first in (angle, distance) order, i.e. ``argmax`` over the dense
+    ``(β, ℛ)`` accumulator of :mod:`linefit.hough`.  The list drops the cells that fall below
+    ``hough_min_votes``.
     """
     n_beta = cos_b.shape[0]
     step = fp[F_RSTEP]
@@ -785,48 +870,21 @@ def _hough(
         if d2 > d2max:
             d2max = d2
     half = int(np.ceil(np.sqrt(d2max) / step)) + 1
-    n_cells = 0
+    n_rho = 2 * half
     for p in range(n):
         x32[p] = np.float32(pt[X, p])
         y32[p] = np.float32(pt[Y, p])
-    for j in range(n_beta):
-        cj = c32[j]
-        sj = s32[j]
-        for p in range(n):
-            # float32 as linefit.hough.hough_accumulator: products rounded, then their sum
-            v = cj * x32[p]
-            v = v + sj * y32[p]
-            t = int(v)  # floor, without a call
-            if v < t:
-                t -= 1
-            bins[p] = t + half
-        for p in range(n):
-            cnt_row[bins[p]] += 1
-        for p in range(n):
-            i = bins[p]
-            if cnt_row[i] >= min_votes:
-                if id_row[i] < 0:
-                    id_row[i] = n_cells
-                    cells[n_cells, 0] = j
-                    cells[n_cells, 1] = i
-                    cells[n_cells, 2] = cnt_row[i]
-                    n_cells += 1
-                vote[j, p] = id_row[i]
-            else:
-                vote[j, p] = -1
-        for p in range(n):  # reset the row buffers (only the bins touched)
-            cnt_row[bins[p]] = 0
-            id_row[bins[p]] = -1
-    # lazy max-heap of the cells: key = votes · 2^24 − (j · n_ℛ + i), i.e. most votes first,
-    # then the first cell in (angle, distance) order, as argmax over the dense accumulator.
-    # Votes only decrease, so a popped key that is no longer current is pushed again with
-    # its current votes; a current one is the argmax.
-    n_rho = 2 * half
-    n_heap = 0
-    for c in range(n_cells):
-        heap[n_heap] = _cell_key(cells, c, n_rho)
-        hcell[n_heap] = c
-        n_heap = _heap_push(heap, hcell, n_heap)
+    n_acc = _hough_rows(x32, y32, n, c32, s32, half, n_rho, row_off, row_key)
+    if n_acc <= acc.shape[0]:
+        cnt = acc
+        _hough_votes_dense(x32, y32, n, c32, s32, row_off, n_acc, acc, vote)
+        n_cells = _hough_count(vote, n, n_beta, min_votes, row_key, acc, cidx, ckey)
+        cells = cidx
+        keys = ckey
+    else:
+        cnt, cells, keys, n_cells = _hough_votes_sorted(
+            x32, y32, n, c32, s32, half, n_rho, min_votes, vote
+        )
     n_alive = n
     for p in range(n):
         alive[p] = True
@@ -835,23 +893,29 @@ def _hough(
     n_groups = 0
     gs[0] = 0
     for _ in range(ip[I_MAXPEAKS]):
+        # the peak: most votes, then the smallest key; cells below min_votes leave the list
         best = -1
-        while n_heap:
-            key = heap[0]
-            c = hcell[0]
-            n_heap = _heap_pop(heap, hcell, n_heap)
-            if cells[c, 2] < min_votes:
-                continue  # can never be a peak again
-            if key == _cell_key(cells, c, n_rho):
-                best = c
-                break
-            heap[n_heap] = _cell_key(cells, c, n_rho)
-            hcell[n_heap] = c
-            n_heap = _heap_push(heap, hcell, n_heap)
+        best_v = 0
+        best_k = 0
+        w = 0
+        for c in range(n_cells):
+            f = cells[c]
+            v = cnt[f]
+            if v < min_votes:
+                continue
+            k = keys[c]
+            cells[w] = f
+            keys[w] = k
+            if v > best_v or (v == best_v and k < best_k):
+                best = f
+                best_v = v
+                best_k = k
+            w += 1
+        n_cells = w
         if best < 0:
             break
-        j = cells[best, 0]
-        rho_c = (cells[best, 1] - half + 0.5) * step
+        j = best_k // n_rho
+        rho_c = (best_k - j * n_rho - half + 0.5) * step
         for q in range(n_alive):
             p = alist[q]
             rho = pt[X, p] * cos_b[j] + pt[Y, p] * sin_b[j]
@@ -875,12 +939,12 @@ def _hough(
                     m3 += x * x
                     m4 += x * y
                     m5 += y * y
-            cnt = max(m0, 1.0)
-            mx = m1 / cnt
-            my = m2 / cnt
-            cxx = m3 - cnt * mx * mx
-            cxy = m4 - cnt * mx * my
-            cyy = m5 - cnt * my * my
+            cnt_g = max(m0, 1.0)
+            mx = m1 / cnt_g
+            my = m2 / cnt_g
+            cxx = m3 - cnt_g * mx * mx
+            cxy = m4 - cnt_g * mx * my
+            cyy = m5 - cnt_g * my * my
             alpha = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy) + 0.5 * np.pi
             ca = np.cos(alpha)
             sa = np.sin(alpha)
@@ -894,7 +958,7 @@ def _hough(
             if grp[alist[q]]:
                 count += 1
         if count < min_votes:
-            cells[best, 2] = SUPPRESSED
+            cnt[best] = SUPPRESSED
             continue
         # record (points ascending: alist stays sorted) and remove the group's votes
         o = gs[n_groups]
@@ -905,18 +969,13 @@ def _hough(
                 gm[o] = p
                 o += 1
                 alive[p] = False
+                row = vote[p]
                 for jj in range(n_beta):
-                    c = vote[jj, p]
-                    if c >= 0:
-                        cells[c, 2] -= 1
+                    cnt[row[jj]] -= 1
             else:
                 alist[w] = p
                 w += 1
         n_alive = w
-        if cells[best, 2] >= min_votes:
-            heap[n_heap] = _cell_key(cells, best, n_rho)
-            hcell[n_heap] = best
-            n_heap = _heap_push(heap, hcell, n_heap)
         ga[n_groups] = alpha
         n_groups += 1
         gs[n_groups] = o
@@ -1078,8 +1137,8 @@ def _merge_collinear(pt, beam, n, ip, fp, ws, st, ordr, n_ord, parent, mark, gm,
 @jit
 def _scan_lines(pt, beam, n, ip, fp, ws, hs, ss, st, ordr):
     """Steps 3-6 of the pipeline for one scan; returns the number of lines in ``ordr``."""
-    cos_b, sin_b, c32, s32, x32, y32, vote, bins, cnt_row, id_row, cells, heap, hcell = hs[:13]
-    alive, alist, grp = hs[13:]
+    cos_b, sin_b, c32, s32, x32, y32, vote, row_off, row_key, acc, cidx, ckey = hs[:12]
+    alive, alist, grp = hs[12:]
     gm, gs, ga, sub, starts, ends, alphas, stk, flag, parent, mark, tmp_ord = ss
     st[0] = 0
     st[1] = 0
@@ -1097,12 +1156,11 @@ def _scan_lines(pt, beam, n, ip, fp, ws, hs, ss, st, ordr):
             x32,
             y32,
             vote,
-            bins,
-            cnt_row,
-            id_row,
-            cells,
-            heap,
-            hcell,
+            row_off,
+            row_key,
+            acc,
+            cidx,
+            ckey,
             alive,
             alist,
             grp,
@@ -1175,7 +1233,7 @@ def _grow(a, need):
 
 
 @jit
-def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
+def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_cells):
     """Lines of every scan of a batch (steps 3-7 of :func:`linefit.extract_lines`).
 
     Parameters
@@ -1194,6 +1252,8 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
         ``cos β_j``, ``sin β_j`` of the Hough angle bins.
     c32, s32 : ndarray of float32
         ``cos β_j / Δℛ`` and ``sin β_j / Δℛ`` rounded to float32.
+    dense_cells : int
+        Largest dense Hough accumulator (:data:`DENSE_CELLS`).
 
     Returns
     -------
@@ -1229,17 +1289,18 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
     okf = np.empty(capl, dtype=np.int64)
     tmpo = np.empty(capl, dtype=np.int64)
     ws = (wk, iw, res, lr, lcov, lm, ar, ai, nref, segch, okf, tmpo)
-    # Hough scratch
-    vote = np.empty((n_beta, nmax), dtype=np.int32)
-    bins = np.empty(nmax, dtype=np.int32)
-    cnt_row = np.zeros(n_rho, dtype=np.int64)
-    id_row = np.full(n_rho, -1, dtype=np.int64)
-    # a cell kept has at least hough_min_votes points of its angle row: at most n / min_votes
-    # per row (small buffers: no large allocation per call)
+    # Hough scratch: the dense accumulator holds every row's window of distance bins (at most
+    # 2·sqrt(2)·ℛ_max/Δℛ + 10 per row, see _hough_rows); beyond dense_cells a scan's votes are
+    # counted by sorting instead
+    vote = np.empty((nmax, n_beta), dtype=np.int32)
+    row_off = np.empty(n_beta, dtype=np.int64)
+    row_key = np.empty(n_beta, dtype=np.int64)
+    acc = np.empty(max(0, min(n_beta * (3 * (n_rho // 2) + 16), dense_cells)), dtype=np.int32)
+    # a listed cell has at least hough_min_votes points of its angle row: at most n / min_votes
+    # per row
     cap_cells = n_beta * (nmax // max(1, ip[I_MINVOTES]) + 1) + 1
-    cells = np.empty((cap_cells, 3), dtype=np.int32)
-    heap = np.empty(cap_cells, dtype=np.int64)
-    hcell = np.empty(cap_cells, dtype=np.int32)
+    cidx = np.empty(cap_cells, dtype=np.int64)
+    ckey = np.empty(cap_cells, dtype=np.int64)
     alive = np.empty(nmax, dtype=np.bool_)
     alist = np.empty(nmax, dtype=np.int64)
     grp = np.empty(nmax, dtype=np.bool_)
@@ -1253,12 +1314,11 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
         x32,
         y32,
         vote,
-        bins,
-        cnt_row,
-        id_row,
-        cells,
-        heap,
-        hcell,
+        row_off,
+        row_key,
+        acc,
+        cidx,
+        ckey,
         alive,
         alist,
         grp,
