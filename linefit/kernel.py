@@ -101,6 +101,15 @@ IPARAMS = (
 #: Rows of the member arena ``ar``: u_R, u_S and endpoint variance of each stored member.
 A_UR, A_US, A_EV = 0, 1, 2
 
+#: Rows of the float scratch ``wk`` of the line being refined: centred points, u_R, u_S, P_R,
+#: P_S, P_RS, their weights, and a spare row.
+W_CX, W_CY, W_UR, W_US, W_PR, W_PS, W_PRS, W_WR, W_WS, W_TMP = range(10)
+
+#: Rows of the integer scratch ``iw``: members of the line being refined, their order by
+#: ``u_S``, segment numbers, segment sizes, drop flags; the scan's cached breakpoints between
+#: neighbouring points (:func:`_break`).
+R_MEM, R_ORDER, R_SEG, R_COUNT, R_DROP, R_BRK = 0, 1, 2, 3, 4, 5
+
 FLOOR = 1e-20  # linefit.fit.VARIANCE_FLOOR_M2
 SUPPRESSED = -1073741824  # np.iinfo(np.int32).min // 2, as linefit.hough
 
@@ -115,8 +124,8 @@ def _wrap(a: float) -> float:
 # the ML fit of one line (linefit.fit.fit_groups)
 # --------------------------------------------------------------------------------------------
 @jit
-def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
-    """Fit one line to the points ``mem[:L]``; per-member results in the scratch arrays.
+def _fit(pt, iw, L, alpha0, ip, fp, wk, res):
+    """Fit one line to the points ``iw[R_MEM, :L]``; per-member results in the rows of ``wk``.
 
     ``res`` receives ``r, alpha, s`` (signed, the representative nearest ``alpha0``).  Returns
     True when the line converged with finite ``r`` and ``alpha`` (else the caller drops it).
@@ -125,13 +134,13 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
     mx = 0.0
     my = 0.0
     for k in range(L):
-        mx += pt[X, mem[k]]
-        my += pt[Y, mem[k]]
+        mx += pt[X, iw[R_MEM, k]]
+        my += pt[Y, iw[R_MEM, k]]
     mx /= L
     my /= L
     for k in range(L):
-        cx[k] = pt[X, mem[k]] - mx
-        cy[k] = pt[Y, mem[k]] - my
+        wk[W_CX, k] = pt[X, iw[R_MEM, k]] - mx
+        wk[W_CY, k] = pt[Y, iw[R_MEM, k]] - my
     alpha = alpha0
     active = True
     if not weighted:
@@ -139,16 +148,16 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
         tx = 0.0
         ty = 0.0
         for k in range(L):
-            tx += pt[X, mem[k]]
-            ty += pt[Y, mem[k]]
+            tx += pt[X, iw[R_MEM, k]]
+            ty += pt[Y, iw[R_MEM, k]]
         tx /= L
         ty /= L
         cxx = 0.0
         cyy = 0.0
         cxy = 0.0
         for k in range(L):
-            dx = pt[X, mem[k]] - tx
-            dy = pt[Y, mem[k]] - ty
+            dx = pt[X, iw[R_MEM, k]] - tx
+            dy = pt[Y, iw[R_MEM, k]] - ty
             cxx += dx * dx
             cyy += dy * dy
             cxy += dx * dy
@@ -180,14 +189,14 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
             s_p0 = 0.0
             s_p1 = 0.0
             for k in range(L):
-                p = mem[k]
+                p = iw[R_MEM, k]
                 q11 = pt[Q11, p]
                 q22 = pt[Q22, p]
                 qt = q11 + q22
                 qh = 0.5 * qt
                 qd = 0.5 * (q11 - q22)
-                u_r = cx[k] * ca + cy[k] * sa
-                u_s = cy[k] * ca - cx[k] * sa
+                u_r = wk[W_CX, k] * ca + wk[W_CY, k] * sa
+                u_s = wk[W_CY, k] * ca - wk[W_CX, k] * sa
                 p_r = qh + (qd * cos2 + pt[Q12, p] * sin2)
                 if p_r < FLOOR:
                     p_r = FLOOR
@@ -240,33 +249,33 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
     s2 = 0.0
     s3 = 0.0
     for k in range(L):
-        p = mem[k]
+        p = iw[R_MEM, k]
         x = pt[X, p]
         y = pt[Y, p]
         q11 = pt[Q11, p]
         q12 = pt[Q12, p]
         q22 = pt[Q22, p]
-        ur[k] = x * ca + y * sa
-        us[k] = y * ca - x * sa
+        wk[W_UR, k] = x * ca + y * sa
+        wk[W_US, k] = y * ca - x * sa
         p_r = q11 * cc + 2.0 * q12 * sc + q22 * ss
         if p_r < FLOOR:
             p_r = FLOOR
         p_s = (q11 + q22) - p_r
         if p_s < FLOOR:
             p_s = FLOOR
-        pr[k] = p_r
-        ps[k] = p_s
-        prs[k] = (q22 - q11) * sc + q12 * (cc - ss)
+        wk[W_PR, k] = p_r
+        wk[W_PS, k] = p_s
+        wk[W_PRS, k] = (q22 - q11) * sc + q12 * (cc - ss)
         if weighted:
-            wr[k] = 1.0 / p_r
-            ws[k] = 1.0 / p_s
+            wk[W_WR, k] = 1.0 / p_r
+            wk[W_WS, k] = 1.0 / p_s
         else:
-            wr[k] = 1.0
-            ws[k] = 1.0
-        s0 += wr[k]
-        s1 += wr[k] * (cx[k] * ca + cy[k] * sa)
-        s2 += ws[k]
-        s3 += ws[k] * (cy[k] * ca - cx[k] * sa)
+            wk[W_WR, k] = 1.0
+            wk[W_WS, k] = 1.0
+        s0 += wk[W_WR, k]
+        s1 += wk[W_WR, k] * (wk[W_CX, k] * ca + wk[W_CY, k] * sa)
+        s2 += wk[W_WS, k]
+        s3 += wk[W_WS, k] * (wk[W_CY, k] * ca - wk[W_CX, k] * sa)
     r = s1 / s0 + mx * ca + my * sa
     s = s3 / s2 + my * ca - mx * sa
     res[0] = r
@@ -280,7 +289,10 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
 # --------------------------------------------------------------------------------------------
 @jit
 def _is_break(pt, beam, a, b, ip, fp):
-    """:func:`linefit.segments.breakpoint_mask` between the points ``a`` and ``b``."""
+    """:func:`linefit.segments.breakpoint_mask` between the points ``a`` and ``b`` (symmetric)."""
+    missing = abs(beam[b] - beam[a]) - 1
+    if missing > ip[I_MAXMISS]:
+        return True
     xa = pt[X, a]
     ya = pt[Y, a]
     xb = pt[X, b]
@@ -289,28 +301,77 @@ def _is_break(pt, beam, a, b, ip, fp):
     dphi = min(dphi, 2.0 * np.pi - dphi)
     d_near = min(pt[D, a], pt[D, b])
     gap = np.hypot(xb - xa, yb - ya)
-    missing = abs(beam[b] - beam[a]) - 1
     lam = fp[F_LAMBDA]
     sin_margin = np.sin(max(lam - dphi, 0.0))
     limit = d_near * np.sin(dphi) / sin_margin
     limit = limit + fp[F_BSIG] * max(pt[SIG, a], pt[SIG, b])
-    too_far = dphi >= lam or not (gap <= limit)
-    return missing > ip[I_MAXMISS] or too_far
+    return dphi >= lam or not (gap <= limit)
 
 
 @jit
-def _segment_sizes(pt, beam, mem, L, us, ip, fp, order, seg):
-    """Sort the members by ``u_S`` (stable) into ``order`` and number their segments ``seg``.
+def _break(pt, beam, a, b, ip, fp, iw):
+    """:func:`_is_break`; for neighbouring points cached in ``iw[R_BRK]`` (-1: not known)."""
+    lo = min(a, b)
+    if max(a, b) - lo != 1:
+        return _is_break(pt, beam, a, b, ip, fp)
+    v = iw[R_BRK, lo]
+    if v < 0:
+        v = 1 if _is_break(pt, beam, lo, lo + 1, ip, fp) else 0
+        iw[R_BRK, lo] = v
+    return v == 1
+
+
+@jit
+def _lt(a, b):
+    """``a < b`` in numpy's sort order (NaN last)."""
+    return a < b or (b != b and a == a)
+
+
+@jit
+def _argsort_stable(v, row, L, iw):
+    """Stable argsort of ``v[row, :L]`` into ``iw[R_ORDER, :L]`` (``np.argsort``, stable).
+
+    Insertion sort, run from the end whose order the data already has (the members of a line
+    are in beam order, so ``u_S`` is nearly sorted one way or the other): linear time for the
+    usual input.
+    """
+    if L == 0:
+        return
+    if _lt(v[row, L - 1], v[row, 0]):
+        # nearly descending: insert k = L-1, ..., 0 into the sorted tail iw[R_ORDER, k + 1 : L]
+        for k in range(L - 1, -1, -1):
+            x = v[row, k]
+            i = k
+            while i + 1 < L and _lt(v[row, iw[R_ORDER, i + 1]], x):
+                iw[R_ORDER, i] = iw[R_ORDER, i + 1]
+                i += 1
+            iw[R_ORDER, i] = k
+    else:
+        for k in range(L):
+            x = v[row, k]
+            i = k
+            while i > 0 and _lt(x, v[row, iw[R_ORDER, i - 1]]):
+                iw[R_ORDER, i] = iw[R_ORDER, i - 1]
+                i -= 1
+            iw[R_ORDER, i] = k
+
+
+@jit
+def _segment_sizes(pt, beam, L, ip, fp, iw, wk):
+    """Order the members ``iw[R_MEM, :L]`` by ``u_S`` and number their segments.
+
+    The order (stable, by ``wk[W_US]``) goes to ``iw[R_ORDER]``, the segment numbers to
+    ``iw[R_SEG]``.
 
     Returns the number of segments (:func:`linefit.segments.segment_ids` for one line).
     """
-    o = np.argsort(us[:L], kind="mergesort")
+    _argsort_stable(wk, W_US, L, iw)
     n_seg = 0
     for k in range(L):
-        order[k] = o[k]
-        if k > 0 and _is_break(pt, beam, mem[o[k - 1]], mem[o[k]], ip, fp):
+        a = iw[R_MEM, iw[R_ORDER, k - 1]] if k > 0 else 0
+        if k > 0 and _break(pt, beam, a, iw[R_MEM, iw[R_ORDER, k]], ip, fp, iw):
             n_seg += 1
-        seg[k] = n_seg
+        iw[R_SEG, k] = n_seg
     return n_seg + 1 if L else 0
 
 
@@ -318,29 +379,32 @@ def _segment_sizes(pt, beam, mem, L, us, ip, fp, order, seg):
 # covariance of one line (linefit.covariance.line_covariances)
 # --------------------------------------------------------------------------------------------
 @jit
-def _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, s_fit, ip, cov, end_var):
-    """The ``(R, α, S)`` covariance into ``cov`` (3×3) and every member's endpoint variance."""
+def _covariance(pt, iw, L, wk, s_fit, ip, lcov, li):
+    """The ``(R, α, S)`` covariance into ``lcov[li]``; the members' endpoint variances.
+
+    The endpoint variances go to ``wk[W_TMP]``.
+    """
     weighted = ip[I_WEIGHTED] != 0
     beam_model = ip[I_BEAM] != 0
     W = 0.0
     cw = 0.0
     WS = 0.0
     for k in range(L):
-        W += wr[k]
-        cw += wr[k] * us[k]
-        WS += ws[k]
+        W += wk[W_WR, k]
+        cw += wk[W_WR, k] * wk[W_US, k]
+        WS += wk[W_WS, k]
     c = cw / W
     A = 0.0
     for k in range(L):
-        du = us[k] - c
-        A += wr[k] * du * du
+        du = wk[W_US, k] - c
+        A += wk[W_WR, k] * du * du
     c_s = 0.0
     c_s_w = 0.0
     for k in range(L):
-        c_s += (ws[k] / WS) * ur[k]
+        c_s += (wk[W_WS, k] / WS) * wk[W_UR, k]
         if weighted:
-            kappa = (us[k] - s_fit) / WS
-            c_s_w += 2.0 * prs[k] * ws[k] * ws[k] * kappa
+            kappa = (wk[W_US, k] - s_fit) / WS
+            c_s_w += 2.0 * wk[W_PRS, k] * wk[W_WS, k] * wk[W_WS, k] * kappa
     c_s = -c_s
     if weighted:
         c_s = c_s + c_s_w
@@ -353,20 +417,20 @@ def _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, s_fit, ip, cov, end_var
         P_ra = 0.0
         P_aa = 0.0
         for k in range(L):
-            gain_a = -wr[k] * (us[k] - c) / A
-            gain_r = wr[k] / W + c * gain_a
-            P_rr += gain_r * gain_r * pr[k]
-            P_ra += gain_r * gain_a * pr[k]
-            P_aa += gain_a * gain_a * pr[k]
+            gain_a = -wk[W_WR, k] * (wk[W_US, k] - c) / A
+            gain_r = wk[W_WR, k] / W + c * gain_a
+            P_rr += gain_r * gain_r * wk[W_PR, k]
+            P_ra += gain_r * gain_a * wk[W_PR, k]
+            P_aa += gain_a * gain_a * wk[W_PR, k]
     P_rs = 0.0
     P_as = 0.0
     P_ss = 0.0
     for k in range(L):
-        p = mem[k]
-        u_r = ur[k]
-        u_s = us[k]
-        gain_a = -wr[k] * (u_s - c) / A
-        gain_r = wr[k] / W + c * gain_a
+        p = iw[R_MEM, k]
+        u_r = wk[W_UR, k]
+        u_s = wk[W_US, k]
+        gain_a = -wk[W_WR, k] * (u_s - c) / A
+        gain_r = wk[W_WR, k] / W + c * gain_a
         d2 = u_r * u_r + u_s * u_s
         cos_t = u_r / np.sqrt(d2)
         sin_t = u_s / np.sqrt(d2)
@@ -377,9 +441,9 @@ def _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, s_fit, ip, cov, end_var
             q_tt = var_eff * sin_t * sin_t
             q_nt = var_eff * sin_t * cos_t
         else:
-            q_tt = ps[k]
-            q_nt = prs[k]
-        v = ws[k] / WS
+            q_tt = wk[W_PS, k]
+            q_nt = wk[W_PRS, k]
+        v = wk[W_WS, k] / WS
         a_s = 0.0
         b_s = v
         if weighted:
@@ -387,32 +451,34 @@ def _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, s_fit, ip, cov, end_var
             d = np.sqrt(d2)
             dps_dd = pt[DV, p] * sin_t * sin_t + 2.0 * var_perp / d * cos_t * cos_t
             dps_dphi = 2.0 * (var_range - var_perp) * sin_t * cos_t
-            k_d = -kappa * dps_dd * ws[k] * ws[k]
-            k_phi = -kappa * dps_dphi * ws[k] * ws[k] / d
+            k_d = -kappa * dps_dd * wk[W_WS, k] * wk[W_WS, k]
+            k_phi = -kappa * dps_dphi * wk[W_WS, k] * wk[W_WS, k] / d
             a_s = k_d * cos_t - k_phi * sin_t
             b_s = v + k_d * sin_t + k_phi * cos_t
         a_s = a_s + c_s * gain_a
-        P_rs += gain_r * (a_s * pr[k] + b_s * q_nt)
-        P_as += gain_a * (a_s * pr[k] + b_s * q_nt)
-        P_ss += a_s * a_s * pr[k] + b_s * b_s * q_tt + 2.0 * a_s * b_s * q_nt
-        end_var[k] = q_tt + u_r * u_r * P_aa - 2.0 * u_r * gain_a * q_nt
-    cov[0, 0] = P_rr
-    cov[0, 1] = P_ra
-    cov[1, 0] = P_ra
-    cov[1, 1] = P_aa
-    cov[0, 2] = P_rs
-    cov[2, 0] = P_rs
-    cov[1, 2] = P_as
-    cov[2, 1] = P_as
-    cov[2, 2] = P_ss
+        P_rs += gain_r * (a_s * wk[W_PR, k] + b_s * q_nt)
+        P_as += gain_a * (a_s * wk[W_PR, k] + b_s * q_nt)
+        P_ss += a_s * a_s * wk[W_PR, k] + b_s * b_s * q_tt + 2.0 * a_s * b_s * q_nt
+        wk[W_TMP, k] = q_tt + u_r * u_r * P_aa - 2.0 * u_r * gain_a * q_nt
+    lcov[li, 0, 0] = P_rr
+    lcov[li, 0, 1] = P_ra
+    lcov[li, 1, 0] = P_ra
+    lcov[li, 1, 1] = P_aa
+    lcov[li, 0, 2] = P_rs
+    lcov[li, 2, 0] = P_rs
+    lcov[li, 1, 2] = P_as
+    lcov[li, 2, 1] = P_as
+    lcov[li, 2, 2] = P_ss
 
 
 # --------------------------------------------------------------------------------------------
 # fit, rejection and segments of one candidate line (linefit.refine.refine)
 # --------------------------------------------------------------------------------------------
 @jit
-def _refine_line(pt, beam, cand, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, li, ar, ai, top):
-    """Refine the candidate ``cand[:L0]`` into line slot ``li``; its members go to ``top``.
+def _refine_line(
+    pt, beam, gm, g0, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, li, ar, ai, ao, top
+):
+    """Refine the candidate ``gm[g0 : g0 + L0]`` into line slot ``li``; its members go to ``top``.
 
     Returns ``(status, n_refits, seg_changed, new_top)``: status 1 when the line survived.
     ``n_refits`` is the number of reject-and-refit rounds it went through and ``seg_changed``
@@ -420,28 +486,13 @@ def _refine_line(pt, beam, cand, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, 
     from these).
     """
     min_pts = max(2, ip[I_MINPTS])
-    mem = iw[0]
-    order = iw[1]
-    seg = iw[2]
-    cx, cy, ur, us, pr, ps, prs, wr, ws, tmp = (
-        wk[0],
-        wk[1],
-        wk[2],
-        wk[3],
-        wk[4],
-        wk[5],
-        wk[6],
-        wk[7],
-        wk[8],
-        wk[9],
-    )
     L = L0
     for k in range(L):
-        mem[k] = cand[k]
+        iw[R_MEM, k] = gm[g0 + k]
     n_refits = 0
     if min_pts > L:
         return 0, n_refits, False, top
-    if not _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
+    if not _fit(pt, iw, L, alpha0, ip, fp, wk, res):
         return 0, n_refits, False, top
     chi2_max = fp[F_CHI2]
     for _ in range(ip[I_MAXREF] + 1):
@@ -449,28 +500,28 @@ def _refine_line(pt, beam, cand, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, 
         W = 0.0
         cw = 0.0
         for k in range(L):
-            W += wr[k]
-            cw += wr[k] * us[k]
+            W += wk[W_WR, k]
+            cw += wk[W_WR, k] * wk[W_US, k]
         c = cw / W
         A = 0.0
         for k in range(L):
-            du = us[k] - c
-            A += wr[k] * du * du
+            du = wk[W_US, k] - c
+            A += wk[W_WR, k] * du * du
         worst = 0.0
         for k in range(L):
-            du = us[k] - c
-            h = wr[k] * (1.0 / W + du * du / A)
+            du = wk[W_US, k] - c
+            h = wk[W_WR, k] * (1.0 / W + du * du / A)
             h = min(h, 0.95)
-            e = ur[k] - res[0]
-            chi2 = e * e / (pr[k] * (1.0 - h))
-            tmp[k] = chi2
+            e = wk[W_UR, k] - res[0]
+            chi2 = e * e / (wk[W_PR, k] * (1.0 - h))
+            wk[W_TMP, k] = chi2
             if chi2 > worst or np.isnan(chi2):
                 worst = chi2
         n_keep = 0
         for k in range(L):
-            reject = tmp[k] > chi2_max and tmp[k] >= worst / 9.0
+            reject = wk[W_TMP, k] > chi2_max and wk[W_TMP, k] >= worst / 9.0
             if not reject:
-                mem[n_keep] = mem[k]
+                iw[R_MEM, n_keep] = iw[R_MEM, k]
                 n_keep += 1
         if n_keep == L:
             break
@@ -478,50 +529,53 @@ def _refine_line(pt, beam, cand, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, 
         n_refits += 1
         if min_pts > L:
             return 0, n_refits, False, top
-        if not _fit(pt, mem, L, res[1], ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
+        if not _fit(pt, iw, L, res[1], ip, fp, wk, res):
             return 0, n_refits, False, top
     # segments; pieces with too few points leave the line
-    n_seg = _segment_sizes(pt, beam, mem, L, us, ip, fp, order, seg)
+    n_seg = _segment_sizes(pt, beam, L, ip, fp, iw, wk)
     seg_changed = False
     if n_seg:
-        counts = iw[3]
         for g in range(n_seg):
-            counts[g] = 0
+            iw[R_COUNT, g] = 0
         for k in range(L):
-            counts[seg[k]] += 1
-        drop = iw[4]
+            iw[R_COUNT, iw[R_SEG, k]] += 1
         for k in range(L):
-            drop[k] = 0
+            iw[R_DROP, k] = 0
         any_small = False
         for k in range(L):
-            if counts[seg[k]] < ip[I_MINSEG]:
-                drop[order[k]] = 1
+            if iw[R_COUNT, iw[R_SEG, k]] < ip[I_MINSEG]:
+                iw[R_DROP, iw[R_ORDER, k]] = 1
                 any_small = True
         if any_small:
             seg_changed = True
             n_keep = 0
             for k in range(L):
-                if drop[k] == 0:
-                    mem[n_keep] = mem[k]
+                if iw[R_DROP, k] == 0:
+                    iw[R_MEM, n_keep] = iw[R_MEM, k]
                     n_keep += 1
             L = n_keep
             if min_pts > L:
                 return 0, n_refits, True, top
-            if not _fit(pt, mem, L, res[1], ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
+            if not _fit(pt, iw, L, res[1], ip, fp, wk, res):
                 return 0, n_refits, True, top
-    # store the line: slot li, its members at arena[top : top + L]
+            n_seg = _segment_sizes(pt, beam, L, ip, fp, iw, wk)
+    # store the line: slot li, its members at arena[top : top + L] with their order by u_S
+    # and segment numbers
     for k in range(L):
-        ai[top + k] = mem[k]
-        ar[A_UR, top + k] = ur[k]
-        ar[A_US, top + k] = us[k]
+        ai[top + k] = iw[R_MEM, k]
+        ar[A_UR, top + k] = wk[W_UR, k]
+        ar[A_US, top + k] = wk[W_US, k]
+        ao[0, top + k] = iw[R_ORDER, k]
+        ao[1, top + k] = iw[R_SEG, k]
     lr[li, 0] = res[0]
     lr[li, 1] = res[1]
     lr[li, 2] = res[2]
     lm[li, 0] = top
     lm[li, 1] = L
-    _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, res[2], ip, lcov[li], tmp)
+    lm[li, 2] = n_seg
+    _covariance(pt, iw, L, wk, res[2], ip, lcov, li)
     for k in range(L):
-        ar[A_EV, top + k] = tmp[k]
+        ar[A_EV, top + k] = wk[W_TMP, k]
     return 1, n_refits, seg_changed, top + L
 
 
@@ -574,7 +628,7 @@ def _tls_max_score(pt, sub, s, e, fp):
 
 
 @jit
-def _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag):
+def _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag, iw):
     """Split-and-merge pieces of the points ``sub[:n]`` (one scan, beam order).
 
     Pieces are ``sub[starts[g] .. ends[g]]`` with start angles ``alphas[g]``; returns their
@@ -587,7 +641,7 @@ def _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag):
     c0 = 0
     for k in range(n):
         last = k == n - 1
-        if last or _is_break(pt, beam, sub[k], sub[k + 1], ip, fp):
+        if last or _break(pt, beam, sub[k], sub[k + 1], ip, fp, iw):
             if k - c0 + 1 >= 2:
                 stk[n_stk, 0] = c0
                 stk[n_stk, 1] = k
@@ -747,12 +801,11 @@ def _hough_votes_dense(x32, y32, n, c32, s32, row_off, n_acc, acc, vote):
     for p in range(n):
         xp = x32[p]
         yp = y32[p]
-        row = vote[p]
         for j in range(n_beta):
             # float32 as linefit.hough.hough_accumulator: products rounded, then their sum
             v = c32[j] * xp
             v = v + s32[j] * yp
-            row[j] = np.int32(np.floor(v)) + row_off[j]
+            vote[p, j] = np.int32(np.floor(v)) + row_off[j]
 
 
 @jit
@@ -760,9 +813,8 @@ def _hough_count(vote, n, n_beta, min_votes, row_key, acc, cidx, ckey):
     """Count the votes of ``vote[:n]`` into ``acc``; list the cells reaching ``min_votes``."""
     n_cells = 0
     for p in range(n):
-        row = vote[p]
         for j in range(n_beta):
-            f = row[j]
+            f = vote[p, j]
             v = acc[f] + 1
             acc[f] = v
             if v == min_votes:
@@ -969,9 +1021,8 @@ def _hough(
                 gm[o] = p
                 o += 1
                 alive[p] = False
-                row = vote[p]
                 for jj in range(n_beta):
-                    cnt[row[jj]] -= 1
+                    cnt[vote[p, jj]] -= 1
             else:
                 alist[w] = p
                 w += 1
@@ -995,7 +1046,7 @@ def _refine_set(pt, beam, gm, gs, ga, n_g, ip, fp, ws, st, ordr, n_ord):
     segment step), which decides the start angle of a collinear merge.  Returns the new
     length of ``ordr``.
     """
-    wk, iw, res, lr, lcov, lm, ar, ai, nref, segch, okf, tmpo = ws
+    wk, iw, res, lr, lcov, lm, ar, ai, nref, segch, okf, tmpo, ao = ws
     first = st[0]
     for g in range(n_g):
         li = st[0]
@@ -1003,7 +1054,7 @@ def _refine_set(pt, beam, gm, gs, ga, n_g, ip, fp, ws, st, ordr, n_ord):
         a = gs[g]
         b = gs[g + 1]
         status, nr, sc, top = _refine_line(
-            pt, beam, gm[a:b], b - a, ga[g], ip, fp, wk, iw, res, lr, lcov, lm, li, ar, ai, st[1]
+            pt, beam, gm, a, b - a, ga[g], ip, fp, wk, iw, res, lr, lcov, lm, li, ar, ai, ao, st[1]
         )
         st[1] = top
         okf[li] = status
@@ -1183,14 +1234,14 @@ def _scan_lines(pt, beam, n, ip, fp, ws, hs, ss, st, ordr):
                     sub[m] = p
                     m += 1
                 mark[p] = 0
-            n_g = _split_merge(pt, beam, sub, m, ip, fp, starts, ends, alphas, stk, flag)
+            n_g = _split_merge(pt, beam, sub, m, ip, fp, starts, ends, alphas, stk, flag, ws[1])
             n_ord = _refine_pieces(
                 pt, beam, sub, starts, ends, alphas, n_g, ip, fp, ws, st, ordr, n_ord, gm, gs, ga
             )
     else:
         for p in range(n):
             sub[p] = p
-        n_g = _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag)
+        n_g = _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag, ws[1])
         n_ord = _refine_pieces(
             pt, beam, sub, starts, ends, alphas, n_g, ip, fp, ws, st, ordr, n_ord, gm, gs, ga
         )
@@ -1275,20 +1326,24 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_c
     max_peaks = ip[I_MAXPEAKS]
     capl = max_peaks + 2 * nmax + 16
     capm = 4 * nmax + 64
-    # per-line scratch, line slots and the member arena of one scan
+    # per-line scratch, line slots and the member arena of one scan: a line slot li has its
+    # fit in lr[li], its covariance in lcov[li], and in lm[li] the start of its members in the
+    # arena, their number and the number of its segments; ao holds, per stored member, the
+    # member order by u_S and the segment numbers (as iw[R_ORDER], iw[R_SEG])
     wk = np.empty((10, nmax))
-    iw = np.empty((5, nmax), dtype=np.int64)
+    iw = np.empty((6, nmax), dtype=np.int64)
     res = np.empty(3)
     lr = np.empty((capl, 3))
     lcov = np.empty((capl, 3, 3))
-    lm = np.empty((capl, 2), dtype=np.int64)
+    lm = np.empty((capl, 3), dtype=np.int64)
     ar = np.empty((3, capm))
     ai = np.empty(capm, dtype=np.int64)
     nref = np.empty(capl, dtype=np.int64)
     segch = np.empty(capl, dtype=np.int64)
     okf = np.empty(capl, dtype=np.int64)
     tmpo = np.empty(capl, dtype=np.int64)
-    ws = (wk, iw, res, lr, lcov, lm, ar, ai, nref, segch, okf, tmpo)
+    ao = np.empty((2, capm), dtype=np.int64)
+    ws = (wk, iw, res, lr, lcov, lm, ar, ai, nref, segch, okf, tmpo, ao)
     # Hough scratch: the dense accumulator holds every row's window of distance bins (at most
     # 2·sqrt(2)·ℛ_max/Δℛ + 10 per row, see _hough_rows); beyond dense_cells a scan's votes are
     # counted by sorting instead
@@ -1352,8 +1407,6 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_c
     # per-line output scratch
     fb = np.empty(capl, dtype=np.int64)
     keep = np.empty(capl, dtype=np.int64)
-    order = iw[1]
-    seg = iw[2]
     for k in range(n_scans):
         a = scan_start[k]
         b = scan_start[k + 1]
@@ -1362,6 +1415,8 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_c
             continue
         pts = pt[:, a:b]
         bm = beam[a:b]
+        for p in range(n):
+            iw[R_BRK, p] = -1
         n_ord = _scan_lines(pts, bm, n, ip, fp, ws, hs, ss, st, ordr)
         # which lines are kept, and their first beams
         n_keep = 0
@@ -1374,16 +1429,14 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_c
                 for v in range(3):
                     if not np.isfinite(lcov[li, u, v]):
                         finite = False
-            n_seg = _segment_sizes(
-                pts, bm, ai[t : t + L], L, ar[A_US, t : t + L], ip, fp, order, seg
-            )
+            n_seg = lm[li, 2]
             length = 0.0
             q0 = 0
             for g in range(n_seg):
                 q1 = q0
-                while q1 + 1 < L and seg[q1 + 1] == g:
+                while q1 + 1 < L and ao[1, t + q1 + 1] == g:
                     q1 += 1
-                length += ar[A_US, t + order[q1]] - ar[A_US, t + order[q0]]
+                length += ar[A_US, t + ao[0, t + q1]] - ar[A_US, t + ao[0, t + q0]]
                 q0 = q1 + 1
             if ip[I_MINPTS] <= L and length >= fp[F_MIN_LEN] and finite:
                 first_beam = bm[ai[t]]
@@ -1413,19 +1466,17 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_c
                     sgn = -1.0 if flip and (u == 2 or u == 0) != (v == 2 or v == 0) else 1.0
                     o_cov[n_out, u, v] = lcov[li, u, v] * sgn
             # segments: ends of each run of the members sorted by u_S
-            n_seg = _segment_sizes(
-                pts, bm, ai[t : t + L], L, ar[A_US, t : t + L], ip, fp, order, seg
-            )
+            n_seg = lm[li, 2]
             o_seg = _grow(o_seg, n_oseg + n_seg)
             o_lin[n_out, 0] = n_oseg
             o_lin[n_out, 1] = n_seg
             q0 = 0
             for g in range(n_seg):
                 q1 = q0
-                while q1 + 1 < L and seg[q1 + 1] == g:
+                while q1 + 1 < L and ao[1, t + q1 + 1] == g:
                     q1 += 1
-                m0 = t + order[q0]
-                m1 = t + order[q1]
+                m0 = t + ao[0, t + q0]
+                m1 = t + ao[0, t + q1]
                 row = n_oseg + (n_seg - 1 - g if flip else g)
                 if flip:
                     o_seg[row, 0] = -ar[A_US, m1]
@@ -1439,11 +1490,15 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_c
                     o_seg[row, 3] = ar[A_EV, m1]
                 q0 = q1 + 1
             n_oseg += n_seg
-            # beam indices, sorted
+            # beam indices, sorted (the members are in point order already, as a rule)
             o_idx = _grow(o_idx, n_oidx + L)
+            ascending = True
             for u in range(L):
                 o_idx[n_oidx + u] = bm[ai[t + u]]
-            o_idx[n_oidx : n_oidx + L] = np.sort(o_idx[n_oidx : n_oidx + L])
+                if u > 0 and o_idx[n_oidx + u] < o_idx[n_oidx + u - 1]:
+                    ascending = False
+            if not ascending:
+                o_idx[n_oidx : n_oidx + L] = np.sort(o_idx[n_oidx : n_oidx + L])
             o_lin[n_out, 2] = n_oidx
             o_lin[n_out, 3] = L
             n_oidx += L
