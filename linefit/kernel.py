@@ -106,9 +106,8 @@ A_UR, A_US, A_EV = 0, 1, 2
 W_CX, W_CY, W_UR, W_US, W_PR, W_PS, W_PRS, W_WR, W_WS, W_TMP = range(10)
 
 #: Rows of the integer scratch ``iw``: members of the line being refined, their order by
-#: ``u_S``, segment numbers, segment sizes, drop flags; the scan's cached breakpoints between
-#: neighbouring points (:func:`_break`).
-R_MEM, R_ORDER, R_SEG, R_COUNT, R_DROP, R_BRK = 0, 1, 2, 3, 4, 5
+#: ``u_S``, segment numbers, segment sizes, drop flags.
+R_MEM, R_ORDER, R_SEG, R_COUNT, R_DROP = 0, 1, 2, 3, 4
 
 FLOOR = 1e-20  # linefit.fit.VARIANCE_FLOOR_M2
 SUPPRESSED = -1073741824  # np.iinfo(np.int32).min // 2, as linefit.hough
@@ -309,19 +308,6 @@ def _is_break(pt, beam, a, b, ip, fp):
 
 
 @jit
-def _break(pt, beam, a, b, ip, fp, iw):
-    """:func:`_is_break`; for neighbouring points cached in ``iw[R_BRK]`` (-1: not known)."""
-    lo = min(a, b)
-    if max(a, b) - lo != 1:
-        return _is_break(pt, beam, a, b, ip, fp)
-    v = iw[R_BRK, lo]
-    if v < 0:
-        v = 1 if _is_break(pt, beam, lo, lo + 1, ip, fp) else 0
-        iw[R_BRK, lo] = v
-    return v == 1
-
-
-@jit
 def _lt(a, b):
     """``a < b`` in numpy's sort order (NaN last)."""
     return a < b or (b != b and a == a)
@@ -369,7 +355,7 @@ def _segment_sizes(pt, beam, L, ip, fp, iw, wk):
     n_seg = 0
     for k in range(L):
         a = iw[R_MEM, iw[R_ORDER, k - 1]] if k > 0 else 0
-        if k > 0 and _break(pt, beam, a, iw[R_MEM, iw[R_ORDER, k]], ip, fp, iw):
+        if k > 0 and _is_break(pt, beam, a, iw[R_MEM, iw[R_ORDER, k]], ip, fp):
             n_seg += 1
         iw[R_SEG, k] = n_seg
     return n_seg + 1 if L else 0
@@ -628,7 +614,7 @@ def _tls_max_score(pt, sub, s, e, fp):
 
 
 @jit
-def _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag, iw):
+def _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag):
     """Split-and-merge pieces of the points ``sub[:n]`` (one scan, beam order).
 
     Pieces are ``sub[starts[g] .. ends[g]]`` with start angles ``alphas[g]``; returns their
@@ -641,7 +627,7 @@ def _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag, iw):
     c0 = 0
     for k in range(n):
         last = k == n - 1
-        if last or _break(pt, beam, sub[k], sub[k + 1], ip, fp, iw):
+        if last or _is_break(pt, beam, sub[k], sub[k + 1], ip, fp):
             if k - c0 + 1 >= 2:
                 stk[n_stk, 0] = c0
                 stk[n_stk, 1] = k
@@ -1234,14 +1220,14 @@ def _scan_lines(pt, beam, n, ip, fp, ws, hs, ss, st, ordr):
                     sub[m] = p
                     m += 1
                 mark[p] = 0
-            n_g = _split_merge(pt, beam, sub, m, ip, fp, starts, ends, alphas, stk, flag, ws[1])
+            n_g = _split_merge(pt, beam, sub, m, ip, fp, starts, ends, alphas, stk, flag)
             n_ord = _refine_pieces(
                 pt, beam, sub, starts, ends, alphas, n_g, ip, fp, ws, st, ordr, n_ord, gm, gs, ga
             )
     else:
         for p in range(n):
             sub[p] = p
-        n_g = _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag, ws[1])
+        n_g = _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag)
         n_ord = _refine_pieces(
             pt, beam, sub, starts, ends, alphas, n_g, ip, fp, ws, st, ordr, n_ord, gm, gs, ga
         )
@@ -1331,7 +1317,7 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_c
     # arena, their number and the number of its segments; ao holds, per stored member, the
     # member order by u_S and the segment numbers (as iw[R_ORDER], iw[R_SEG])
     wk = np.empty((10, nmax))
-    iw = np.empty((6, nmax), dtype=np.int64)
+    iw = np.empty((5, nmax), dtype=np.int64)
     res = np.empty(3)
     lr = np.empty((capl, 3))
     lcov = np.empty((capl, 3, 3))
@@ -1415,8 +1401,6 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_c
             continue
         pts = pt[:, a:b]
         bm = beam[a:b]
-        for p in range(n):
-            iw[R_BRK, p] = -1
         n_ord = _scan_lines(pts, bm, n, ip, fp, ws, hs, ss, st, ordr)
         # which lines are kept, and their first beams
         n_keep = 0
