@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from linefit import kernel
 from linefit.assemble import lines_from_fit
 from linefit.collinear import merge_collinear
 from linefit.config import LineFitConfig
@@ -110,7 +111,7 @@ def extract_lines_batch(
     scan_start = np.zeros(n_scans + 1, dtype=np.int64)
     np.cumsum(valid.sum(axis=1), out=scan_start[1:])
     scan, ras, cov, lin, seg, idx = extract_kernel(
-        pt, beam_of.astype(np.int64), scan_start, *kernel_params(cfg)
+        pt, beam_of.astype(np.int64), scan_start, *kernel_params(cfg), kernel.DENSE_CELLS
     )
     segs = np.ascontiguousarray(seg[:, :2])
     svar = np.ascontiguousarray(seg[:, 2:])

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from linefit.config import LineFitConfig
 
-__all__ = ["FPARAMS", "IPARAMS", "extract_kernel", "kernel_params"]
+__all__ = ["DENSE_CELLS", "FPARAMS", "IPARAMS", "extract_kernel", "kernel_params"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -101,6 +101,14 @@ IPARAMS = (
 #: Rows of the member arena ``ar``: u_R, u_S and endpoint variance of each stored member.
 A_UR, A_US, A_EV = 0, 1, 2
 
+#: Rows of the float scratch ``wk`` of the line being refined: centred points, u_R, u_S, P_R,
+#: P_S, P_RS, their weights, and a spare row.
+W_CX, W_CY, W_UR, W_US, W_PR, W_PS, W_PRS, W_WR, W_WS, W_TMP = range(10)
+
+#: Rows of the integer scratch ``iw``: members of the line being refined, their order by
+#: ``u_S``, segment numbers, segment sizes, drop flags.
+R_MEM, R_ORDER, R_SEG, R_COUNT, R_DROP = 0, 1, 2, 3, 4
+
 FLOOR = 1e-20  # linefit.fit.VARIANCE_FLOOR_M2
 SUPPRESSED = -1073741824  # np.iinfo(np.int32).min // 2, as linefit.hough
 
@@ -115,8 +123,8 @@ def _wrap(a: float) -> float:
 # the ML fit of one line (linefit.fit.fit_groups)
 # --------------------------------------------------------------------------------------------
 @jit
-def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
-    """Fit one line to the points ``mem[:L]``; per-member results in the scratch arrays.
+def _fit(pt, iw, L, alpha0, ip, fp, wk, res):
+    """Fit one line to the points ``iw[R_MEM, :L]``; per-member results in the rows of ``wk``.
 
     ``res`` receives ``r, alpha, s`` (signed, the representative nearest ``alpha0``).  Returns
     True when the line converged with finite ``r`` and ``alpha`` (else the caller drops it).
@@ -125,13 +133,13 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
     mx = 0.0
     my = 0.0
     for k in range(L):
-        mx += pt[X, mem[k]]
-        my += pt[Y, mem[k]]
+        mx += pt[X, iw[R_MEM, k]]
+        my += pt[Y, iw[R_MEM, k]]
     mx /= L
     my /= L
     for k in range(L):
-        cx[k] = pt[X, mem[k]] - mx
-        cy[k] = pt[Y, mem[k]] - my
+        wk[W_CX, k] = pt[X, iw[R_MEM, k]] - mx
+        wk[W_CY, k] = pt[Y, iw[R_MEM, k]] - my
     alpha = alpha0
     active = True
     if not weighted:
@@ -139,16 +147,16 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
         tx = 0.0
         ty = 0.0
         for k in range(L):
-            tx += pt[X, mem[k]]
-            ty += pt[Y, mem[k]]
+            tx += pt[X, iw[R_MEM, k]]
+            ty += pt[Y, iw[R_MEM, k]]
         tx /= L
         ty /= L
         cxx = 0.0
         cyy = 0.0
         cxy = 0.0
         for k in range(L):
-            dx = pt[X, mem[k]] - tx
-            dy = pt[Y, mem[k]] - ty
+            dx = pt[X, iw[R_MEM, k]] - tx
+            dy = pt[Y, iw[R_MEM, k]] - ty
             cxx += dx * dx
             cyy += dy * dy
             cxy += dx * dy
@@ -180,14 +188,14 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
             s_p0 = 0.0
             s_p1 = 0.0
             for k in range(L):
-                p = mem[k]
+                p = iw[R_MEM, k]
                 q11 = pt[Q11, p]
                 q22 = pt[Q22, p]
                 qt = q11 + q22
                 qh = 0.5 * qt
                 qd = 0.5 * (q11 - q22)
-                u_r = cx[k] * ca + cy[k] * sa
-                u_s = cy[k] * ca - cx[k] * sa
+                u_r = wk[W_CX, k] * ca + wk[W_CY, k] * sa
+                u_s = wk[W_CY, k] * ca - wk[W_CX, k] * sa
                 p_r = qh + (qd * cos2 + pt[Q12, p] * sin2)
                 if p_r < FLOOR:
                     p_r = FLOOR
@@ -240,33 +248,33 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
     s2 = 0.0
     s3 = 0.0
     for k in range(L):
-        p = mem[k]
+        p = iw[R_MEM, k]
         x = pt[X, p]
         y = pt[Y, p]
         q11 = pt[Q11, p]
         q12 = pt[Q12, p]
         q22 = pt[Q22, p]
-        ur[k] = x * ca + y * sa
-        us[k] = y * ca - x * sa
+        wk[W_UR, k] = x * ca + y * sa
+        wk[W_US, k] = y * ca - x * sa
         p_r = q11 * cc + 2.0 * q12 * sc + q22 * ss
         if p_r < FLOOR:
             p_r = FLOOR
         p_s = (q11 + q22) - p_r
         if p_s < FLOOR:
             p_s = FLOOR
-        pr[k] = p_r
-        ps[k] = p_s
-        prs[k] = (q22 - q11) * sc + q12 * (cc - ss)
+        wk[W_PR, k] = p_r
+        wk[W_PS, k] = p_s
+        wk[W_PRS, k] = (q22 - q11) * sc + q12 * (cc - ss)
         if weighted:
-            wr[k] = 1.0 / p_r
-            ws[k] = 1.0 / p_s
+            wk[W_WR, k] = 1.0 / p_r
+            wk[W_WS, k] = 1.0 / p_s
         else:
-            wr[k] = 1.0
-            ws[k] = 1.0
-        s0 += wr[k]
-        s1 += wr[k] * (cx[k] * ca + cy[k] * sa)
-        s2 += ws[k]
-        s3 += ws[k] * (cy[k] * ca - cx[k] * sa)
+            wk[W_WR, k] = 1.0
+            wk[W_WS, k] = 1.0
+        s0 += wk[W_WR, k]
+        s1 += wk[W_WR, k] * (wk[W_CX, k] * ca + wk[W_CY, k] * sa)
+        s2 += wk[W_WS, k]
+        s3 += wk[W_WS, k] * (wk[W_CY, k] * ca - wk[W_CX, k] * sa)
     r = s1 / s0 + mx * ca + my * sa
     s = s3 / s2 + my * ca - mx * sa
     res[0] = r
@@ -280,7 +288,10 @@ def _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
 # --------------------------------------------------------------------------------------------
 @jit
 def _is_break(pt, beam, a, b, ip, fp):
-    """:func:`linefit.segments.breakpoint_mask` between the points ``a`` and ``b``."""
+    """:func:`linefit.segments.breakpoint_mask` between the points ``a`` and ``b`` (symmetric)."""
+    missing = abs(beam[b] - beam[a]) - 1
+    if missing > ip[I_MAXMISS]:
+        return True
     xa = pt[X, a]
     ya = pt[Y, a]
     xb = pt[X, b]
@@ -289,28 +300,64 @@ def _is_break(pt, beam, a, b, ip, fp):
     dphi = min(dphi, 2.0 * np.pi - dphi)
     d_near = min(pt[D, a], pt[D, b])
     gap = np.hypot(xb - xa, yb - ya)
-    missing = abs(beam[b] - beam[a]) - 1
     lam = fp[F_LAMBDA]
     sin_margin = np.sin(max(lam - dphi, 0.0))
     limit = d_near * np.sin(dphi) / sin_margin
     limit = limit + fp[F_BSIG] * max(pt[SIG, a], pt[SIG, b])
-    too_far = dphi >= lam or not (gap <= limit)
-    return missing > ip[I_MAXMISS] or too_far
+    return dphi >= lam or not (gap <= limit)
 
 
 @jit
-def _segment_sizes(pt, beam, mem, L, us, ip, fp, order, seg):
-    """Sort the members by ``u_S`` (stable) into ``order`` and number their segments ``seg``.
+def _lt(a, b):
+    """``a < b`` in numpy's sort order (NaN last)."""
+    return a < b or (b != b and a == a)
+
+
+@jit
+def _argsort_stable(v, row, L, iw):
+    """Stable argsort of ``v[row, :L]`` into ``iw[R_ORDER, :L]`` (``np.argsort``, stable).
+
+    Insertion sort, run from the end whose order the data already has (the members of a line
+    are in beam order, so ``u_S`` is nearly sorted one way or the other): linear time for the
+    usual input.
+    """
+    if L == 0:
+        return
+    if _lt(v[row, L - 1], v[row, 0]):
+        # nearly descending: insert k = L-1, ..., 0 into the sorted tail iw[R_ORDER, k + 1 : L]
+        for k in range(L - 1, -1, -1):
+            x = v[row, k]
+            i = k
+            while i + 1 < L and _lt(v[row, iw[R_ORDER, i + 1]], x):
+                iw[R_ORDER, i] = iw[R_ORDER, i + 1]
+                i += 1
+            iw[R_ORDER, i] = k
+    else:
+        for k in range(L):
+            x = v[row, k]
+            i = k
+            while i > 0 and _lt(x, v[row, iw[R_ORDER, i - 1]]):
+                iw[R_ORDER, i] = iw[R_ORDER, i - 1]
+                i -= 1
+            iw[R_ORDER, i] = k
+
+
+@jit
+def _segment_sizes(pt, beam, L, ip, fp, iw, wk):
+    """Order the members ``iw[R_MEM, :L]`` by ``u_S`` and number their segments.
+
+    The order (stable, by ``wk[W_US]``) goes to ``iw[R_ORDER]``, the segment numbers to
+    ``iw[R_SEG]``.
 
     Returns the number of segments (:func:`linefit.segments.segment_ids` for one line).
     """
-    o = np.argsort(us[:L], kind="mergesort")
+    _argsort_stable(wk, W_US, L, iw)
     n_seg = 0
     for k in range(L):
-        order[k] = o[k]
-        if k > 0 and _is_break(pt, beam, mem[o[k - 1]], mem[o[k]], ip, fp):
+        a = iw[R_MEM, iw[R_ORDER, k - 1]] if k > 0 else 0
+        if k > 0 and _is_break(pt, beam, a, iw[R_MEM, iw[R_ORDER, k]], ip, fp):
             n_seg += 1
-        seg[k] = n_seg
+        iw[R_SEG, k] = n_seg
     return n_seg + 1 if L else 0
 
 
@@ -318,29 +365,32 @@ def _segment_sizes(pt, beam, mem, L, us, ip, fp, order, seg):
 # covariance of one line (linefit.covariance.line_covariances)
 # --------------------------------------------------------------------------------------------
 @jit
-def _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, s_fit, ip, cov, end_var):
-    """The ``(R, α, S)`` covariance into ``cov`` (3×3) and every member's endpoint variance."""
+def _covariance(pt, iw, L, wk, s_fit, ip, lcov, li):
+    """The ``(R, α, S)`` covariance into ``lcov[li]``; the members' endpoint variances.
+
+    The endpoint variances go to ``wk[W_TMP]``.
+    """
     weighted = ip[I_WEIGHTED] != 0
     beam_model = ip[I_BEAM] != 0
     W = 0.0
     cw = 0.0
     WS = 0.0
     for k in range(L):
-        W += wr[k]
-        cw += wr[k] * us[k]
-        WS += ws[k]
+        W += wk[W_WR, k]
+        cw += wk[W_WR, k] * wk[W_US, k]
+        WS += wk[W_WS, k]
     c = cw / W
     A = 0.0
     for k in range(L):
-        du = us[k] - c
-        A += wr[k] * du * du
+        du = wk[W_US, k] - c
+        A += wk[W_WR, k] * du * du
     c_s = 0.0
     c_s_w = 0.0
     for k in range(L):
-        c_s += (ws[k] / WS) * ur[k]
+        c_s += (wk[W_WS, k] / WS) * wk[W_UR, k]
         if weighted:
-            kappa = (us[k] - s_fit) / WS
-            c_s_w += 2.0 * prs[k] * ws[k] * ws[k] * kappa
+            kappa = (wk[W_US, k] - s_fit) / WS
+            c_s_w += 2.0 * wk[W_PRS, k] * wk[W_WS, k] * wk[W_WS, k] * kappa
     c_s = -c_s
     if weighted:
         c_s = c_s + c_s_w
@@ -353,20 +403,20 @@ def _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, s_fit, ip, cov, end_var
         P_ra = 0.0
         P_aa = 0.0
         for k in range(L):
-            gain_a = -wr[k] * (us[k] - c) / A
-            gain_r = wr[k] / W + c * gain_a
-            P_rr += gain_r * gain_r * pr[k]
-            P_ra += gain_r * gain_a * pr[k]
-            P_aa += gain_a * gain_a * pr[k]
+            gain_a = -wk[W_WR, k] * (wk[W_US, k] - c) / A
+            gain_r = wk[W_WR, k] / W + c * gain_a
+            P_rr += gain_r * gain_r * wk[W_PR, k]
+            P_ra += gain_r * gain_a * wk[W_PR, k]
+            P_aa += gain_a * gain_a * wk[W_PR, k]
     P_rs = 0.0
     P_as = 0.0
     P_ss = 0.0
     for k in range(L):
-        p = mem[k]
-        u_r = ur[k]
-        u_s = us[k]
-        gain_a = -wr[k] * (u_s - c) / A
-        gain_r = wr[k] / W + c * gain_a
+        p = iw[R_MEM, k]
+        u_r = wk[W_UR, k]
+        u_s = wk[W_US, k]
+        gain_a = -wk[W_WR, k] * (u_s - c) / A
+        gain_r = wk[W_WR, k] / W + c * gain_a
         d2 = u_r * u_r + u_s * u_s
         cos_t = u_r / np.sqrt(d2)
         sin_t = u_s / np.sqrt(d2)
@@ -377,9 +427,9 @@ def _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, s_fit, ip, cov, end_var
             q_tt = var_eff * sin_t * sin_t
             q_nt = var_eff * sin_t * cos_t
         else:
-            q_tt = ps[k]
-            q_nt = prs[k]
-        v = ws[k] / WS
+            q_tt = wk[W_PS, k]
+            q_nt = wk[W_PRS, k]
+        v = wk[W_WS, k] / WS
         a_s = 0.0
         b_s = v
         if weighted:
@@ -387,32 +437,34 @@ def _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, s_fit, ip, cov, end_var
             d = np.sqrt(d2)
             dps_dd = pt[DV, p] * sin_t * sin_t + 2.0 * var_perp / d * cos_t * cos_t
             dps_dphi = 2.0 * (var_range - var_perp) * sin_t * cos_t
-            k_d = -kappa * dps_dd * ws[k] * ws[k]
-            k_phi = -kappa * dps_dphi * ws[k] * ws[k] / d
+            k_d = -kappa * dps_dd * wk[W_WS, k] * wk[W_WS, k]
+            k_phi = -kappa * dps_dphi * wk[W_WS, k] * wk[W_WS, k] / d
             a_s = k_d * cos_t - k_phi * sin_t
             b_s = v + k_d * sin_t + k_phi * cos_t
         a_s = a_s + c_s * gain_a
-        P_rs += gain_r * (a_s * pr[k] + b_s * q_nt)
-        P_as += gain_a * (a_s * pr[k] + b_s * q_nt)
-        P_ss += a_s * a_s * pr[k] + b_s * b_s * q_tt + 2.0 * a_s * b_s * q_nt
-        end_var[k] = q_tt + u_r * u_r * P_aa - 2.0 * u_r * gain_a * q_nt
-    cov[0, 0] = P_rr
-    cov[0, 1] = P_ra
-    cov[1, 0] = P_ra
-    cov[1, 1] = P_aa
-    cov[0, 2] = P_rs
-    cov[2, 0] = P_rs
-    cov[1, 2] = P_as
-    cov[2, 1] = P_as
-    cov[2, 2] = P_ss
+        P_rs += gain_r * (a_s * wk[W_PR, k] + b_s * q_nt)
+        P_as += gain_a * (a_s * wk[W_PR, k] + b_s * q_nt)
+        P_ss += a_s * a_s * wk[W_PR, k] + b_s * b_s * q_tt + 2.0 * a_s * b_s * q_nt
+        wk[W_TMP, k] = q_tt + u_r * u_r * P_aa - 2.0 * u_r * gain_a * q_nt
+    lcov[li, 0, 0] = P_rr
+    lcov[li, 0, 1] = P_ra
+    lcov[li, 1, 0] = P_ra
+    lcov[li, 1, 1] = P_aa
+    lcov[li, 0, 2] = P_rs
+    lcov[li, 2, 0] = P_rs
+    lcov[li, 1, 2] = P_as
+    lcov[li, 2, 1] = P_as
+    lcov[li, 2, 2] = P_ss
 
 
 # --------------------------------------------------------------------------------------------
 # fit, rejection and segments of one candidate line (linefit.refine.refine)
 # --------------------------------------------------------------------------------------------
 @jit
-def _refine_line(pt, beam, cand, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, li, ar, ai, top):
-    """Refine the candidate ``cand[:L0]`` into line slot ``li``; its members go to ``top``.
+def _refine_line(
+    pt, beam, gm, g0, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, li, ar, ai, ao, top
+):
+    """Refine the candidate ``gm[g0 : g0 + L0]`` into line slot ``li``; its members go to ``top``.
 
     Returns ``(status, n_refits, seg_changed, new_top)``: status 1 when the line survived.
     ``n_refits`` is the number of reject-and-refit rounds it went through and ``seg_changed``
@@ -420,28 +472,13 @@ def _refine_line(pt, beam, cand, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, 
     from these).
     """
     min_pts = max(2, ip[I_MINPTS])
-    mem = iw[0]
-    order = iw[1]
-    seg = iw[2]
-    cx, cy, ur, us, pr, ps, prs, wr, ws, tmp = (
-        wk[0],
-        wk[1],
-        wk[2],
-        wk[3],
-        wk[4],
-        wk[5],
-        wk[6],
-        wk[7],
-        wk[8],
-        wk[9],
-    )
     L = L0
     for k in range(L):
-        mem[k] = cand[k]
+        iw[R_MEM, k] = gm[g0 + k]
     n_refits = 0
     if min_pts > L:
         return 0, n_refits, False, top
-    if not _fit(pt, mem, L, alpha0, ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
+    if not _fit(pt, iw, L, alpha0, ip, fp, wk, res):
         return 0, n_refits, False, top
     chi2_max = fp[F_CHI2]
     for _ in range(ip[I_MAXREF] + 1):
@@ -449,28 +486,28 @@ def _refine_line(pt, beam, cand, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, 
         W = 0.0
         cw = 0.0
         for k in range(L):
-            W += wr[k]
-            cw += wr[k] * us[k]
+            W += wk[W_WR, k]
+            cw += wk[W_WR, k] * wk[W_US, k]
         c = cw / W
         A = 0.0
         for k in range(L):
-            du = us[k] - c
-            A += wr[k] * du * du
+            du = wk[W_US, k] - c
+            A += wk[W_WR, k] * du * du
         worst = 0.0
         for k in range(L):
-            du = us[k] - c
-            h = wr[k] * (1.0 / W + du * du / A)
+            du = wk[W_US, k] - c
+            h = wk[W_WR, k] * (1.0 / W + du * du / A)
             h = min(h, 0.95)
-            e = ur[k] - res[0]
-            chi2 = e * e / (pr[k] * (1.0 - h))
-            tmp[k] = chi2
+            e = wk[W_UR, k] - res[0]
+            chi2 = e * e / (wk[W_PR, k] * (1.0 - h))
+            wk[W_TMP, k] = chi2
             if chi2 > worst or np.isnan(chi2):
                 worst = chi2
         n_keep = 0
         for k in range(L):
-            reject = tmp[k] > chi2_max and tmp[k] >= worst / 9.0
+            reject = wk[W_TMP, k] > chi2_max and wk[W_TMP, k] >= worst / 9.0
             if not reject:
-                mem[n_keep] = mem[k]
+                iw[R_MEM, n_keep] = iw[R_MEM, k]
                 n_keep += 1
         if n_keep == L:
             break
@@ -478,50 +515,53 @@ def _refine_line(pt, beam, cand, L0, alpha0, ip, fp, wk, iw, res, lr, lcov, lm, 
         n_refits += 1
         if min_pts > L:
             return 0, n_refits, False, top
-        if not _fit(pt, mem, L, res[1], ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
+        if not _fit(pt, iw, L, res[1], ip, fp, wk, res):
             return 0, n_refits, False, top
     # segments; pieces with too few points leave the line
-    n_seg = _segment_sizes(pt, beam, mem, L, us, ip, fp, order, seg)
+    n_seg = _segment_sizes(pt, beam, L, ip, fp, iw, wk)
     seg_changed = False
     if n_seg:
-        counts = iw[3]
         for g in range(n_seg):
-            counts[g] = 0
+            iw[R_COUNT, g] = 0
         for k in range(L):
-            counts[seg[k]] += 1
-        drop = iw[4]
+            iw[R_COUNT, iw[R_SEG, k]] += 1
         for k in range(L):
-            drop[k] = 0
+            iw[R_DROP, k] = 0
         any_small = False
         for k in range(L):
-            if counts[seg[k]] < ip[I_MINSEG]:
-                drop[order[k]] = 1
+            if iw[R_COUNT, iw[R_SEG, k]] < ip[I_MINSEG]:
+                iw[R_DROP, iw[R_ORDER, k]] = 1
                 any_small = True
         if any_small:
             seg_changed = True
             n_keep = 0
             for k in range(L):
-                if drop[k] == 0:
-                    mem[n_keep] = mem[k]
+                if iw[R_DROP, k] == 0:
+                    iw[R_MEM, n_keep] = iw[R_MEM, k]
                     n_keep += 1
             L = n_keep
             if min_pts > L:
                 return 0, n_refits, True, top
-            if not _fit(pt, mem, L, res[1], ip, fp, cx, cy, ur, us, pr, ps, prs, wr, ws, res):
+            if not _fit(pt, iw, L, res[1], ip, fp, wk, res):
                 return 0, n_refits, True, top
-    # store the line: slot li, its members at arena[top : top + L]
+            n_seg = _segment_sizes(pt, beam, L, ip, fp, iw, wk)
+    # store the line: slot li, its members at arena[top : top + L] with their order by u_S
+    # and segment numbers
     for k in range(L):
-        ai[top + k] = mem[k]
-        ar[A_UR, top + k] = ur[k]
-        ar[A_US, top + k] = us[k]
+        ai[top + k] = iw[R_MEM, k]
+        ar[A_UR, top + k] = wk[W_UR, k]
+        ar[A_US, top + k] = wk[W_US, k]
+        ao[0, top + k] = iw[R_ORDER, k]
+        ao[1, top + k] = iw[R_SEG, k]
     lr[li, 0] = res[0]
     lr[li, 1] = res[1]
     lr[li, 2] = res[2]
     lm[li, 0] = top
     lm[li, 1] = L
-    _covariance(pt, mem, L, ur, us, pr, ps, prs, wr, ws, res[2], ip, lcov[li], tmp)
+    lm[li, 2] = n_seg
+    _covariance(pt, iw, L, wk, res[2], ip, lcov, li)
     for k in range(L):
-        ar[A_EV, top + k] = tmp[k]
+        ar[A_EV, top + k] = wk[W_TMP, k]
     return 1, n_refits, seg_changed, top + L
 
 
@@ -692,53 +732,131 @@ def _split_merge(pt, beam, sub, n, ip, fp, starts, ends, alphas, stk, flag):
 # --------------------------------------------------------------------------------------------
 # Hough grouping of one scan (linefit.hough.hough_groups)
 # --------------------------------------------------------------------------------------------
-@jit
-def _cell_key(cells, c, n_rho):
-    """Heap key of cell ``c``: more votes first, then the first cell in (angle, distance) order."""
-    return np.int64(cells[c, 2]) * 16777216 - (np.int64(cells[c, 0]) * n_rho + cells[c, 1])
+#: Largest dense Hough accumulator (cells, int32) of a scan: beyond it :func:`extract_kernel`
+#: counts that scan's votes by sorting (same result); read at each call (tests lower it).
+DENSE_CELLS = 1 << 22
 
 
 @jit
-def _heap_push(heap, hcell, n):
-    """Sift the entry at ``n`` up into the max-heap ``heap[:n]``; the new size."""
-    k = n
-    key = heap[k]
-    c = hcell[k]
-    while k > 0:
-        parent = (k - 1) >> 1
-        if heap[parent] >= key:
-            break
-        heap[k] = heap[parent]
-        hcell[k] = hcell[parent]
-        k = parent
-    heap[k] = key
-    hcell[k] = c
-    return n + 1
+def _hough_rows(x32, y32, n, c32, s32, half, n_rho, row_off, row_key):
+    """Distance-bin window of every angle row; returns the number of dense cells needed.
+
+    Row ``j`` of the dense accumulator holds the bins ``[lo_j, hi_j]`` (a bound from the
+    points' bounding box, widened beyond any float32 rounding); a vote for bin ``b`` of row
+    ``j`` goes to cell ``b + row_off[j]``, whose argmax key ``j · n_ℛ + (b + half)`` is the cell
+    number ``+ row_key[j]``.
+    """
+    xmin = np.inf
+    xmax = -np.inf
+    ymin = np.inf
+    ymax = -np.inf
+    for p in range(n):
+        xv = np.float64(x32[p])
+        yv = np.float64(y32[p])
+        xmin = min(xmin, xv)
+        xmax = max(xmax, xv)
+        ymin = min(ymin, yv)
+        ymax = max(ymax, yv)
+    total = 0
+    for j in range(c32.shape[0]):
+        c = np.float64(c32[j])
+        s = np.float64(s32[j])
+        a = c * xmin
+        b = c * xmax
+        lo = min(a, b)
+        hi = max(a, b)
+        a = s * ymin
+        b = s * ymax
+        lo += min(a, b)
+        hi += max(a, b)
+        margin = 2.0 + (abs(lo) + abs(hi)) * 1e-6
+        b_lo = int(np.floor(lo - margin))
+        b_hi = int(np.floor(hi + margin))
+        row_off[j] = total - b_lo
+        row_key[j] = j * n_rho + half - row_off[j]
+        total += b_hi - b_lo + 1
+    return total
 
 
 @jit
-def _heap_pop(heap, hcell, n):
-    """Remove the top of the max-heap ``heap[:n]``; the new size."""
-    n -= 1
-    if n == 0:
-        return 0
-    key = heap[n]
-    c = hcell[n]
-    k = 0
-    while True:
-        child = 2 * k + 1
-        if child >= n:
-            break
-        if child + 1 < n and heap[child + 1] > heap[child]:
-            child += 1
-        if heap[child] <= key:
-            break
-        heap[k] = heap[child]
-        hcell[k] = hcell[child]
-        k = child
-    heap[k] = key
-    hcell[k] = c
-    return n
+def _hough_votes_dense(x32, y32, n, c32, s32, row_off, n_acc, acc, vote):
+    """Clear ``acc[:n_acc]``; ``vote[p, j]`` receives the cell of point ``p`` in angle row ``j``."""
+    n_beta = c32.shape[0]
+    for f in range(n_acc):
+        acc[f] = 0
+    for p in range(n):
+        xp = x32[p]
+        yp = y32[p]
+        for j in range(n_beta):
+            # float32 as linefit.hough.hough_accumulator: products rounded, then their sum
+            v = c32[j] * xp
+            v = v + s32[j] * yp
+            vote[p, j] = np.int32(np.floor(v)) + row_off[j]
+
+
+@jit
+def _hough_count(vote, n, n_beta, min_votes, row_key, acc, cidx, ckey):
+    """Count the votes of ``vote[:n]`` into ``acc``; list the cells reaching ``min_votes``."""
+    n_cells = 0
+    for p in range(n):
+        for j in range(n_beta):
+            f = vote[p, j]
+            v = acc[f] + 1
+            acc[f] = v
+            if v == min_votes:
+                cidx[n_cells] = f
+                ckey[n_cells] = f + row_key[j]
+                n_cells += 1
+    return n_cells
+
+
+@jit
+def _hough_votes_sorted(x32, y32, n, c32, s32, half, n_rho, min_votes, vote):
+    """Sparse form of the votes for an accumulator too large to hold densely.
+
+    The cells (keys ``j · n_ℛ + i``) are counted by sorting; ``vote[p, j]`` receives the index
+    of its cell in the returned counts when that cell has ``min_votes`` votes, else the index
+    of a spare slot that is never a cell.  Returns ``(counts, cidx, ckey, n_cells)``.
+    """
+    n_beta = c32.shape[0]
+    keys = np.empty(n * n_beta, dtype=np.int64)
+    for p in range(n):
+        xp = x32[p]
+        yp = y32[p]
+        for j in range(n_beta):
+            v = c32[j] * xp
+            v = v + s32[j] * yp
+            keys[p * n_beta + j] = j * np.int64(n_rho) + (np.int64(np.floor(v)) + half)
+    order = np.argsort(keys, kind="mergesort")
+    slot = np.empty(n * n_beta, dtype=np.int64)
+    counts = np.zeros(n * n_beta // max(1, min_votes) + 2, dtype=np.int32)
+    cidx = np.empty(counts.shape[0], dtype=np.int64)
+    ckey = np.empty(counts.shape[0], dtype=np.int64)
+    n_cells = 0
+    a = 0
+    m = n * n_beta
+    while a < m:
+        b = a
+        while b + 1 < m and keys[order[b + 1]] == keys[order[a]]:
+            b += 1
+        size = b - a + 1
+        if size >= min_votes:
+            counts[n_cells] = size
+            cidx[n_cells] = n_cells
+            ckey[n_cells] = keys[order[a]]
+            for t in range(a, b + 1):
+                slot[order[t]] = n_cells
+            n_cells += 1
+        else:
+            for t in range(a, b + 1):
+                slot[order[t]] = -1
+        a = b + 1
+    spare = n_cells
+    for p in range(n):
+        for j in range(n_beta):
+            s = slot[p * n_beta + j]
+            vote[p, j] = s if s >= 0 else spare
+    return counts, cidx, ckey, n_cells
 
 
 @jit
@@ -754,12 +872,11 @@ def _hough(
     x32,
     y32,
     vote,
-    bins,
-    cnt_row,
-    id_row,
-    cells,
-    heap,
-    hcell,
+    row_off,
+    row_key,
+    acc,
+    cidx,
+    ckey,
     alive,
     alist,
     grp,
@@ -770,10 +887,16 @@ def _hough(
     """Hough candidates of the ``n`` points of a scan.
 
     Group ``g`` is ``gm[gs[g] : gs[g + 1]]`` (point indices, ascending) with start angle
-    ``ga[g]``; returns the number of groups.  Only cells that ever hold ``hough_min_votes``
-    votes are kept (votes only decrease), as a compact list ``cells`` of (angle bin, distance
-    bin, votes); the peak is the first cell in (angle, distance) order with the most votes,
-    as ``argmax`` over the dense accumulator.
+    ``ga[g]``; returns the number of groups.
+
+    The votes are counted in a dense accumulator holding, for each angle row, the window of
+    distance bins the scan's points can reach (or, for an accumulator too large, by sorting);
+    ``vote[p, j]`` is the accumulator cell of point ``p`` in row ``j``, so removing a group
+    subtracts its votes directly.  Only the cells that ever hold ``hough_min_votes`` votes can
+    be peaks (votes only decrease): they are listed, and each peak is the one with the most
+    votes, then the first in (angle, distance) order, i.e. ``argmax`` over the dense
+    ``(β, ℛ)`` accumulator of :mod:`linefit.hough`.  The list drops the cells that fall below
+    ``hough_min_votes``.
     """
     n_beta = cos_b.shape[0]
     step = fp[F_RSTEP]
@@ -785,48 +908,21 @@ def _hough(
         if d2 > d2max:
             d2max = d2
     half = int(np.ceil(np.sqrt(d2max) / step)) + 1
-    n_cells = 0
+    n_rho = 2 * half
     for p in range(n):
         x32[p] = np.float32(pt[X, p])
         y32[p] = np.float32(pt[Y, p])
-    for j in range(n_beta):
-        cj = c32[j]
-        sj = s32[j]
-        for p in range(n):
-            # float32 as linefit.hough.hough_accumulator: products rounded, then their sum
-            v = cj * x32[p]
-            v = v + sj * y32[p]
-            t = int(v)  # floor, without a call
-            if v < t:
-                t -= 1
-            bins[p] = t + half
-        for p in range(n):
-            cnt_row[bins[p]] += 1
-        for p in range(n):
-            i = bins[p]
-            if cnt_row[i] >= min_votes:
-                if id_row[i] < 0:
-                    id_row[i] = n_cells
-                    cells[n_cells, 0] = j
-                    cells[n_cells, 1] = i
-                    cells[n_cells, 2] = cnt_row[i]
-                    n_cells += 1
-                vote[j, p] = id_row[i]
-            else:
-                vote[j, p] = -1
-        for p in range(n):  # reset the row buffers (only the bins touched)
-            cnt_row[bins[p]] = 0
-            id_row[bins[p]] = -1
-    # lazy max-heap of the cells: key = votes · 2^24 − (j · n_ℛ + i), i.e. most votes first,
-    # then the first cell in (angle, distance) order, as argmax over the dense accumulator.
-    # Votes only decrease, so a popped key that is no longer current is pushed again with
-    # its current votes; a current one is the argmax.
-    n_rho = 2 * half
-    n_heap = 0
-    for c in range(n_cells):
-        heap[n_heap] = _cell_key(cells, c, n_rho)
-        hcell[n_heap] = c
-        n_heap = _heap_push(heap, hcell, n_heap)
+    n_acc = _hough_rows(x32, y32, n, c32, s32, half, n_rho, row_off, row_key)
+    if n_acc <= acc.shape[0]:
+        cnt = acc
+        _hough_votes_dense(x32, y32, n, c32, s32, row_off, n_acc, acc, vote)
+        n_cells = _hough_count(vote, n, n_beta, min_votes, row_key, acc, cidx, ckey)
+        cells = cidx
+        keys = ckey
+    else:
+        cnt, cells, keys, n_cells = _hough_votes_sorted(
+            x32, y32, n, c32, s32, half, n_rho, min_votes, vote
+        )
     n_alive = n
     for p in range(n):
         alive[p] = True
@@ -835,23 +931,29 @@ def _hough(
     n_groups = 0
     gs[0] = 0
     for _ in range(ip[I_MAXPEAKS]):
+        # the peak: most votes, then the smallest key; cells below min_votes leave the list
         best = -1
-        while n_heap:
-            key = heap[0]
-            c = hcell[0]
-            n_heap = _heap_pop(heap, hcell, n_heap)
-            if cells[c, 2] < min_votes:
-                continue  # can never be a peak again
-            if key == _cell_key(cells, c, n_rho):
-                best = c
-                break
-            heap[n_heap] = _cell_key(cells, c, n_rho)
-            hcell[n_heap] = c
-            n_heap = _heap_push(heap, hcell, n_heap)
+        best_v = 0
+        best_k = 0
+        w = 0
+        for c in range(n_cells):
+            f = cells[c]
+            v = cnt[f]
+            if v < min_votes:
+                continue
+            k = keys[c]
+            cells[w] = f
+            keys[w] = k
+            if v > best_v or (v == best_v and k < best_k):
+                best = f
+                best_v = v
+                best_k = k
+            w += 1
+        n_cells = w
         if best < 0:
             break
-        j = cells[best, 0]
-        rho_c = (cells[best, 1] - half + 0.5) * step
+        j = best_k // n_rho
+        rho_c = (best_k - j * n_rho - half + 0.5) * step
         for q in range(n_alive):
             p = alist[q]
             rho = pt[X, p] * cos_b[j] + pt[Y, p] * sin_b[j]
@@ -875,12 +977,12 @@ def _hough(
                     m3 += x * x
                     m4 += x * y
                     m5 += y * y
-            cnt = max(m0, 1.0)
-            mx = m1 / cnt
-            my = m2 / cnt
-            cxx = m3 - cnt * mx * mx
-            cxy = m4 - cnt * mx * my
-            cyy = m5 - cnt * my * my
+            cnt_g = max(m0, 1.0)
+            mx = m1 / cnt_g
+            my = m2 / cnt_g
+            cxx = m3 - cnt_g * mx * mx
+            cxy = m4 - cnt_g * mx * my
+            cyy = m5 - cnt_g * my * my
             alpha = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy) + 0.5 * np.pi
             ca = np.cos(alpha)
             sa = np.sin(alpha)
@@ -894,7 +996,7 @@ def _hough(
             if grp[alist[q]]:
                 count += 1
         if count < min_votes:
-            cells[best, 2] = SUPPRESSED
+            cnt[best] = SUPPRESSED
             continue
         # record (points ascending: alist stays sorted) and remove the group's votes
         o = gs[n_groups]
@@ -906,17 +1008,11 @@ def _hough(
                 o += 1
                 alive[p] = False
                 for jj in range(n_beta):
-                    c = vote[jj, p]
-                    if c >= 0:
-                        cells[c, 2] -= 1
+                    cnt[vote[p, jj]] -= 1
             else:
                 alist[w] = p
                 w += 1
         n_alive = w
-        if cells[best, 2] >= min_votes:
-            heap[n_heap] = _cell_key(cells, best, n_rho)
-            hcell[n_heap] = best
-            n_heap = _heap_push(heap, hcell, n_heap)
         ga[n_groups] = alpha
         n_groups += 1
         gs[n_groups] = o
@@ -936,7 +1032,7 @@ def _refine_set(pt, beam, gm, gs, ga, n_g, ip, fp, ws, st, ordr, n_ord):
     segment step), which decides the start angle of a collinear merge.  Returns the new
     length of ``ordr``.
     """
-    wk, iw, res, lr, lcov, lm, ar, ai, nref, segch, okf, tmpo = ws
+    wk, iw, res, lr, lcov, lm, ar, ai, nref, segch, okf, tmpo, ao = ws
     first = st[0]
     for g in range(n_g):
         li = st[0]
@@ -944,7 +1040,7 @@ def _refine_set(pt, beam, gm, gs, ga, n_g, ip, fp, ws, st, ordr, n_ord):
         a = gs[g]
         b = gs[g + 1]
         status, nr, sc, top = _refine_line(
-            pt, beam, gm[a:b], b - a, ga[g], ip, fp, wk, iw, res, lr, lcov, lm, li, ar, ai, st[1]
+            pt, beam, gm, a, b - a, ga[g], ip, fp, wk, iw, res, lr, lcov, lm, li, ar, ai, ao, st[1]
         )
         st[1] = top
         okf[li] = status
@@ -1078,8 +1174,8 @@ def _merge_collinear(pt, beam, n, ip, fp, ws, st, ordr, n_ord, parent, mark, gm,
 @jit
 def _scan_lines(pt, beam, n, ip, fp, ws, hs, ss, st, ordr):
     """Steps 3-6 of the pipeline for one scan; returns the number of lines in ``ordr``."""
-    cos_b, sin_b, c32, s32, x32, y32, vote, bins, cnt_row, id_row, cells, heap, hcell = hs[:13]
-    alive, alist, grp = hs[13:]
+    cos_b, sin_b, c32, s32, x32, y32, vote, row_off, row_key, acc, cidx, ckey = hs[:12]
+    alive, alist, grp = hs[12:]
     gm, gs, ga, sub, starts, ends, alphas, stk, flag, parent, mark, tmp_ord = ss
     st[0] = 0
     st[1] = 0
@@ -1097,12 +1193,11 @@ def _scan_lines(pt, beam, n, ip, fp, ws, hs, ss, st, ordr):
             x32,
             y32,
             vote,
-            bins,
-            cnt_row,
-            id_row,
-            cells,
-            heap,
-            hcell,
+            row_off,
+            row_key,
+            acc,
+            cidx,
+            ckey,
             alive,
             alist,
             grp,
@@ -1175,7 +1270,7 @@ def _grow(a, need):
 
 
 @jit
-def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
+def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32, dense_cells):
     """Lines of every scan of a batch (steps 3-7 of :func:`linefit.extract_lines`).
 
     Parameters
@@ -1194,6 +1289,8 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
         ``cos β_j``, ``sin β_j`` of the Hough angle bins.
     c32, s32 : ndarray of float32
         ``cos β_j / Δℛ`` and ``sin β_j / Δℛ`` rounded to float32.
+    dense_cells : int
+        Largest dense Hough accumulator (:data:`DENSE_CELLS`).
 
     Returns
     -------
@@ -1215,31 +1312,36 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
     max_peaks = ip[I_MAXPEAKS]
     capl = max_peaks + 2 * nmax + 16
     capm = 4 * nmax + 64
-    # per-line scratch, line slots and the member arena of one scan
+    # per-line scratch, line slots and the member arena of one scan: a line slot li has its
+    # fit in lr[li], its covariance in lcov[li], and in lm[li] the start of its members in the
+    # arena, their number and the number of its segments; ao holds, per stored member, the
+    # member order by u_S and the segment numbers (as iw[R_ORDER], iw[R_SEG])
     wk = np.empty((10, nmax))
     iw = np.empty((5, nmax), dtype=np.int64)
     res = np.empty(3)
     lr = np.empty((capl, 3))
     lcov = np.empty((capl, 3, 3))
-    lm = np.empty((capl, 2), dtype=np.int64)
+    lm = np.empty((capl, 3), dtype=np.int64)
     ar = np.empty((3, capm))
     ai = np.empty(capm, dtype=np.int64)
     nref = np.empty(capl, dtype=np.int64)
     segch = np.empty(capl, dtype=np.int64)
     okf = np.empty(capl, dtype=np.int64)
     tmpo = np.empty(capl, dtype=np.int64)
-    ws = (wk, iw, res, lr, lcov, lm, ar, ai, nref, segch, okf, tmpo)
-    # Hough scratch
-    vote = np.empty((n_beta, nmax), dtype=np.int32)
-    bins = np.empty(nmax, dtype=np.int32)
-    cnt_row = np.zeros(n_rho, dtype=np.int64)
-    id_row = np.full(n_rho, -1, dtype=np.int64)
-    # a cell kept has at least hough_min_votes points of its angle row: at most n / min_votes
-    # per row (small buffers: no large allocation per call)
+    ao = np.empty((2, capm), dtype=np.int64)
+    ws = (wk, iw, res, lr, lcov, lm, ar, ai, nref, segch, okf, tmpo, ao)
+    # Hough scratch: the dense accumulator holds every row's window of distance bins (at most
+    # 2·sqrt(2)·ℛ_max/Δℛ + 10 per row, see _hough_rows); beyond dense_cells a scan's votes are
+    # counted by sorting instead
+    vote = np.empty((nmax, n_beta), dtype=np.int32)
+    row_off = np.empty(n_beta, dtype=np.int64)
+    row_key = np.empty(n_beta, dtype=np.int64)
+    acc = np.empty(max(0, min(n_beta * (3 * (n_rho // 2) + 16), dense_cells)), dtype=np.int32)
+    # a listed cell has at least hough_min_votes points of its angle row: at most n / min_votes
+    # per row
     cap_cells = n_beta * (nmax // max(1, ip[I_MINVOTES]) + 1) + 1
-    cells = np.empty((cap_cells, 3), dtype=np.int32)
-    heap = np.empty(cap_cells, dtype=np.int64)
-    hcell = np.empty(cap_cells, dtype=np.int32)
+    cidx = np.empty(cap_cells, dtype=np.int64)
+    ckey = np.empty(cap_cells, dtype=np.int64)
     alive = np.empty(nmax, dtype=np.bool_)
     alist = np.empty(nmax, dtype=np.int64)
     grp = np.empty(nmax, dtype=np.bool_)
@@ -1253,12 +1355,11 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
         x32,
         y32,
         vote,
-        bins,
-        cnt_row,
-        id_row,
-        cells,
-        heap,
-        hcell,
+        row_off,
+        row_key,
+        acc,
+        cidx,
+        ckey,
         alive,
         alist,
         grp,
@@ -1292,8 +1393,6 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
     # per-line output scratch
     fb = np.empty(capl, dtype=np.int64)
     keep = np.empty(capl, dtype=np.int64)
-    order = iw[1]
-    seg = iw[2]
     for k in range(n_scans):
         a = scan_start[k]
         b = scan_start[k + 1]
@@ -1314,16 +1413,14 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
                 for v in range(3):
                     if not np.isfinite(lcov[li, u, v]):
                         finite = False
-            n_seg = _segment_sizes(
-                pts, bm, ai[t : t + L], L, ar[A_US, t : t + L], ip, fp, order, seg
-            )
+            n_seg = lm[li, 2]
             length = 0.0
             q0 = 0
             for g in range(n_seg):
                 q1 = q0
-                while q1 + 1 < L and seg[q1 + 1] == g:
+                while q1 + 1 < L and ao[1, t + q1 + 1] == g:
                     q1 += 1
-                length += ar[A_US, t + order[q1]] - ar[A_US, t + order[q0]]
+                length += ar[A_US, t + ao[0, t + q1]] - ar[A_US, t + ao[0, t + q0]]
                 q0 = q1 + 1
             if ip[I_MINPTS] <= L and length >= fp[F_MIN_LEN] and finite:
                 first_beam = bm[ai[t]]
@@ -1353,19 +1450,17 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
                     sgn = -1.0 if flip and (u == 2 or u == 0) != (v == 2 or v == 0) else 1.0
                     o_cov[n_out, u, v] = lcov[li, u, v] * sgn
             # segments: ends of each run of the members sorted by u_S
-            n_seg = _segment_sizes(
-                pts, bm, ai[t : t + L], L, ar[A_US, t : t + L], ip, fp, order, seg
-            )
+            n_seg = lm[li, 2]
             o_seg = _grow(o_seg, n_oseg + n_seg)
             o_lin[n_out, 0] = n_oseg
             o_lin[n_out, 1] = n_seg
             q0 = 0
             for g in range(n_seg):
                 q1 = q0
-                while q1 + 1 < L and seg[q1 + 1] == g:
+                while q1 + 1 < L and ao[1, t + q1 + 1] == g:
                     q1 += 1
-                m0 = t + order[q0]
-                m1 = t + order[q1]
+                m0 = t + ao[0, t + q0]
+                m1 = t + ao[0, t + q1]
                 row = n_oseg + (n_seg - 1 - g if flip else g)
                 if flip:
                     o_seg[row, 0] = -ar[A_US, m1]
@@ -1379,11 +1474,15 @@ def extract_kernel(pt, beam, scan_start, ip, fp, cos_b, sin_b, c32, s32):
                     o_seg[row, 3] = ar[A_EV, m1]
                 q0 = q1 + 1
             n_oseg += n_seg
-            # beam indices, sorted
+            # beam indices, sorted (the members are in point order already, as a rule)
             o_idx = _grow(o_idx, n_oidx + L)
+            ascending = True
             for u in range(L):
                 o_idx[n_oidx + u] = bm[ai[t + u]]
-            o_idx[n_oidx : n_oidx + L] = np.sort(o_idx[n_oidx : n_oidx + L])
+                if u > 0 and o_idx[n_oidx + u] < o_idx[n_oidx + u - 1]:
+                    ascending = False
+            if not ascending:
+                o_idx[n_oidx : n_oidx + L] = np.sort(o_idx[n_oidx : n_oidx + L])
             o_lin[n_out, 2] = n_oidx
             o_lin[n_out, 3] = L
             n_oidx += L

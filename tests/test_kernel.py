@@ -166,3 +166,24 @@ def test_compiled_matches_numpy_on_intel() -> None:
                 ranges[k : k + 64], bearings, cfg, max_range_m=max_range[k : k + 64]
             )
         assert assert_same_lines(got, want) > 500
+
+
+def test_hough_votes_counted_by_sorting_give_the_same_lines(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A scan whose dense Hough accumulator would be too large counts its votes by sorting."""
+    from linefit import kernel
+
+    ranges, bearings = room_scans(12, 181, seed=7)
+    for cfg in (CONFIGS["default"], CONFIGS["pure hough"]):
+        dense = extract_lines_batch(ranges, bearings, cfg, max_range_m=40.0)
+        monkeypatch.setattr(kernel, "DENSE_CELLS", 0)
+        sparse = extract_lines_batch(ranges, bearings, cfg, max_range_m=40.0)
+        monkeypatch.undo()
+        assert sum(map(len, dense)) > 12
+        for a, b in zip(dense, sparse, strict=True):
+            assert len(a) == len(b)
+            for x, y in zip(a, b, strict=True):
+                assert (x.r, x.alpha, x.s) == (y.r, y.alpha, y.s)
+                assert np.array_equal(x.indices, y.indices)
+                assert np.array_equal(x.cov, y.cov)
