@@ -41,8 +41,8 @@ class Observation:
     endpoint_var: FloatArray
     pieces: FloatArray
     pieces_var: FloatArray
-    R_fit: FloatArray | None = None
-    """The fit's covariance without model error (default: ``R``)."""
+    R_fit: FloatArray
+    """The fit's covariance without model error (``R`` is this plus the model error)."""
 
 
 class TentativePool:

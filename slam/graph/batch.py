@@ -213,15 +213,7 @@ class BatchSolver:
             )
             lm = lm_all[used]
             fp = graph.factor_pose[used]
-            lin = linearize_line_factors(
-                poses[fp],
-                landmarks[lm],
-                graph.anchors[lm],
-                graph.factor_z[used],
-                graph.factor_sqrt_info[used],
-                self.config.robust_kernel,
-                self.config.robust_k,
-            )
+            lin = self._linearize_lines(graph, poses, landmarks, used)
             free = fp >= free_from
             o = np.flatnonzero(free)
             o = o[pairing_order(fp[o], lm[o])]  # most factors two to a JacobianFactor
@@ -235,6 +227,21 @@ class BatchSolver:
             for f in factors:
                 gfg.push_back(f)
         return gfg, lin, used
+
+    def _linearize_lines(
+        self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray, factors: IntArray
+    ) -> LineLinearization:
+        """Linearise line factors ``factors`` at ``poses`` / ``landmarks``, kernel weights in."""
+        lm = graph.factor_landmark[factors]
+        return linearize_line_factors(
+            poses[graph.factor_pose[factors]],
+            landmarks[lm],
+            graph.anchors[lm],
+            graph.factor_z[factors],
+            graph.factor_sqrt_info[factors],
+            self.config.robust_kernel,
+            self.config.robust_k,
+        )
 
     def _region(
         self, graph: LineGraph, free_from: int, lms: IntArray, solved: NDArray[np.bool_] | None
@@ -327,16 +334,7 @@ class BatchSolver:
         lin: LineLinearization | None = None
         total = 0.0
         if used.size:
-            lm = graph.factor_landmark[used]
-            lin = linearize_line_factors(
-                poses[graph.factor_pose[used]],
-                landmarks[lm],
-                graph.anchors[lm],
-                graph.factor_z[used],
-                graph.factor_sqrt_info[used],
-                self.config.robust_kernel,
-                self.config.robust_k,
-            )
+            lin = self._linearize_lines(graph, poses, landmarks, used)
             rho = robust_cost(
                 self.config.robust_kernel,
                 np.linalg.norm(lin.whitened_residual, axis=-1),
@@ -376,15 +374,7 @@ class BatchSolver:
             lm = graph.factor_landmark[f]
             fp = graph.factor_pose[f]
             if lin is None:
-                lin = linearize_line_factors(
-                    poses[fp],
-                    landmarks[lm],
-                    graph.anchors[lm],
-                    graph.factor_z[f],
-                    graph.factor_sqrt_info[f],
-                    self.config.robust_kernel,
-                    self.config.robust_k,
-                )
+                lin = self._linearize_lines(graph, poses, landmarks, f)
             np.add.at(dp, fp, np.sum(lin.A_pose**2, axis=1))
             np.add.at(dl, lm, np.sum(lin.A_landmark**2, axis=1))
         if graph.n_odometry:

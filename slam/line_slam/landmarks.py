@@ -186,7 +186,7 @@ class LandmarkBook:
                         pieces_var=[o.pieces_var],
                     )
                 )
-                self._fit_cov.append((o.R if o.R_fit is None else o.R_fit)[None])
+                self._fit_cov.append(o.R_fit[None])
         tp.remove(tids)
         return np.concatenate(out) if out else np.zeros(0, dtype=np.intp)
 
