@@ -231,6 +231,14 @@ def test_lineslam_evaluate_reports_the_relations_nees(tmp_path, capsys):
     assert set(nees) >= {"mean", "bounds_95", "fraction_inside_95", "n", "median"}
     assert 0.0 < nees["mean"] < 20.0 and 0.0 <= nees["fraction_inside_95"] <= 1.0
     assert sum(g["n"] for g in nees["by_gap"]) == nees["n"]
+    # the simulator's relations are exact: the three-cornered hat's bound on their scatter is
+    # of the order of the run's own error (millimetres), not of a wrong frame (decimetres)
+    noise = metrics["relations_noise"]
+    assert noise["n"] >= 10 and noise["keyframes_only"]
+    assert metrics["odometry_log"] == str(sim / "log.clf")
+    assert np.all(np.abs(noise["rms_relations_xy_theta"][:2]) < 0.01)
+    assert abs(noise["rms_relations_xy_theta"][2]) < 0.005
+    assert "relations_nees_with_relations_noise" in metrics
     results = read_results(out)
     cov = RunCovariances.from_results(out, results.summary)
     t = results.trajectory.timestamps

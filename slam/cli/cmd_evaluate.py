@@ -4,16 +4,18 @@ from __future__ import annotations
 
 from functools import partial as bind
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from slam.cli._app import app
-from slam.errors import DatasetError, EvaluationError
+from slam.errors import DatasetError, EvaluationError, LineslamError
 from slam.evaluation.report import evaluate_results
+from slam.io.carmen import scan_trajectory
 from slam.io.catalog import resolve_log
 from slam.io.relations import read_relations
 from slam.io.results import read_results, write_metrics
+from slam.io.trajectory import Trajectory
 from slam.io.tum import read_tum
 
 __all__ = ["evaluate", "relations_path"]
@@ -31,6 +33,26 @@ def relations_path(value: str) -> Path:
     if resolved.relations is None:
         raise DatasetError(f"--relations {value!r}: the dataset has no relations file")
     return resolved.relations
+
+
+def _log_odometry(summary: dict[str, Any], frame: str) -> Trajectory | None:
+    """The odometry of the CARMEN log the run read (``summary.json``), in the run's frame.
+
+    It is the third measurement of the relations' own scatter
+    (:mod:`slam.evaluation.reference_noise`); None (with a warning) when the log is not a
+    readable CARMEN file.
+    """
+    log = summary.get("log")
+    source = summary.get("input") or {}
+    if not log or source.get("format", "carmen") != "carmen" or frame not in ("base", "laser"):
+        return None
+    try:
+        return scan_trajectory(
+            log, frame=frame, odometry_sign=source.get("odometry_sign", "logged")
+        )
+    except (OSError, LineslamError) as exc:
+        typer.echo(f"lineslam: warning: {log}: no relations' scatter: {exc}", err=True)
+        return None
 
 
 @app.command("evaluate")
@@ -88,6 +110,7 @@ def evaluate(
         rel = read_relations(rel_path)
         sources["relations_file"] = str(rel_path)
     covariances = None
+    odometry = keyframe_timestamps = None
     graph_file = results_dir / "graph.g2o"
     if rel is not None and relations_nees and graph_file.is_file():
         from slam.graph.relative import RunCovariances
@@ -99,6 +122,10 @@ def evaluate(
         else:
             covariances = bind(run_cov.relative_covariances, tolerance_s=tolerance)
             sources["graph_file"] = str(graph_file)
+            odometry = _log_odometry(results.summary, results.frame)
+            keyframe_timestamps = run_cov.graph_file.timestamps
+            if odometry is not None:
+                sources["odometry_log"] = str(results.summary["log"])
     gt = None
     if ground_truth is not None:
         gt = read_tum(ground_truth)
@@ -113,6 +140,8 @@ def evaluate(
         sources=sources,
         partial=partial,
         relative_covariances=covariances,
+        odometry=odometry,
+        keyframe_timestamps=keyframe_timestamps,
     )
     path = write_metrics(results_dir, report.to_dict())  # whole or not at all
     if not quiet:

@@ -120,12 +120,15 @@ def relations_nees(
     covariances: RelationCovariances,
     *,
     tolerance_s: float = 1e-5,
+    relations_cov: FloatArray | None = None,
 ) -> RelationsNees:
     """NEES of every relation whose two time stamps are poses of ``trajectory``.
 
     Relations with a stamp that is not in the trajectory are left out (the relations metric
     counts and judges them); a covariance that is not positive definite is an
-    :class:`~slam.errors.EvaluationError`.
+    :class:`~slam.errors.EvaluationError`.  ``relations_cov`` (3, 3), the relations' own
+    covariance (:mod:`slam.evaluation.reference_noise`), is added to every run covariance:
+    the NEES then tests the run's covariance against errors that include the relations'.
     """
     i1, ok1 = match_timestamps(relations.t1, trajectory.timestamps, tolerance_s)
     i2, ok2 = match_timestamps(relations.t2, trajectory.timestamps, tolerance_s)
@@ -137,6 +140,8 @@ def relations_nees(
     cov = np.asarray(
         covariances(trajectory.timestamps[i1[used]], trajectory.timestamps[i2[used]]), float
     )
+    if relations_cov is not None:
+        cov = cov + np.asarray(relations_cov, dtype=float)[None, :, :]
     values = nees_values(e, cov)
     trans = nees_values(e[:, :2], cov[:, :2, :2])
     rot = e[:, 2] ** 2 / cov[:, 2, 2]

@@ -13,9 +13,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from slam.errors import EvaluationError
 from slam.evaluation.ate import AteResult, ate
 from slam.evaluation.nees import NeesResult, pose_nees
+from slam.evaluation.reference_noise import RelationNoise, relation_noise
 from slam.evaluation.relations_metric import RelationsMetric, relations_metric, relations_within
 from slam.evaluation.relations_nees import RelationCovariances, RelationsNees, relations_nees
 from slam.evaluation.rpe import RpeResult, rpe
@@ -24,6 +28,8 @@ from slam.io.results import Results
 from slam.io.trajectory import Trajectory
 
 __all__ = ["EvaluationReport", "evaluate_results"]
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -39,6 +45,8 @@ class EvaluationReport:
     sources: dict[str, str] = field(default_factory=dict)
     relations_inside_run: tuple[int, int] | None = None
     relations_nees: RelationsNees | None = None
+    relations_noise: RelationNoise | None = None
+    relations_nees_with_relations_noise: RelationsNees | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The content of ``metrics.json``."""
@@ -56,6 +64,12 @@ class EvaluationReport:
             out["nees"] = self.nees.to_dict()
         if self.relations_nees is not None:
             out["relations_nees"] = self.relations_nees.to_dict()
+        if self.relations_noise is not None:
+            out["relations_noise"] = self.relations_noise.to_dict()
+        if self.relations_nees_with_relations_noise is not None:
+            out["relations_nees_with_relations_noise"] = (
+                self.relations_nees_with_relations_noise.to_dict()
+            )
         return out
 
     def format_table(self) -> str:
@@ -122,6 +136,43 @@ class EvaluationReport:
                     ),
                 ),
             ]
+        if self.relations_noise is not None:
+            rn = self.relations_noise.to_dict()
+
+            def cm_mrad(v: list[float]) -> str:
+                return f"{100 * v[0]:.2f} / {100 * v[1]:.2f} cm, {1000 * v[2]:.1f} mrad"
+
+            rows += [
+                (
+                    "relations' own RMS",
+                    f"{cm_mrad(rn['rms_relations_xy_theta'])} (x / y, heading; three-cornered "
+                    f"hat on {rn['n']} relations < {rn['max_gap_s']:g} s"
+                    f"{' between keyframes' if rn['keyframes_only'] else ''}; the odometry "
+                    f"coincides with {rn['odometry_coincides']})",
+                ),
+                (
+                    "  run / odometry RMS",
+                    f"{cm_mrad(rn['rms_run_xy_theta'])} / {cm_mrad(rn['rms_odometry_xy_theta'])}",
+                ),
+            ]
+        if self.relations_nees_with_relations_noise is not None:
+            q = self.relations_nees_with_relations_noise
+            verdict = "consistent" if q.consistent else "NOT consistent"
+            rows += [
+                (
+                    "relations NEES + relations' own",
+                    f"{q.mean:.3f} in [{q.lower:.3f}, {q.upper:.3f}]: {verdict}; inside 95% "
+                    f"{q.fraction_inside_95:.3f}",
+                ),
+                (
+                    "  by gap",
+                    "; ".join(
+                        f"{_gap_label(g['gap_s'])}: {g['mean']:.2f} (n={g['n']})"
+                        for g in q.by_gap()
+                        if g["n"]
+                    ),
+                ),
+            ]
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
@@ -142,12 +193,17 @@ def evaluate_results(
     sources: dict[str, str] | None = None,
     partial: bool | None = None,
     relative_covariances: RelationCovariances | None = None,
+    odometry: Trajectory | None = None,
+    keyframe_timestamps: FloatArray | None = None,
 ) -> EvaluationReport:
     """Relations metric (with ``relations``), ATE, RPE and NEES (with ``ground_truth``).
 
     NEES is computed when ``results`` carries pose covariances and ground truth is given; the
     relations NEES (:mod:`slam.evaluation.relations_nees`) when relations and
-    ``relative_covariances`` (covariances of relative poses between time stamps) are given.
+    ``relative_covariances`` (covariances of relative poses between time stamps) are given;
+    with the log's ``odometry`` too (in the relations' frame), the relations' own scatter
+    (:mod:`slam.evaluation.reference_noise`, on the relations between two of
+    ``keyframe_timestamps`` when given) and the relations NEES with it added.
 
     A run over part of a log (``partial``; default: what the results' ``summary.json`` says,
     ``"partial": true`` for ``--max-scans`` runs) is scored on the relations whose two time
@@ -175,11 +231,27 @@ def evaluate_results(
                 f"none of the {total} relations has both time stamps inside the partial run "
                 f"({len(trajectory)} poses): run over more of the log"
             )
-    rel_nees = None
+    rel_nees = rel_nees_ref = None
+    rel_noise: RelationNoise | None = None
     if relations is not None:
         rel = relations_metric(trajectory, relations, tolerance_s=tol, max_unmatched_fraction=frac)
         if relative_covariances is not None:
             rel_nees = relations_nees(trajectory, relations, relative_covariances, tolerance_s=tol)
+            if odometry is not None:
+                rel_noise = relation_noise(
+                    trajectory,
+                    odometry,
+                    relations,
+                    tolerance_s=tol,
+                    keyframe_timestamps=keyframe_timestamps,
+                )
+                rel_nees_ref = relations_nees(
+                    trajectory,
+                    relations,
+                    relative_covariances,
+                    tolerance_s=tol,
+                    relations_cov=rel_noise.covariance,
+                )
     ate_result = nees_result = None
     rpe_results: tuple[RpeResult, ...] = ()
     if ground_truth is not None:
@@ -202,4 +274,6 @@ def evaluate_results(
         sources=dict(sources or {}),
         relations_inside_run=inside_run,
         relations_nees=rel_nees,
+        relations_noise=rel_noise,
+        relations_nees_with_relations_noise=rel_nees_ref,
     )
