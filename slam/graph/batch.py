@@ -46,12 +46,16 @@ from slam.graph.factors import LineLinearization, line_factor_costs, linearize_l
 from slam.graph.linear import (
     UNIT2,
     UNIT3,
+    FactorBatch,
+    ReusableGraph,
+    key_array,
     keys_of,
-    landmark_prior_factors,
-    line_jacobian_factors,
-    odometry_jacobian_factors,
+    landmark_prior_batch,
+    line_jacobian_batch,
+    odometry_jacobian_batch,
     pairing_order,
     split_delta,
+    unary_batch,
 )
 from slam.graph.odometry import between_costs, linearize_between, linearize_prior
 from slam.graph.problem import LineGraph
@@ -177,20 +181,23 @@ class BatchSolver:
         landmarks: FloatArray,
         free_from: int = 0,
         solved: NDArray[np.bool_] | None = None,
+        reuse: ReusableGraph | None = None,
     ) -> tuple[gtsam.GaussianFactorGraph, LineLinearization | None, IntArray]:
         """:meth:`linearize`, also returning the line factors' linearisation and their indices.
 
         :meth:`damping_scale` at the same point reuses it instead of linearising again.  With
         ``free_from > 0`` poses before it are constants: factors touching only constants are
         left out, and a factor between a constant and a variable becomes a one-key factor.
-        ``solved`` (per landmark) says which landmarks are variables (default: all).
+        ``solved`` (per landmark) says which landmarks are variables (default: all).  With
+        ``reuse`` the factors of its last graph are overwritten where the structure allows
+        (:class:`slam.graph.linear.ReusableGraph`): the same graph, built faster.
         """
-        gfg = gtsam.GaussianFactorGraph()
+        batches: list[FactorBatch] = []
         lin: LineLinearization | None = None
         used = np.zeros(0, dtype=np.intp)
         if free_from == 0 and graph.prior_pose is not None and graph.prior_sqrt_info is not None:
             A, b, _ = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
-            gfg.push_back(gtsam.JacobianFactor(keys_of("x", np.array([0]))[0], A, b, UNIT3))
+            batches.append(unary_batch(key_array("x", np.array([0])), A[None], b[None]))
         if graph.n_odometry:
             e = np.flatnonzero(graph.odometry_second >= free_from)
             first, second = graph.odometry_first[e], graph.odometry_second[e]
@@ -198,12 +205,10 @@ class BatchSolver:
                 poses[first], poses[second], graph.odometry_measured[e], graph.odometry_sqrt_info[e]
             )
             both = first >= free_from
-            for f in odometry_jacobian_factors(
-                first[both], second[both], A1[both], A2[both], b[both]
-            ):
-                gfg.push_back(f)
-            for key, A, rhs in zip(keys_of("x", second[~both]), A2[~both], b[~both], strict=True):
-                gfg.push_back(gtsam.JacobianFactor(key, A, rhs, UNIT3))
+            batches.append(
+                odometry_jacobian_batch(first[both], second[both], A1[both], A2[both], b[both])
+            )
+            batches.append(unary_batch(key_array("x", second[~both]), A2[~both], b[~both]))
         if graph.n_line_factors:
             lm_all = graph.factor_landmark
             used = (
@@ -220,13 +225,13 @@ class BatchSolver:
             sub = LineLinearization(
                 lin.A_pose[o], lin.A_landmark[o], lin.b[o], lin.whitened_residual[o], lin.weights[o]
             )
-            factors = line_jacobian_factors(fp[o], lm[o], sub)
+            batches.append(line_jacobian_batch(fp[o], lm[o], sub))
             if not free.all():
                 fixed = ~free
-                factors += landmark_prior_factors(lm[fixed], lin.A_landmark[fixed], lin.b[fixed])
-            for f in factors:
-                gfg.push_back(f)
-        return gfg, lin, used
+                batches.append(landmark_prior_batch(lm[fixed], lin.A_landmark[fixed], lin.b[fixed]))
+        if reuse is None:
+            reuse = ReusableGraph()
+        return reuse.load(batches), lin, used
 
     def _linearize_lines(
         self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray, factors: IntArray
@@ -495,6 +500,7 @@ class BatchSolver:
             stats.time_s["linearize"] += time.perf_counter() - t0
         ordering = None
         gfg = gtsam.GaussianFactorGraph()
+        reuse = ReusableGraph()  # the factors of one iteration are rewritten in the next
         at_point: tuple[Any, LineLinearization | None, float] | None = None
         trial: tuple[Any, LineLinearization | None, float] | None = None
         relinearize = True
@@ -512,7 +518,9 @@ class BatchSolver:
                     lin = at_point[1]
                     at_point = None
                 else:
-                    gfg, lin, used = self._linearize(graph, poses, landmarks, free_from, solved)
+                    gfg, lin, used = self._linearize(
+                        graph, poses, landmarks, free_from, solved, reuse
+                    )
                     if ordering is None:
                         ordering = self._ordering(gfg)
                 stats.iterations += 1
