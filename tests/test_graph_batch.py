@@ -439,3 +439,29 @@ def test_reused_graph_holds_the_factors_a_new_one_would(free_from):
     # a different structure (fewer poses free) is a new graph
     other, _, _ = solver._linearize(g, poses, landmarks, free_from + 10, None, reuse)
     assert other is not first
+
+
+@pytest.mark.parametrize("free_from", [0, 120])
+def test_linearisation_gives_the_cost_of_its_factors(free_from):
+    """The cost a linearisation reports (the trial point's, reused when the step is accepted)
+    is the number ``cost`` gives for the same factors, exactly."""
+    g = synthetic_problem(250, seed=3).graph
+    rng = np.random.default_rng(2)
+    g.poses[:] += rng.normal(scale=0.05, size=g.poses.shape)
+    solver = BatchSolver(SolverConfig())
+    if free_from:
+        solved = np.zeros(g.n_landmarks, dtype=bool)
+        solved[g.factor_landmark[g.factor_pose >= free_from]] = True
+        point = solver._linear_batches(g, g.poses, g.landmarks, free_from, solved)
+        expected = solver.cost(
+            g,
+            g.poses,
+            g.landmarks,
+            line_factors=np.flatnonzero(solved[g.factor_landmark]),
+            odometry=np.flatnonzero(g.odometry_second >= free_from),
+            with_prior=False,
+        )
+    else:
+        point = solver._linear_batches(g, g.poses, g.landmarks)
+        expected = solver.cost(g, g.poses, g.landmarks)
+    assert point.cost == expected
