@@ -219,47 +219,57 @@ class BatchSolver:
         landmarks: FloatArray,
         free_from: int = 0,
         solved: NDArray[np.bool_] | None = None,
+        structure: dict[str, Any] | None = None,
     ) -> _LinearPoint:
         """The factors of :meth:`_linearize` as numpy batches, and their cost at the point.
 
         The cost is the one :meth:`cost` gives for the same factors (every factor with
         ``free_from == 0``, else the line factors on solved landmarks and the odometry into
-        free poses): the same residuals, summed in the same order.
+        free poses): the same residuals, summed in the same order.  ``structure`` keeps the
+        index arrays that depend only on the graph's structure, ``free_from`` and ``solved``
+        (which factors, in which order) from one call to the next of a solve.
         """
         batches: list[FactorBatch] = []
         lin: LineLinearization | None = None
         used = np.zeros(0, dtype=np.intp)
         prior_cost: float | None = None
         odometry_cost: float | None = None
+        if structure is None:
+            structure = {}
         if free_from == 0 and graph.prior_pose is not None and graph.prior_sqrt_info is not None:
             A, b, prior_cost = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
             batches.append(unary_batch(key_array("x", np.array([0])), A[None], b[None]))
         if graph.n_odometry:
-            e = np.flatnonzero(graph.odometry_second >= free_from)
-            first, second = graph.odometry_first[e], graph.odometry_second[e]
+            if "odometry" not in structure:
+                e = np.flatnonzero(graph.odometry_second >= free_from)
+                first, second = graph.odometry_first[e], graph.odometry_second[e]
+                structure["odometry"] = (e, first, second, first >= free_from)
+            e, first, second, both = structure["odometry"]
             A1, A2, b = linearize_between(
                 poses[first], poses[second], graph.odometry_measured[e], graph.odometry_sqrt_info[e]
             )
             if e.size:
                 odometry_cost = float(np.sum(0.5 * np.sum(b**2, axis=-1)))  # b = −W e
-            both = first >= free_from
             batches.append(
                 odometry_jacobian_batch(first[both], second[both], A1[both], A2[both], b[both])
             )
             batches.append(unary_batch(key_array("x", second[~both]), A2[~both], b[~both]))
         if graph.n_line_factors:
-            lm_all = graph.factor_landmark
-            used = (
-                np.arange(graph.n_line_factors)
-                if solved is None
-                else np.flatnonzero(solved[lm_all])
-            )
-            lm = lm_all[used]
-            fp = graph.factor_pose[used]
+            if "lines" not in structure:
+                lm_all = graph.factor_landmark
+                used = (
+                    np.arange(graph.n_line_factors)
+                    if solved is None
+                    else np.flatnonzero(solved[lm_all])
+                )
+                lm = lm_all[used]
+                fp = graph.factor_pose[used]
+                free = fp >= free_from
+                o = np.flatnonzero(free)
+                o = o[pairing_order(fp[o], lm[o])]  # most factors two to a JacobianFactor
+                structure["lines"] = (used, lm, fp, free, o)
+            used, lm, fp, free, o = structure["lines"]
             lin = self._linearize_lines(graph, poses, landmarks, used)
-            free = fp >= free_from
-            o = np.flatnonzero(free)
-            o = o[pairing_order(fp[o], lm[o])]  # most factors two to a JacobianFactor
             sub = LineLinearization(
                 lin.A_pose[o], lin.A_landmark[o], lin.b[o], lin.whitened_residual[o], lin.weights[o]
             )
@@ -554,6 +564,7 @@ class BatchSolver:
         trial: tuple[Any, LineLinearization | None, float] | None = None
         point: _LinearPoint | None = None
         trial_point: _LinearPoint | None = None
+        structure: dict[str, Any] = {}  # the factors' index arrays, the same all solve long
         relinearize = True
         while True:
             interrupts.check()  # between iterations (slam.interrupts)
@@ -570,7 +581,9 @@ class BatchSolver:
                     at_point = None
                 else:
                     if point is None:  # else the accepted trial's linearisation
-                        point = self._linear_batches(graph, poses, landmarks, free_from, solved)
+                        point = self._linear_batches(
+                            graph, poses, landmarks, free_from, solved, structure
+                        )
                     gfg, lin, used = reuse.load(point.batches), point.lin, point.used
                     point = None
                     if ordering is None:
@@ -622,7 +635,7 @@ class BatchSolver:
                 new_cost = trial[2] + constant
             else:
                 trial_point = self._linear_batches(
-                    graph, new_poses, new_landmarks, free_from, solved
+                    graph, new_poses, new_landmarks, free_from, solved, structure
                 )
                 new_cost = trial_point.cost + constant
             stats.time_s["cost"] += time.perf_counter() - t0
