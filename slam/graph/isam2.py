@@ -8,7 +8,8 @@ Design (measured in ``scripts/bench_graph.py``; see ``docs/graph.md``):
   at iSAM2's linearisation point ``θ`` of their variables.  All line factors of one keyframe
   are stacked into one ``gtsam.JacobianFactor`` (pose + its landmarks) and wrapped in one
   ``gtsam.LinearContainerFactor`` (native C++): one Python object per keyframe instead of per
-  line, and iSAM2 never calls back into Python.
+  line, and iSAM2 never calls back into Python.  A keyframe's stacked factor is kept and, when
+  the block is rebuilt on the same landmarks, overwritten in place (:class:`_BlockTemplate`).
 * **Relinearisation policy.**  A ``LinearContainerFactor`` keeps its Jacobian; when iSAM2
   moves ``θ`` of one of its variables (its own relinearisation, ``relinearize_threshold_*``) it
   only shifts the right-hand side.  After every update whose result reports relinearised
