@@ -409,3 +409,59 @@ def test_sparse_and_gtsam_take_the_same_damped_steps(free_from):
     )
     np.testing.assert_allclose(g_s.poses, g_g.poses, atol=1e-9)
     np.testing.assert_allclose(g_s.landmarks, g_g.landmarks, atol=1e-9)
+
+
+@pytest.mark.parametrize("free_from", [0, 120])
+def test_reused_graph_holds_the_factors_a_new_one_would(free_from):
+    """Linearising into the last iteration's factors (``ReusableGraph``) gives the graph a new
+    build gives, bit for bit, and the same graph object; another structure gives a new graph."""
+    from slam.graph.linear import ReusableGraph
+
+    g = synthetic_problem(250, seed=3).graph
+    solver = BatchSolver(SolverConfig())
+    solved = None
+    if free_from:
+        solved = np.zeros(g.n_landmarks, dtype=bool)
+        solved[g.factor_landmark[g.factor_pose >= free_from]] = True
+    reuse = ReusableGraph()
+    first, _, _ = solver._linearize(g, g.poses, g.landmarks, free_from, solved, reuse)
+    rng = np.random.default_rng(0)
+    poses = g.poses + rng.normal(scale=1e-2, size=g.poses.shape)
+    landmarks = g.landmarks + rng.normal(scale=1e-2, size=g.landmarks.shape)
+    again, _, _ = solver._linearize(g, poses, landmarks, free_from, solved, reuse)
+    fresh, _, _ = solver._linearize(g, poses, landmarks, free_from, solved)
+    assert again is first and fresh is not first
+    assert again.size() == fresh.size()
+    for i in range(fresh.size()):
+        a, f = again.at(i), fresh.at(i)
+        assert list(a.keys()) == list(f.keys())
+        np.testing.assert_array_equal(a.augmentedJacobian(), f.augmentedJacobian())
+    # a different structure (fewer poses free) is a new graph
+    other, _, _ = solver._linearize(g, poses, landmarks, free_from + 10, None, reuse)
+    assert other is not first
+
+
+@pytest.mark.parametrize("free_from", [0, 120])
+def test_linearisation_gives_the_cost_of_its_factors(free_from):
+    """The cost a linearisation reports (the trial point's, reused when the step is accepted)
+    is the number ``cost`` gives for the same factors, exactly."""
+    g = synthetic_problem(250, seed=3).graph
+    rng = np.random.default_rng(2)
+    g.poses[:] += rng.normal(scale=0.05, size=g.poses.shape)
+    solver = BatchSolver(SolverConfig())
+    if free_from:
+        solved = np.zeros(g.n_landmarks, dtype=bool)
+        solved[g.factor_landmark[g.factor_pose >= free_from]] = True
+        point = solver._linear_batches(g, g.poses, g.landmarks, free_from, solved)
+        expected = solver.cost(
+            g,
+            g.poses,
+            g.landmarks,
+            line_factors=np.flatnonzero(solved[g.factor_landmark]),
+            odometry=np.flatnonzero(g.odometry_second >= free_from),
+            with_prior=False,
+        )
+    else:
+        point = solver._linear_batches(g, g.poses, g.landmarks)
+        expected = solver.cost(g, g.poses, g.landmarks)
+    assert point.cost == expected

@@ -1,4 +1,4 @@
-"""Loop-closure search (numpy only): known corrections on constructed rooms, grid sampling."""
+"""Loop-closure search: known corrections on constructed rooms, grid sampling."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ import pytest
 from slam.frontend.config import LoopClosureConfig, RelocalisationConfig
 from slam.frontend.loop_closure import (
     LoopLines,
+    _constraint_votes,
     _refine,
+    _sample_ranges,
     _samples_near_grid,
     _top_cells,
     correction_chi2,
@@ -259,3 +261,39 @@ def test_two_direction_closure_needs_metres_of_wall_across_the_corridor(cross_m,
     if verified:
         assert found is not None and len(found.pairs) == 3
         np.testing.assert_allclose(found.correction, [-0.3, 0.0, 0.0], atol=0.02)
+
+
+def test_compiled_votes_equal_the_sorted_count():
+    """The compiled vote count equals counting the sorted ``(local line, cell)`` keys with
+    ``np.bincount``, bit for bit (per cell the largest weight of each local line, summed over
+    the lines in order), with ties of weights and constraints that leave the grid."""
+    rng = np.random.default_rng(7)
+    P = 300
+    line = np.sort(rng.integers(0, 25, P)).astype(np.int64)
+    ang = rng.uniform(-np.pi, np.pi, P)
+    n = np.stack([np.cos(ang), np.sin(ang)], -1)
+    tdir = np.stack([-n[:, 1], n[:, 0]], -1)
+    b = rng.uniform(-4.0, 4.0, P)
+    weight = np.round(rng.uniform(0.1, 3.0, P), 1)  # ties
+    w, cell = 3.0, 0.05
+    nc = int(np.ceil(2 * w / cell))
+    s = np.arange(-w * np.sqrt(2.0), w * np.sqrt(2.0) + cell, cell / 2.0)
+    q_lo, q_hi = _sample_ranges(b, n, tdir, s, -w, -w + nc * cell, cell)
+    votes, inside = _constraint_votes(
+        line, b[:, None] * n, tdir, weight, s, q_lo, q_hi, w, cell, nc
+    )
+    # the reference: every sample, then one vote per (line, cell) with its largest weight
+    pp, ss = _samples_near_grid(b, n, tdir, s, -w, -w + nc * cell, cell)
+    px = b[pp] * n[pp, 0] + s[ss] * tdir[pp, 0]
+    py = b[pp] * n[pp, 1] + s[ss] * tdir[pp, 1]
+    cx = np.floor((px + w) / cell).astype(np.int64)
+    cy = np.floor((py + w) / cell).astype(np.int64)
+    ok = (cx >= 0) & (cx < nc) & (cy >= 0) & (cy < nc)
+    key = line[pp[ok]] * (nc * nc) + (cx * nc + cy)[ok]
+    wt = weight[pp[ok]]
+    order = np.lexsort((-wt, key))
+    key_s = key[order]
+    first = np.r_[True, key_s[1:] != key_s[:-1]]
+    ref = np.bincount(key_s[first] % (nc * nc), weights=wt[order][first], minlength=nc * nc)
+    assert inside == np.count_nonzero(ok) > 0
+    np.testing.assert_array_equal(votes, ref)

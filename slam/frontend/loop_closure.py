@@ -1,4 +1,4 @@
-"""Loop-closure search: find the local submap's lines in the old map (numpy only).
+"""Loop-closure search: find the local submap's lines in the old map (numpy; one numba kernel).
 
 After a long loop the drift between the robot and the walls it mapped long ago can be metres and
 tens of degrees, far beyond what χ² gates on the current estimate can bridge safely.  This
@@ -16,7 +16,8 @@ window ``|t| ≤ W``, ``|dθ| ≤ Θ``:
    constrains ``t`` to a line, ``n_j·t = r_j − r_i'`` (``r_i'`` the rotated local line's
    offset).  Each constraint votes, with the local line's length, into the cells of a grid over
    the window that it crosses (a local line votes at most once per cell); peaks are where
-   constraints from different directions cross (a 2-D Hough transform of the line pairs).
+   constraints from different directions cross (a 2-D Hough transform of the line pairs;
+   the sampling and counting are compiled, :func:`_constraint_votes`).
 4. **Verification** of each peak: transform the local lines, pair each with the nearest old line
    within the angle and offset tolerances whose segment overlaps it, refine ``T`` by weighted
    least squares on the pairs (re-pairing in between), score = the overlapping length.  A
@@ -35,6 +36,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
@@ -406,7 +408,7 @@ def _rotation_candidates(
     return out
 
 
-def _samples_near_grid(
+def _sample_ranges(
     b: FloatArray,
     n: FloatArray,
     tdir: FloatArray,
@@ -415,11 +417,10 @@ def _samples_near_grid(
     hi: float,
     margin: float,
 ) -> tuple[IntArray, IntArray]:
-    """Indices ``(line, sample)`` of the points ``b·n + s·t`` that may fall in ``[lo, hi)²``.
+    """Per line, the samples ``s[q_lo:q_hi]`` whose points ``b·n + s·t`` may fall in ``[lo, hi)²``.
 
-    Per line, the interval of ``s`` whose point lies in the square (widened by ``margin``);
-    the caller tests the samples exactly.  Rows in line order, samples ascending (the order of
-    a full ``(P, S)`` grid).
+    The interval of ``s`` whose point lies in the square (widened by ``margin``); the caller
+    tests the samples exactly.  ``q_hi < q_lo`` where there are none.
     """
     s_lo = np.full(b.shape[0], -np.inf)
     s_hi = np.full(b.shape[0], np.inf)
@@ -436,11 +437,89 @@ def _samples_near_grid(
         s_hi = np.where(outside, -np.inf, s_hi)
     q_lo = np.searchsorted(s, s_lo - margin, side="left")
     q_hi = np.searchsorted(s, s_hi + margin, side="right")
+    return q_lo, q_hi
+
+
+def _samples_near_grid(
+    b: FloatArray,
+    n: FloatArray,
+    tdir: FloatArray,
+    s: FloatArray,
+    lo: float,
+    hi: float,
+    margin: float,
+) -> tuple[IntArray, IntArray]:
+    """Indices ``(line, sample)`` of the points ``b·n + s·t`` that may fall in ``[lo, hi)²``.
+
+    The samples of :func:`_sample_ranges`: rows in line order, samples ascending (the order of
+    a full ``(P, S)`` grid).
+    """
+    q_lo, q_hi = _sample_ranges(b, n, tdir, s, lo, hi, margin)
     counts = np.maximum(q_hi - q_lo, 0)
     pp = np.repeat(np.arange(b.shape[0]), counts)
     start = np.cumsum(counts) - counts
     ss = q_lo[pp] + (np.arange(pp.shape[0]) - start[pp])
     return pp, ss
+
+
+@njit(cache=True, nogil=True)
+def _constraint_votes(
+    line: IntArray,
+    bn: FloatArray,
+    tdir: FloatArray,
+    weight: FloatArray,
+    s: FloatArray,
+    q_lo: IntArray,
+    q_hi: IntArray,
+    window: float,
+    cell: float,
+    nc: int,
+) -> tuple[FloatArray, int]:  # pragma: no cover - compiled
+    """The translation votes of the constraint lines (compiled; :func:`_translation_peaks`).
+
+    Constraint ``p`` (of local line ``line[p]``, non-decreasing: the constraints come grouped by
+    local line) is sampled at ``bn[p] + s[k]·tdir[p]`` for ``k`` in ``[q_lo[p], q_hi[p])``;
+    a sample in the ``nc × nc`` grid of ``cell`` over ``[−window, −window + nc·cell)²`` votes
+    for its cell.  Each local line gives each cell it reaches its largest weight there, and a
+    cell's votes are summed over the local lines in ascending order from 0 (the order
+    ``np.bincount`` over the sorted ``(line, cell)`` keys sums in).  Returns the votes
+    (``nc²``, row ``x``, column ``y``) and how many samples fell in the grid.
+    """
+    n_cells = nc * nc
+    votes = np.zeros(n_cells)
+    best = np.zeros(n_cells)
+    seen = np.zeros(n_cells, np.bool_)
+    touched = np.empty(n_cells, np.int64)
+    inside = 0
+    P = line.shape[0]
+    p = 0
+    while p < P:
+        current = line[p]
+        n_touched = 0
+        while p < P and line[p] == current:
+            w = weight[p]
+            for k in range(q_lo[p], q_hi[p]):
+                px = bn[p, 0] + s[k] * tdir[p, 0]
+                py = bn[p, 1] + s[k] * tdir[p, 1]
+                cx = np.int64(np.floor((px + window) / cell))
+                cy = np.int64(np.floor((py + window) / cell))
+                if cx < 0 or cx >= nc or cy < 0 or cy >= nc:
+                    continue
+                inside += 1
+                c = cx * nc + cy
+                if not seen[c]:
+                    seen[c] = True
+                    best[c] = w
+                    touched[n_touched] = c
+                    n_touched += 1
+                elif w > best[c]:
+                    best[c] = w
+            p += 1
+        for i in range(n_touched):
+            c = touched[i]
+            votes[c] += best[c]
+            seen[c] = False
+    return votes, inside
 
 
 def _top_cells(values: FloatArray, k: int) -> IntArray:
@@ -481,26 +560,17 @@ def _translation_peaks(
     cell = config.cell_m
     nc = int(np.ceil(2 * window_xy / cell))
     s = np.arange(-window_xy * np.sqrt(2.0), window_xy * np.sqrt(2.0) + cell, cell / 2.0)
-    # each constraint line is sampled at b·n + s·t; only the samples near the grid are computed
-    pp, ss = _samples_near_grid(b, n, tdir, s, -window_xy, -window_xy + nc * cell, cell)
-    px = b[pp] * n[pp, 0] + s[ss] * tdir[pp, 0]
-    py = b[pp] * n[pp, 1] + s[ss] * tdir[pp, 1]
-    cx = np.floor((px + window_xy) / cell).astype(np.int64)
-    cy = np.floor((py + window_xy) / cell).astype(np.int64)
-    inside = (cx >= 0) & (cx < nc) & (cy >= 0) & (cy < nc)
-    pair_of = pp[inside]
-    if pair_of.size == 0:
-        return []
-    cells = (cx * nc + cy)[inside]
+    # each constraint line is sampled at b·n + s·t; only the samples near the grid are computed;
     # one vote per (local line, cell): the largest weight among its constraints there
-    weight = np.minimum(rot.length[ii], old.length[jj])[pair_of]
-    key = ii[pair_of].astype(np.int64) * (nc * nc) + cells
-    order = np.lexsort((-weight, key))
-    key_s = key[order]
-    first = np.r_[True, key_s[1:] != key_s[:-1]]
-    votes = np.bincount(
-        (key_s[first] % (nc * nc)), weights=weight[order][first], minlength=nc * nc
-    ).reshape(nc, nc)
+    q_lo, q_hi = _sample_ranges(b, n, tdir, s, -window_xy, -window_xy + nc * cell, cell)
+    bn = b[:, None] * n
+    weight = np.minimum(rot.length[ii], old.length[jj])
+    flat, inside = _constraint_votes(
+        ii.astype(np.int64), bn, tdir, weight, s, q_lo, q_hi, window_xy, cell, nc
+    )
+    if inside == 0:
+        return []
+    votes = flat.reshape(nc, nc)
     # smooth 3×3 (a crossing may straddle cells)
     pad = np.pad(votes, 1)
     sm: FloatArray = pad[0:nc, 0:nc].astype(float)

@@ -13,8 +13,9 @@ Each iteration:
    (:mod:`slam.graph.sparse`: pattern, ordering and symbolic analysis once per solve): the
    same step to rounding, several times faster;
 3. retract in numpy (poses ``x·Exp(ξ)``, landmarks additively in their anchored chart) and
-   evaluate the cost in numpy (the sparse path linearises the trial point, the same cost, and
-   reuses that linearisation in the next iteration if the step is accepted).
+   evaluate the cost in numpy: the trial point is linearised (the same cost as
+   :meth:`BatchSolver.cost` from the same residuals), and that linearisation is the next
+   iteration's if the step is accepted.
 
 Nothing in the loop costs more per factor as the graph grows except the elimination itself,
 whose fill per factor stays flat on the planar problems here (``scripts/bench_graph.py``).
@@ -46,12 +47,16 @@ from slam.graph.factors import LineLinearization, line_factor_costs, linearize_l
 from slam.graph.linear import (
     UNIT2,
     UNIT3,
+    FactorBatch,
+    ReusableGraph,
+    key_array,
     keys_of,
-    landmark_prior_factors,
-    line_jacobian_factors,
-    odometry_jacobian_factors,
+    landmark_prior_batch,
+    line_jacobian_batch,
+    odometry_jacobian_batch,
     pairing_order,
     split_delta,
+    unary_batch,
 )
 from slam.graph.odometry import between_costs, linearize_between, linearize_prior
 from slam.graph.problem import LineGraph
@@ -92,6 +97,20 @@ class SolveStats:
     reason: str = ""
     time_s: dict[str, float] = field(default_factory=dict)
     history: list[tuple[float, float, bool]] = field(default_factory=list)
+
+
+@dataclass(frozen=True, eq=False)
+class _LinearPoint:
+    """A linearisation of :meth:`BatchSolver._linear_batches`.
+
+    The factors' numpy batches, the line factors' linearisation and indices, and the cost of
+    these factors at the point.
+    """
+
+    batches: list[FactorBatch]
+    lin: LineLinearization | None
+    used: IntArray
+    cost: float
 
 
 class BatchSolver:
@@ -177,56 +196,101 @@ class BatchSolver:
         landmarks: FloatArray,
         free_from: int = 0,
         solved: NDArray[np.bool_] | None = None,
+        reuse: ReusableGraph | None = None,
     ) -> tuple[gtsam.GaussianFactorGraph, LineLinearization | None, IntArray]:
         """:meth:`linearize`, also returning the line factors' linearisation and their indices.
 
         :meth:`damping_scale` at the same point reuses it instead of linearising again.  With
         ``free_from > 0`` poses before it are constants: factors touching only constants are
         left out, and a factor between a constant and a variable becomes a one-key factor.
-        ``solved`` (per landmark) says which landmarks are variables (default: all).
+        ``solved`` (per landmark) says which landmarks are variables (default: all).  With
+        ``reuse`` the factors of its last graph are overwritten where the structure allows
+        (:class:`slam.graph.linear.ReusableGraph`): the same graph, built faster.
         """
-        gfg = gtsam.GaussianFactorGraph()
+        point = self._linear_batches(graph, poses, landmarks, free_from, solved)
+        if reuse is None:
+            reuse = ReusableGraph()
+        return reuse.load(point.batches), point.lin, point.used
+
+    def _linear_batches(
+        self,
+        graph: LineGraph,
+        poses: FloatArray,
+        landmarks: FloatArray,
+        free_from: int = 0,
+        solved: NDArray[np.bool_] | None = None,
+        structure: dict[str, Any] | None = None,
+    ) -> _LinearPoint:
+        """The factors of :meth:`_linearize` as numpy batches, and their cost at the point.
+
+        The cost is the one :meth:`cost` gives for the same factors (every factor with
+        ``free_from == 0``, else the line factors on solved landmarks and the odometry into
+        free poses): the same residuals, summed in the same order.  ``structure`` keeps the
+        index arrays that depend only on the graph's structure, ``free_from`` and ``solved``
+        (which factors, in which order) from one call to the next of a solve.
+        """
+        batches: list[FactorBatch] = []
         lin: LineLinearization | None = None
         used = np.zeros(0, dtype=np.intp)
+        prior_cost: float | None = None
+        odometry_cost: float | None = None
+        if structure is None:
+            structure = {}
         if free_from == 0 and graph.prior_pose is not None and graph.prior_sqrt_info is not None:
-            A, b, _ = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
-            gfg.push_back(gtsam.JacobianFactor(keys_of("x", np.array([0]))[0], A, b, UNIT3))
+            A, b, prior_cost = linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)
+            batches.append(unary_batch(key_array("x", np.array([0])), A[None], b[None]))
         if graph.n_odometry:
-            e = np.flatnonzero(graph.odometry_second >= free_from)
-            first, second = graph.odometry_first[e], graph.odometry_second[e]
+            if "odometry" not in structure:
+                e = np.flatnonzero(graph.odometry_second >= free_from)
+                first, second = graph.odometry_first[e], graph.odometry_second[e]
+                structure["odometry"] = (e, first, second, first >= free_from)
+            e, first, second, both = structure["odometry"]
             A1, A2, b = linearize_between(
                 poses[first], poses[second], graph.odometry_measured[e], graph.odometry_sqrt_info[e]
             )
-            both = first >= free_from
-            for f in odometry_jacobian_factors(
-                first[both], second[both], A1[both], A2[both], b[both]
-            ):
-                gfg.push_back(f)
-            for key, A, rhs in zip(keys_of("x", second[~both]), A2[~both], b[~both], strict=True):
-                gfg.push_back(gtsam.JacobianFactor(key, A, rhs, UNIT3))
-        if graph.n_line_factors:
-            lm_all = graph.factor_landmark
-            used = (
-                np.arange(graph.n_line_factors)
-                if solved is None
-                else np.flatnonzero(solved[lm_all])
+            if e.size:
+                odometry_cost = float(np.sum(0.5 * np.sum(b**2, axis=-1)))  # b = −W e
+            batches.append(
+                odometry_jacobian_batch(first[both], second[both], A1[both], A2[both], b[both])
             )
-            lm = lm_all[used]
-            fp = graph.factor_pose[used]
+            batches.append(unary_batch(key_array("x", second[~both]), A2[~both], b[~both]))
+        if graph.n_line_factors:
+            if "lines" not in structure:
+                lm_all = graph.factor_landmark
+                used = (
+                    np.arange(graph.n_line_factors)
+                    if solved is None
+                    else np.flatnonzero(solved[lm_all])
+                )
+                lm = lm_all[used]
+                fp = graph.factor_pose[used]
+                free = fp >= free_from
+                o = np.flatnonzero(free)
+                o = o[pairing_order(fp[o], lm[o])]  # most factors two to a JacobianFactor
+                structure["lines"] = (used, lm, fp, free, o)
+            used, lm, fp, free, o = structure["lines"]
             lin = self._linearize_lines(graph, poses, landmarks, used)
-            free = fp >= free_from
-            o = np.flatnonzero(free)
-            o = o[pairing_order(fp[o], lm[o])]  # most factors two to a JacobianFactor
             sub = LineLinearization(
                 lin.A_pose[o], lin.A_landmark[o], lin.b[o], lin.whitened_residual[o], lin.weights[o]
             )
-            factors = line_jacobian_factors(fp[o], lm[o], sub)
+            batches.append(line_jacobian_batch(fp[o], lm[o], sub))
             if not free.all():
                 fixed = ~free
-                factors += landmark_prior_factors(lm[fixed], lin.A_landmark[fixed], lin.b[fixed])
-            for f in factors:
-                gfg.push_back(f)
-        return gfg, lin, used
+                batches.append(landmark_prior_batch(lm[fixed], lin.A_landmark[fixed], lin.b[fixed]))
+        total = 0.0
+        if used.size:
+            assert lin is not None
+            rho = robust_cost(
+                self.config.robust_kernel,
+                np.linalg.norm(lin.whitened_residual, axis=-1),
+                self.config.robust_k,
+            )
+            total += float(np.sum(rho))
+        if odometry_cost is not None:
+            total += odometry_cost
+        if prior_cost is not None:
+            total += prior_cost
+        return _LinearPoint(batches, lin, used, total)
 
     def _linearize_lines(
         self, graph: LineGraph, poses: FloatArray, landmarks: FloatArray, factors: IntArray
@@ -495,8 +559,12 @@ class BatchSolver:
             stats.time_s["linearize"] += time.perf_counter() - t0
         ordering = None
         gfg = gtsam.GaussianFactorGraph()
+        reuse = ReusableGraph()  # the factors of one iteration are rewritten in the next
         at_point: tuple[Any, LineLinearization | None, float] | None = None
         trial: tuple[Any, LineLinearization | None, float] | None = None
+        point: _LinearPoint | None = None
+        trial_point: _LinearPoint | None = None
+        structure: dict[str, Any] = {}  # the factors' index arrays, the same all solve long
         relinearize = True
         while True:
             interrupts.check()  # between iterations (slam.interrupts)
@@ -512,7 +580,12 @@ class BatchSolver:
                     lin = at_point[1]
                     at_point = None
                 else:
-                    gfg, lin, used = self._linearize(graph, poses, landmarks, free_from, solved)
+                    if point is None:  # else the accepted trial's linearisation
+                        point = self._linear_batches(
+                            graph, poses, landmarks, free_from, solved, structure
+                        )
+                    gfg, lin, used = reuse.load(point.batches), point.lin, point.used
+                    point = None
                     if ordering is None:
                         ordering = self._ordering(gfg)
                 stats.iterations += 1
@@ -556,11 +629,15 @@ class BatchSolver:
             new_landmarks[lms] = retract_landmarks(landmarks[lms], d_lm)
             stats.time_s["retract"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            if sparse:  # linearised at the trial point already: reused if it is accepted
+            # linearised at the trial point already: reused if it is accepted
+            if sparse:
                 trial = self._linearize_point(graph, new_poses, new_landmarks, parts)
                 new_cost = trial[2] + constant
             else:
-                new_cost = self.cost(graph, new_poses, new_landmarks, **varying) + constant
+                trial_point = self._linear_batches(
+                    graph, new_poses, new_landmarks, free_from, solved, structure
+                )
+                new_cost = trial_point.cost + constant
             stats.time_s["cost"] += time.perf_counter() - t0
             accepted = bool(np.isfinite(new_cost)) and new_cost <= cost * (1.0 + 1e-12) + 1e-15
             stats.history.append((new_cost, lam, accepted))
@@ -568,6 +645,7 @@ class BatchSolver:
                 decrease = cost - new_cost
                 poses, landmarks, cost = new_poses, new_landmarks, new_cost
                 at_point = trial
+                point = trial_point
                 relinearize = True
                 if lam > 0.0:
                     rho = decrease / predicted if predicted > 0.0 else 0.0

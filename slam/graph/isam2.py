@@ -8,7 +8,8 @@ Design (measured in ``scripts/bench_graph.py``; see ``docs/graph.md``):
   at iSAM2's linearisation point ``θ`` of their variables.  All line factors of one keyframe
   are stacked into one ``gtsam.JacobianFactor`` (pose + its landmarks) and wrapped in one
   ``gtsam.LinearContainerFactor`` (native C++): one Python object per keyframe instead of per
-  line, and iSAM2 never calls back into Python.
+  line, and iSAM2 never calls back into Python.  A keyframe's stacked factor is kept and, when
+  the block is rebuilt on the same landmarks, overwritten in place (:class:`_BlockTemplate`).
 * **Relinearisation policy.**  A ``LinearContainerFactor`` keeps its Jacobian; when iSAM2
   moves ``θ`` of one of its variables (its own relinearisation, ``relinearize_threshold_*``) it
   only shifts the right-hand side.  After every update whose result reports relinearised
@@ -47,7 +48,7 @@ from slam import interrupts
 from slam.errors import EstimationError
 from slam.geometry import pose_retract
 from slam.graph.config import Isam2Config, SolverConfig
-from slam.graph.factors import linearize_line_factors
+from slam.graph.factors import LineLinearization, linearize_line_factors
 from slam.graph.linear import (
     keys_of,
     line_factor_groups,
@@ -102,6 +103,92 @@ class Isam2Stats:
     )
 
 
+class _BlockTemplate:
+    """A keyframe's stacked line factors, kept to be overwritten when its block is rebuilt.
+
+    GTSAM stacks a keyframe's factors (``JacobianFactor(GaussianFactorGraph)``) with the rows
+    of its line factors in order, two each, and the columns of its keys in key order (the
+    landmarks ``L(j)`` by index, then the pose ``X(i)``), zero where a row does not involve a
+    key.  :meth:`make` checks that layout entry by entry against the stacked factor; then
+    :meth:`write` puts new values of line factors on the same landmarks, in the same order,
+    into the same entries of its memory (``getA()`` / ``getb()`` are views of it): the factor
+    a new stacking would give, bit for bit.
+
+    Attributes
+    ----------
+    factor : gtsam.JacobianFactor
+        The stacked factor (written in place).
+    landmarks : ndarray, shape (k,)
+        The landmark of each line factor, in order.
+    """
+
+    def __init__(
+        self,
+        factor: gtsam.JacobianFactor,
+        landmarks: IntArray,
+        flat_A: FloatArray,
+        b: FloatArray,
+        at_pose: IntArray,
+        at_landmark: IntArray,
+    ) -> None:
+        self.factor = factor
+        self.landmarks = landmarks
+        self._flat_A = flat_A
+        self._b = b
+        self._at_pose = at_pose
+        self._at_landmark = at_landmark
+
+    @classmethod
+    def make(
+        cls,
+        factor: gtsam.JacobianFactor,
+        pose: int,
+        landmarks: IntArray,
+        A_pose: FloatArray,
+        A_landmark: FloatArray,
+        b: FloatArray,
+    ) -> _BlockTemplate | None:
+        """The template of a stacked ``factor`` (None if it is not laid out as expected).
+
+        ``A_pose`` ``(k, 2, 3)``, ``A_landmark`` ``(k, 2, 2)``, ``b`` ``(k, 2)``: the line
+        factors ``factor`` was stacked from.
+        """
+        k = landmarks.shape[0]
+        lms = np.unique(landmarks)
+        m, n = 2 * k, 2 * lms.shape[0] + 3
+        keys = keys_of("l", lms) + keys_of("x", np.array([pose]))
+        A, b_view = factor.getA(), factor.getb()
+        if (
+            list(factor.keys()) != keys
+            or A.shape != (m, n)
+            or b_view.shape != (m,)
+            or not (A.flags.f_contiguous and A.flags.writeable and b_view.flags.writeable)
+            or A.flags.owndata
+            or b_view.flags.owndata
+        ):
+            return None
+        flat_A = A.T.reshape(-1)  # column-major memory: entry (r, c) at c·m + r
+        if not np.shares_memory(flat_A, A):
+            return None
+        row = 2 * np.arange(k)[:, None, None] + np.arange(2)[None, :, None]
+        col_l = 2 * np.searchsorted(lms, landmarks)[:, None, None] + np.arange(2)[None, None, :]
+        col_p = 2 * lms.shape[0] + np.arange(3)[None, None, :]
+        at_pose = col_p * m + row
+        at_landmark = col_l * m + row
+        expected = np.zeros(m * n)
+        expected[at_pose] = A_pose
+        expected[at_landmark] = A_landmark
+        if not (np.array_equal(flat_A, expected) and np.array_equal(b_view, b.reshape(-1))):
+            return None
+        return cls(factor, landmarks.copy(), flat_A, b_view, at_pose, at_landmark)
+
+    def write(self, A_pose: FloatArray, A_landmark: FloatArray, b: FloatArray) -> None:
+        """New values of the same line factors (shapes as in :meth:`make`)."""
+        self._flat_A[self._at_pose] = A_pose
+        self._flat_A[self._at_landmark] = A_landmark
+        self._b[...] = b.reshape(-1)
+
+
 class Isam2Solver:
     """Mirror a :class:`LineGraph` into ``gtsam.ISAM2``, one update per call.
 
@@ -116,6 +203,8 @@ class Isam2Solver:
         self.config = config or Isam2Config()
         self.solver = solver or SolverConfig()
         self.stats = Isam2Stats()
+        # per keyframe, its last stacked block (kept across restarts)
+        self._templates: dict[int, _BlockTemplate] = {}
         self._start()
 
     def _start(self) -> None:
@@ -178,7 +267,10 @@ class Isam2Solver:
     ) -> list[gtsam.LinearContainerFactor]:
         """One ``LinearContainerFactor`` per keyframe in ``poses``, linearised at ``θ``.
 
-        The numpy linearisation runs once for all the blocks' factors together.
+        The numpy linearisation runs once for all the blocks' factors together.  A keyframe
+        whose line factors are on the same landmarks as when its block was last built reuses
+        that block's stacked ``JacobianFactor`` (:class:`_BlockTemplate`, overwritten in
+        place; ``LinearContainerFactor`` copies it); the others are stacked by GTSAM.
         """
         if not poses:
             return []
@@ -197,11 +289,46 @@ class Isam2Solver:
             self.solver.robust_kernel,
             self.solver.robust_k,
         )
-        jfs = line_jacobian_factors(fp, lm, lin)
-        first, _ = line_factor_groups(fp, lm)  # the line factors each of jfs starts with
-        bounds = np.searchsorted(first, np.cumsum([0] + [g.shape[0] for g in groups]))
         self._lin_pose.data[fs] = theta_p
         self._lin_lm.data[fs] = theta_l
+        offsets = np.cumsum([0] + [g.shape[0] for g in groups]).tolist()
+        stacked: list[gtsam.JacobianFactor | None] = [None] * len(poses)
+        fresh: list[int] = []
+        for b, p in enumerate(poses):
+            a, e = offsets[b], offsets[b + 1]
+            template = self._templates.get(p)
+            if template is not None and np.array_equal(template.landmarks, lm[a:e]):
+                template.write(lin.A_pose[a:e], lin.A_landmark[a:e], lin.b[a:e])
+                stacked[b] = template.factor
+            else:
+                fresh.append(b)
+        if fresh:
+            rows = np.concatenate([np.arange(offsets[b], offsets[b + 1]) for b in fresh])
+            sub = LineLinearization(
+                lin.A_pose[rows],
+                lin.A_landmark[rows],
+                lin.b[rows],
+                lin.whitened_residual[rows],
+                lin.weights[rows],
+            )
+            jfs = line_jacobian_factors(fp[rows], lm[rows], sub)
+            first, _ = line_factor_groups(fp[rows], lm[rows])  # the line factors jfs start with
+            sizes = [offsets[b + 1] - offsets[b] for b in fresh]
+            bounds = np.searchsorted(first, np.cumsum([0] + sizes)).tolist()
+            for i, b in enumerate(fresh):
+                gfg = gtsam.GaussianFactorGraph()
+                for jf in jfs[bounds[i] : bounds[i + 1]]:
+                    gfg.push_back(jf)
+                factor = gtsam.JacobianFactor(gfg)
+                stacked[b] = factor
+                a, e = offsets[b], offsets[b + 1]
+                template = _BlockTemplate.make(
+                    factor, poses[b], lm[a:e], lin.A_pose[a:e], lin.A_landmark[a:e], lin.b[a:e]
+                )
+                if template is None:
+                    self._templates.pop(poses[b], None)
+                else:
+                    self._templates[poses[b]] = template
         # one Values with the linearisation point of every variable of these blocks (a
         # LinearContainerFactor copies only its own keys from it)
         values = gtsam.Values()
@@ -212,11 +339,9 @@ class Isam2Solver:
         for key, tl in zip(keys_of("l", lms), self._theta_lms.data[lms], strict=True):
             values.insert(key, gtsam.Point2(tl[0], tl[1]))
         blocks = []
-        for b in range(len(poses)):
-            gfg = gtsam.GaussianFactorGraph()
-            for jf in jfs[bounds[b] : bounds[b + 1]]:
-                gfg.push_back(jf)
-            blocks.append(gtsam.LinearContainerFactor(gtsam.JacobianFactor(gfg), values))
+        for stack in stacked:
+            assert stack is not None
+            blocks.append(gtsam.LinearContainerFactor(stack, values))
         self.stats.blocks_built += len(blocks)
         return blocks
 
