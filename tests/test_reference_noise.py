@@ -114,3 +114,25 @@ def test_relations_nees_allows_for_the_relations_own_noise(tmp_path) -> None:
         allowed.append(relations_nees(traj, rel, cov.relative_covariances, relations_cov=R).values)
     assert np.concatenate(plain).mean() > 5.0
     assert 2.6 < np.concatenate(allowed).mean() < 3.4
+
+
+def test_evaluate_keeps_the_relations_nees_when_the_scatter_cannot_be_estimated(tmp_path) -> None:
+    """No relation between two keyframes: no scatter estimate (the report says why), and the
+    plain relations NEES stands."""
+    from slam.evaluation.report import evaluate_results
+
+    traj, truth, _, path = _synthetic_run(4, tmp_path, 30)
+    rel = _relations(truth, traj.timestamps, _pairs(30)["one keyframe, two scans"])
+    cov = RunCovariances.from_file(path)
+    report = evaluate_results(
+        traj,
+        relations=rel,
+        relative_covariances=cov.relative_covariances,
+        odometry=traj,
+        keyframe_timestamps=cov.graph_file.timestamps,
+    )
+    out = report.to_dict()
+    assert "too few" in out["relations_noise"]["skipped"]
+    assert out["relations_nees"]["n"] == len(rel)
+    assert "relations_nees_with_relations_noise" not in out
+    assert "not estimated" in report.format_table()

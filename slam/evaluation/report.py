@@ -47,6 +47,7 @@ class EvaluationReport:
     relations_nees: RelationsNees | None = None
     relations_noise: RelationNoise | None = None
     relations_nees_with_relations_noise: RelationsNees | None = None
+    relations_noise_skipped: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The content of ``metrics.json``."""
@@ -66,6 +67,8 @@ class EvaluationReport:
             out["relations_nees"] = self.relations_nees.to_dict()
         if self.relations_noise is not None:
             out["relations_noise"] = self.relations_noise.to_dict()
+        elif self.relations_noise_skipped is not None:
+            out["relations_noise"] = {"skipped": self.relations_noise_skipped}
         if self.relations_nees_with_relations_noise is not None:
             out["relations_nees_with_relations_noise"] = (
                 self.relations_nees_with_relations_noise.to_dict()
@@ -155,6 +158,8 @@ class EvaluationReport:
                     f"{cm_mrad(rn['rms_run_xy_theta'])} / {cm_mrad(rn['rms_odometry_xy_theta'])}",
                 ),
             ]
+        if self.relations_noise_skipped is not None:
+            rows.append(("relations' own RMS", f"not estimated: {self.relations_noise_skipped}"))
         if self.relations_nees_with_relations_noise is not None:
             q = self.relations_nees_with_relations_noise
             verdict = "consistent" if q.consistent else "NOT consistent"
@@ -233,18 +238,23 @@ def evaluate_results(
             )
     rel_nees = rel_nees_ref = None
     rel_noise: RelationNoise | None = None
+    noise_skipped: str | None = None
     if relations is not None:
         rel = relations_metric(trajectory, relations, tolerance_s=tol, max_unmatched_fraction=frac)
         if relative_covariances is not None:
             rel_nees = relations_nees(trajectory, relations, relative_covariances, tolerance_s=tol)
             if odometry is not None:
-                rel_noise = relation_noise(
-                    trajectory,
-                    odometry,
-                    relations,
-                    tolerance_s=tol,
-                    keyframe_timestamps=keyframe_timestamps,
-                )
+                try:
+                    rel_noise = relation_noise(
+                        trajectory,
+                        odometry,
+                        relations,
+                        tolerance_s=tol,
+                        keyframe_timestamps=keyframe_timestamps,
+                    )
+                except EvaluationError as exc:  # too few short relations: the rest stands
+                    noise_skipped = str(exc)
+            if rel_noise is not None:
                 rel_nees_ref = relations_nees(
                     trajectory,
                     relations,
@@ -276,4 +286,5 @@ def evaluate_results(
         relations_nees=rel_nees,
         relations_noise=rel_noise,
         relations_nees_with_relations_noise=rel_nees_ref,
+        relations_noise_skipped=noise_skipped,
     )
