@@ -153,6 +153,26 @@ def test_nees_rejects_a_singular_covariance(rng):
         pose_nees(Trajectory(np.arange(5.0), truth), cov, Trajectory(np.arange(5.0), truth))
 
 
+def test_nees_leaves_out_the_gauge_pose_with_zero_covariance(rng):
+    """The EKF's first pose defines the frame (covariance exactly 0): not in the NEES; the
+    others' values are those without it."""
+    n = 50
+    truth = random_walk(rng, n)
+    stamps = np.arange(float(n))
+    cov = random_covariances(rng, n)
+    xi = np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.normal(size=(n, 3)))
+    estimate = pose_compose(truth, pose_inverse(pose_exp(xi)))
+    estimate[0] = truth[0]
+    cov[0] = 0.0
+    got = pose_nees(Trajectory(stamps, estimate), cov, Trajectory(stamps, truth))
+    rest = pose_nees(
+        Trajectory(stamps[1:], estimate[1:]), cov[1:], Trajectory(stamps[1:], truth[1:])
+    )
+    assert got.n == n - 1 and got.mean == pytest.approx(rest.mean)
+    with pytest.raises(EvaluationError, match="zero covariance"):
+        pose_nees(Trajectory(stamps, estimate), cov * 0.0, Trajectory(stamps, truth))
+
+
 def test_pose_nees_values_pair_by_index_and_leave_unusable_covariances_undefined(rng):
     truth = random_walk(rng, 40)
     cov = random_covariances(rng, 40)

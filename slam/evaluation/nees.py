@@ -179,9 +179,11 @@ def pose_nees(
     """NEES of every estimated pose that has a ground-truth pose of the same stamp.
 
     Every matched pose must have a positive-definite covariance (else
-    :class:`~slam.errors.EvaluationError`); :func:`pose_nees_values` instead marks such poses
-    undefined.  The mean is tested against :func:`nees_bounds` of the matched poses, each pose
-    against the single-pose interval.
+    :class:`~slam.errors.EvaluationError`), except a pose whose covariance is exactly zero: the
+    gauge (the EKF's first pose, which defines the world frame), left out of the NEES.
+    :func:`pose_nees_values` instead marks every unusable pose undefined.  The mean is tested
+    against :func:`nees_bounds` of the matched poses, each pose against the single-pose
+    interval.
     """
     cov = np.asarray(covariances, dtype=np.float64)
     if cov.shape != (len(estimate), 3, 3):
@@ -192,6 +194,10 @@ def pose_nees(
         tolerance_s=tolerance_s,
         max_unmatched_fraction=max_unmatched_fraction,
     )
+    gauge = ~np.any(cov[i_est] != 0.0, axis=(1, 2))
+    i_est, i_ref = i_est[~gauge], i_ref[~gauge]
+    if i_est.size == 0:
+        raise EvaluationError("every matched pose has a zero covariance: no NEES")
     values = nees_values(_pose_errors(estimate.poses[i_est], ground_truth.poses[i_ref]), cov[i_est])
     n, dof = values.size, 3
     lower, upper = nees_bounds(dof, n, confidence)
