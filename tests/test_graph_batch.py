@@ -465,3 +465,16 @@ def test_linearisation_gives_the_cost_of_its_factors(free_from):
         point = solver._linear_batches(g, g.poses, g.landmarks)
         expected = solver.cost(g, g.poses, g.landmarks)
     assert point.cost == expected
+
+
+@pytest.mark.parametrize("method", ["colamd", "metis"])
+def test_fill_reducing_order_covers_uncoupled_variables(method):
+    """Every variable once, those no factor couples included (METIS alone cannot take them)."""
+    from slam.graph.sparse import fill_reducing_order
+
+    dims = np.full(6, 3)
+    a, b = np.array([0, 1, 3]), np.array([1, 2, 4])  # 5 is coupled to nothing
+    order = fill_reducing_order(dims, a, b, method)
+    assert sorted(order.tolist()) == list(range(6))
+    alone = fill_reducing_order(dims[:2], np.zeros(0, np.int64), np.zeros(0, np.int64), method)
+    assert sorted(alone.tolist()) == [0, 1]

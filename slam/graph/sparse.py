@@ -189,13 +189,19 @@ def fill_reducing_order(
     alone = np.ones(V, bool)
     alone[pairs_a] = False
     alone[pairs_b] = False
-    for v in np.flatnonzero(alone).tolist():
-        push(v)
     if method == "metis":
-        ordering = gtsam.Ordering.MetisSymbolicFactorGraph(sfg)
+        # METIS orders the coupled variables; an uncoupled one (no factor shares it) comes
+        # last (GTSAM's METIS wrapper does not take a variable without neighbours)
+        coupled: list[int] = []
+        if keys.size:
+            ordering = gtsam.Ordering.MetisSymbolicFactorGraph(sfg)
+            coupled = [ordering.at(i) for i in range(ordering.size())]
+        order = np.array(coupled + np.flatnonzero(alone).tolist(), dtype=np.int64)
     else:
+        for v in np.flatnonzero(alone).tolist():
+            push(v)
         ordering = gtsam.Ordering.ColamdSymbolicFactorGraph(sfg)
-    order = np.array([ordering.at(i) for i in range(ordering.size())], dtype=np.int64)
+        order = np.array([ordering.at(i) for i in range(ordering.size())], dtype=np.int64)
     if order.shape[0] != V:  # pragma: no cover - every variable is in the symbolic graph
         raise EstimationError("the ordering does not cover every variable")
     return order
