@@ -44,6 +44,67 @@ def anchored_endpoints(rho_phi: FloatArray, anchors: FloatArray, extents: FloatA
     return foot[:, None, :] + extents[:, :, None] * t[:, None, :]
 
 
+def _bits(a: FloatArray) -> NDArray[np.int64]:
+    """The bit patterns of a float array (``−0.0`` differs from ``0.0``, NaN equals itself)."""
+    return np.ascontiguousarray(a, dtype=np.float64).view(np.int64)
+
+
+class _ExtentCache:
+    """Each factor's interval along its landmark at the last refresh, and what it was taken at.
+
+    :meth:`extents` recomputes (:meth:`LineGraph.factor_extents`) only the intervals of new
+    factors and of factors whose pose, landmark (value or rewiring) changed since, bit for bit;
+    an interval depends on nothing else (the factor's end points and its landmark's anchor never
+    change), and is computed element by element, so the result is the one a computation of
+    every factor gives.  The landmarks' unions are then taken over every factor as
+    :meth:`LineGraph.landmark_extents` takes them.
+    """
+
+    def __init__(self) -> None:
+        self._poses = np.zeros((0, 3), dtype=np.int64)
+        self._landmarks = np.zeros((0, 2), dtype=np.int64)
+        self._factor_landmark = np.zeros(0, dtype=np.intp)
+        self._s = np.zeros((0, 2))
+
+    def extents(self, g: LineGraph) -> FloatArray:
+        """:meth:`LineGraph.landmark_extents` of ``g``, from the cached intervals."""
+        F, M = g.n_line_factors, g.n_landmarks
+        out = np.full((M, 2), np.nan)
+        if F == 0:
+            return out
+        poses, landmarks = _bits(g.poses), _bits(g.landmarks)
+        fl = g.factor_landmark
+        n = self._s.shape[0]
+        if n > F:  # factors are only ever added; otherwise start afresh
+            n = 0
+        pose_moved = np.ones(poses.shape[0], dtype=bool)
+        k = min(poses.shape[0], self._poses.shape[0])
+        pose_moved[:k] = (poses[:k] != self._poses[:k]).any(axis=1)
+        lm_moved = np.ones(landmarks.shape[0], dtype=bool)
+        k = min(landmarks.shape[0], self._landmarks.shape[0])
+        lm_moved[:k] = (landmarks[:k] != self._landmarks[:k]).any(axis=1)
+        dirty = np.ones(F, dtype=bool)
+        dirty[:n] = (
+            pose_moved[g.factor_pose[:n]] | lm_moved[fl[:n]] | (fl[:n] != self._factor_landmark)
+        )
+        s = np.empty((F, 2))
+        s[:n] = self._s[:n]
+        idx = np.flatnonzero(dirty)
+        if idx.size:
+            s[idx] = g.factor_extents(idx)
+        self._poses, self._landmarks = poses.copy(), landmarks.copy()
+        self._factor_landmark = fl.copy()
+        self._s = s
+        lo = np.full(M, np.inf)
+        hi = np.full(M, -np.inf)
+        np.minimum.at(lo, fl, s[:, 0])
+        np.maximum.at(hi, fl, s[:, 1])
+        seen = np.isfinite(lo)
+        out[seen, 0] = lo[seen]
+        out[seen, 1] = hi[seen]
+        return out
+
+
 @dataclass(frozen=True, eq=False)
 class BookSnapshot:
     """The estimate and landmark bookkeeping at one moment (:meth:`LandmarkBook.snapshot`)."""
@@ -79,6 +140,7 @@ class LandmarkBook:
         self._last_kf = GrowableArray((), dtype=np.intp)
         self._side = GrowableArray(())
         self._fit_cov = GrowableArray((2, 2))
+        self._extent_cache = _ExtentCache()
 
     # -- views -------------------------------------------------------------------------------
     @property
@@ -218,8 +280,12 @@ class LandmarkBook:
             self._last_kf.data[j] = int(g.factor_pose[f].max())
 
     def refresh_extents(self) -> None:
-        """Extents recomputed from every factor at the current estimate."""
-        self.extents = self.graph.landmark_extents()
+        """Extents recomputed from every factor at the current estimate.
+
+        Only the factors whose pose or landmark changed are recomputed (the result is the
+        same as :meth:`LineGraph.landmark_extents`'s, bit for bit).
+        """
+        self.extents = self._extent_cache.extents(self.graph)
 
     def update_extents(self, new_factors: IntArray, estimate_moved: bool) -> None:
         """Extents grown by ``new_factors`` (all recomputed when the estimate moved)."""
