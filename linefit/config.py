@@ -95,7 +95,10 @@ class LineFitConfig:
     alpha_tolerance_rad : float
         The iteration stops when every line's ``|δα|`` is below this (rad).
     min_points : int
-        Fewest supporting points for a line.
+        Fewest supporting points for a line.  Default 3, the fewest that leave a residual to
+        test (two points fix any line): how much wall a line must cover is set in metres
+        (``min_length_m``, and the SLAM front end's ``min_line_length_m``), so that the lines
+        kept do not depend on the scanner's angular resolution.
     min_length_m : float
         Shortest accepted line (m), total visible length of its segments.
     max_range_m : float or None
@@ -120,7 +123,7 @@ class LineFitConfig:
         Hough accumulator resolution Δβ (rad) and Δℛ (m); defaults 3° and 10 cm (coarse on
         purpose: each peak is refined by a total-least-squares line, see :mod:`linefit.hough`).
     hough_min_votes : int
-        Smallest Hough peak that starts a line.
+        Smallest Hough peak that starts a line (default 3, as ``min_points``).
     hough_gather_m : float
         Points within this distance (m) of a peak's line, then of its refined line, join it.
     hough_max_peaks : int
@@ -148,7 +151,7 @@ class LineFitConfig:
     alpha_update: Literal["gauss_newton", "prop2"] = "gauss_newton"
     max_iterations: int = 30
     alpha_tolerance_rad: float = 1e-10
-    min_points: int = 5
+    min_points: int = 3
     min_length_m: float = 0.1
     max_range_m: float | None = None
     outlier_chi2: float = 10.83
@@ -159,7 +162,7 @@ class LineFitConfig:
     breakpoint_sigma: float = 3.0
     hough_angle_step_rad: float = math.radians(3.0)
     hough_range_step_m: float = 0.1
-    hough_min_votes: int = 5
+    hough_min_votes: int = 3
     hough_gather_m: float = 0.05
     hough_max_peaks: int = 60
     hough_recover: bool = True

@@ -137,7 +137,7 @@ def test_compiled_finds_the_walls() -> None:
 def test_empty_and_degenerate_scans() -> None:
     bearings = np.linspace(-1.0, 1.0, 50)
     ranges = np.full((3, 50), np.nan)
-    ranges[1, :3] = 2.0  # too few points
+    ranges[1, :2] = 2.0  # too few points (two: no residual to test)
     ranges[2] = 3.0  # an arc: no line
     for cfg in (CONFIGS["default"], CONFIGS["split_merge"]):
         got = extract_lines_batch(ranges, bearings, cfg)

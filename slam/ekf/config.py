@@ -103,7 +103,7 @@ class EkfConfig:
     min_landmark_observations: int = 3
     line_sigma_extra: tuple[float, float] = (0.02, 0.01)
     blas_threads: int = 1
-    min_line_points: int = 5
+    min_line_points: int = 3
     min_line_length_m: float = 0.3
 
     def __post_init__(self) -> None:

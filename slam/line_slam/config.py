@@ -151,6 +151,8 @@ class SlamConfig:
         the first estimate.
     min_line_points : int
         Lines with fewer supporting points are ignored (neither matched nor new landmarks).
+        Default 3, the fewest with a residual: how much wall a usable line covers is
+        ``min_line_length_m``, in metres, whatever the scanner's angular resolution.
     min_line_length_m : float
         Shorter lines are ignored (default 0.3 m: shorter stubs have so uncertain an angle that
         their gates admit unrelated stubs; see ``docs/graph.md``).
@@ -179,7 +181,7 @@ class SlamConfig:
     line_model_error: Literal["estimated", "fixed"] = "fixed"
     line_model_sigma_r_m: float = 0.02
     line_model_sigma_alpha_rad: float = 0.01
-    min_line_points: int = 5
+    min_line_points: int = 3
     min_line_length_m: float = 0.3
     pose_covariances: Literal["keyframes", "none"] = "keyframes"
     map_segment_gap_m: float = 0.3
