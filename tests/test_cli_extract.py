@@ -51,7 +51,8 @@ def test_extract_writes_one_object_per_scan_and_the_config(sim_log, tmp_path):
             assert ln["r"] >= 0 and -np.pi < ln["alpha"] <= np.pi
             cov = np.array(ln["cov"])
             assert cov.shape == (3, 3) and np.allclose(cov, cov.T)
-            assert np.array(ln["endpoints"]).shape == (2, 2) and ln["n_points"] >= RunConfig().linefit.min_points
+            assert np.array(ln["endpoints"]).shape == (2, 2)
+            assert ln["n_points"] >= RunConfig().linefit.min_points
         # each of the room's walls hit by ≥ 10 beams is there, once
         for k in np.flatnonzero(hit[:4] >= 10):
             r_t, a_t = segment_line_in_sensor(world, int(k), np.array(pose))
