@@ -32,7 +32,14 @@ from slam.graph.factors import sqrt_information_2x2
 from slam.graph.odometry import sqrt_information
 from slam.models.anchored import anchored_from_r_alpha, r_alpha_from_anchored
 
-__all__ = ["GrowableArray", "LineGraph", "MergeRecord", "landmark_key", "pose_key"]
+__all__ = [
+    "GrowableArray",
+    "LineGraph",
+    "MergeRecord",
+    "landmark_key",
+    "pose_key",
+    "unite_factor_extents",
+]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -92,6 +99,22 @@ class MergeRecord:
     drop: int
     factors: IntArray
     undo: bool = False
+
+
+def unite_factor_extents(s: FloatArray, factor_landmark: IntArray, n_landmarks: int) -> FloatArray:
+    """Per landmark, the union ``(s_min, s_max)`` of its factors' intervals ``s`` ``(F, 2)``.
+
+    ``(n_landmarks, 2)``; landmarks without factors get ``(nan, nan)``.
+    """
+    out = np.full((n_landmarks, 2), np.nan)
+    lo = np.full(n_landmarks, np.inf)
+    hi = np.full(n_landmarks, -np.inf)
+    np.minimum.at(lo, factor_landmark, s[:, 0])
+    np.maximum.at(hi, factor_landmark, s[:, 1])
+    seen = np.isfinite(lo)
+    out[seen, 0] = lo[seen]
+    out[seen, 1] = hi[seen]
+    return out
 
 
 class LineGraph:
@@ -488,17 +511,6 @@ class LineGraph:
 
         The union of its factors' intervals; landmarks without factors get ``(nan, nan)``.
         """
-        M = self.n_landmarks
-        out = np.full((M, 2), np.nan)
         if self.n_line_factors == 0:
-            return out
-        s = self.factor_extents()
-        lm = self.factor_landmark
-        lo = np.full(M, np.inf)
-        hi = np.full(M, -np.inf)
-        np.minimum.at(lo, lm, s[:, 0])
-        np.maximum.at(hi, lm, s[:, 1])
-        seen = np.isfinite(lo)
-        out[seen, 0] = lo[seen]
-        out[seen, 1] = hi[seen]
-        return out
+            return np.full((self.n_landmarks, 2), np.nan)
+        return unite_factor_extents(self.factor_extents(), self.factor_landmark, self.n_landmarks)

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from slam.frontend.config import FrontendConfig
 from slam.frontend.loop_closure import LoopLines
 from slam.frontend.tentative import TentativePool
-from slam.graph.problem import GrowableArray, LineGraph
+from slam.graph.problem import GrowableArray, LineGraph, unite_factor_extents
 from slam.line_slam.observations import ScanLines
 from slam.models.anchored import anchored_jacobian, observe_anchored, r_alpha_from_anchored
 
@@ -69,9 +69,8 @@ class _ExtentCache:
     def extents(self, g: LineGraph) -> FloatArray:
         """:meth:`LineGraph.landmark_extents` of ``g``, from the cached intervals."""
         F, M = g.n_line_factors, g.n_landmarks
-        out = np.full((M, 2), np.nan)
         if F == 0:
-            return out
+            return np.full((M, 2), np.nan)
         poses, landmarks = _bits(g.poses), _bits(g.landmarks)
         fl = g.factor_landmark
         n = self._s.shape[0]
@@ -95,14 +94,7 @@ class _ExtentCache:
         self._poses, self._landmarks = poses.copy(), landmarks.copy()
         self._factor_landmark = fl.copy()
         self._s = s
-        lo = np.full(M, np.inf)
-        hi = np.full(M, -np.inf)
-        np.minimum.at(lo, fl, s[:, 0])
-        np.maximum.at(hi, fl, s[:, 1])
-        seen = np.isfinite(lo)
-        out[seen, 0] = lo[seen]
-        out[seen, 1] = hi[seen]
-        return out
+        return unite_factor_extents(s, fl, M)
 
 
 @dataclass(frozen=True, eq=False)
