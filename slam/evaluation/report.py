@@ -132,11 +132,7 @@ class EvaluationReport:
                 ),
                 (
                     "relations NEES by gap",
-                    "; ".join(
-                        f"{_gap_label(g['gap_s'])}: {g['mean']:.2f} (n={g['n']})"
-                        for g in q.by_gap()
-                        if g["n"]
-                    ),
+                    _by_gap_text(q),
                 ),
             ]
         if self.relations_noise is not None:
@@ -171,15 +167,18 @@ class EvaluationReport:
                 ),
                 (
                     "  by gap",
-                    "; ".join(
-                        f"{_gap_label(g['gap_s'])}: {g['mean']:.2f} (n={g['n']})"
-                        for g in q.by_gap()
-                        if g["n"]
-                    ),
+                    _by_gap_text(q),
                 ),
             ]
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def _by_gap_text(q: RelationsNees) -> str:
+    """Mean NEES per time gap of the non-empty gap classes, as the table prints it."""
+    return "; ".join(
+        f"{_gap_label(g['gap_s'])}: {g['mean']:.2f} (n={g['n']})" for g in q.by_gap() if g["n"]
+    )
 
 
 def _gap_label(gap: list[float | None]) -> str:
