@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from slam.evaluation.reference_noise import three_cornered_hat
 from slam.evaluation.timestamps import match_timestamps
 from slam.geometry import pose_between
 from slam.io.carmen import scan_trajectory
@@ -99,14 +100,7 @@ def main() -> None:
     print(
         f"    correlation of the run's and the odometry's errors: x {corr[0]:.2f}, y {corr[1]:.2f}"
     )
-    v_run_rel = np.mean(er**2, axis=0)
-    v_odo_rel = np.mean(eo**2, axis=0)
-    v_run_odo = np.mean((er - eo) ** 2, axis=0)
-    hat = {
-        "relations": (v_run_rel + v_odo_rel - v_run_odo) / 2,
-        "run": (v_run_rel + v_run_odo - v_odo_rel) / 2,
-        "odometry": (v_odo_rel + v_run_odo - v_run_rel) / 2,
-    }
+    hat = dict(zip(("relations", "run", "odometry"), three_cornered_hat(er, eo), strict=True))
     print("    three-cornered hat, RMS per axis (x, y) in m (negative variance: shown as 0):")
     for name, v in hat.items():
         s = np.sqrt(np.maximum(v, 0.0))
