@@ -42,9 +42,7 @@ from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
 from slam.errors import ConfigError, DegenerateGeometryError, InputError
-from slam.geometry import line_residual, predict_line_measurement
 from slam.graph.robust import RobustKernel, robust_cost
-from slam.models.anchored import r_alpha_from_anchored
 
 __all__ = [
     "LineLinearization",
@@ -107,6 +105,57 @@ def sqrt_information_2x2(cov: FloatArray, what: str = "line covariance") -> Floa
     return W
 
 
+def _rows(
+    poses_world_laser: FloatArray,
+    landmarks: FloatArray,
+    anchors: FloatArray,
+    z: FloatArray,
+    sqrt_info: FloatArray,
+) -> tuple[tuple[int, ...], FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The factors' common shape and their inputs broadcast to it, one row per factor.
+
+    Returns the shape and ``(F, 3)`` poses, ``(F, 2)`` landmarks, anchors and measurements,
+    ``(F, 2, 2)`` whitening matrices.
+    """
+    P = np.asarray(poses_world_laser, dtype=float)
+    V = np.asarray(landmarks, dtype=float)
+    C = np.asarray(anchors, dtype=float)
+    Z = np.asarray(z, dtype=float)
+    S = np.asarray(sqrt_info, dtype=float)
+    shape = np.broadcast_shapes(
+        P.shape[:-1], V.shape[:-1], C.shape[:-1], Z.shape[:-1], S.shape[:-2]
+    )
+    n = math.prod(shape)
+    return (
+        shape,
+        np.broadcast_to(P, (*shape, 3)).reshape(n, 3),
+        np.broadcast_to(V, (*shape, 2)).reshape(n, 2),
+        np.broadcast_to(C, (*shape, 2)).reshape(n, 2),
+        np.broadcast_to(Z, (*shape, 2)).reshape(n, 2),
+        np.broadcast_to(S, (*shape, 2, 2)).reshape(n, 2, 2),
+    )
+
+
+def _angles(pose: FloatArray, v: FloatArray, jacobians: bool) -> tuple[FloatArray, FloatArray]:
+    """Sines and cosines of the factors' angles, by numpy, for the compiled kernels.
+
+    Rows ``cos φ, sin φ, cos α_w, sin α_w`` (``α_w`` the wrapped ``φ``) and, with
+    ``jacobians``, ``cos α_s, sin α_s``; and ``α_s = α_w − θ``.
+    """
+    phi = v[:, 1]
+    a_w = np.asarray(wrap_angle(phi))
+    a_s = a_w - pose[:, 2]
+    trig = np.empty((6 if jacobians else 4, pose.shape[0]))
+    np.cos(phi, out=trig[0])
+    np.sin(phi, out=trig[1])
+    np.cos(a_w, out=trig[2])
+    np.sin(a_w, out=trig[3])
+    if jacobians:
+        np.cos(a_s, out=trig[4])
+        np.sin(a_s, out=trig[5])
+    return trig, a_s
+
+
 def line_factor_residuals(
     poses_world_laser: FloatArray,
     landmarks: FloatArray,
@@ -115,10 +164,11 @@ def line_factor_residuals(
     sqrt_info: FloatArray,
 ) -> FloatArray:
     """Whitened residuals ``W e`` of line factors, shape ``(F, 2)`` (inputs row-aligned)."""
-    lm = r_alpha_from_anchored(landmarks, anchors)
-    z_pred, _, _ = predict_line_measurement(lm, poses_world_laser)
-    e, _ = line_residual(z_pred, z)
-    return np.einsum("fij,fj->fi", sqrt_info, e)
+    shape, pose, v, c, zm, W = _rows(poses_world_laser, landmarks, anchors, z, sqrt_info)
+    trig, a_s = _angles(pose, v, jacobians=False)
+    ew = np.empty((pose.shape[0], 2))
+    _residual_kernel(pose, v, c, zm, W, trig, a_s, ew)
+    return ew.reshape(*shape, 2)
 
 
 def line_factor_costs(
@@ -171,6 +221,66 @@ def _wrap(a: float) -> float:  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _residual(
+    x: float,
+    y: float,
+    rho: float,
+    c0: float,
+    c1: float,
+    trig: FloatArray,
+    a_s: float,
+    z: FloatArray,
+    f: int,
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """Residual ``e`` of factor ``f`` and its representative's sign (see the kernels).
+
+    The operations of :func:`slam.models.anchored.r_alpha_from_anchored`,
+    :func:`slam.geometry.predict_line_measurement` and :func:`slam.geometry.line_residual`.
+    """
+    r_w = c0 * trig[0, f] + c1 * trig[1, f] + rho
+    z0 = r_w - x * trig[2, f] - y * trig[3, f]
+    z1 = _wrap(a_s)
+    d_alpha = _wrap(z1 - z[f, 1])
+    flip = abs(d_alpha) > math.pi / 2.0
+    sign = -1.0 if flip else 1.0
+    e1 = _wrap(d_alpha + math.pi) if flip else _wrap(d_alpha)
+    e0 = sign * z0 - z[f, 0]
+    return e0, e1, sign
+
+
+@njit(cache=True, nogil=True)
+def _residual_kernel(
+    poses: FloatArray,
+    landmarks: FloatArray,
+    anchors: FloatArray,
+    z: FloatArray,
+    sqrt_info: FloatArray,
+    trig: FloatArray,
+    a_s: FloatArray,
+    ew: FloatArray,
+) -> None:  # pragma: no cover - compiled
+    """The arithmetic of :func:`line_factor_residuals` after its sines and cosines.
+
+    ``trig`` holds the rows ``cos φ, sin φ, cos α_w, sin α_w`` (:func:`_angles`); ``ew`` (``W e``)
+    is written per factor, summed as ``einsum`` sums it.
+    """
+    for f in range(poses.shape[0]):
+        e0, e1, _ = _residual(
+            poses[f, 0],
+            poses[f, 1],
+            landmarks[f, 0],
+            anchors[f, 0],
+            anchors[f, 1],
+            trig,
+            a_s[f],
+            z,
+            f,
+        )
+        ew[f, 0] = 0.0 + sqrt_info[f, 0, 0] * e0 + sqrt_info[f, 0, 1] * e1
+        ew[f, 1] = 0.0 + sqrt_info[f, 1, 0] * e0 + sqrt_info[f, 1, 1] * e1
+
+
+@njit(cache=True, nogil=True)
 def _linearize_kernel(
     poses: FloatArray,
     landmarks: FloatArray,
@@ -190,7 +300,7 @@ def _linearize_kernel(
     """The arithmetic of :func:`linearize_line_factors` after its sines and cosines.
 
     ``trig`` holds the rows ``cos φ, sin φ, cos α_w, sin α_w, cos α_s, sin α_s`` (``α_w`` the
-    wrapped ``φ``, ``α_s = α_w − θ``, given in ``a_s``); ``kernel`` is a code of
+    wrapped ``φ``, ``α_s = α_w − θ``, given in ``a_s``; :func:`_angles`); ``kernel`` is a code of
     ``_KERNEL_CODE``.  Outputs ``A_pose``, ``A_landmark``, ``b``, ``ew`` (``W e``) and
     ``weights`` are written per factor.  Every entry is the sequence of IEEE operations the
     numpy functions perform: products ``W M`` of 2×2 by 2×n matrices as
@@ -199,24 +309,13 @@ def _linearize_kernel(
     ``einsum`` sums it, ``‖W e‖`` as ``np.linalg.norm``, the kernels' weights as
     :func:`slam.graph.robust.robust_weights`.
     """
-    half_pi = math.pi / 2.0
     for f in range(poses.shape[0]):
         x, y = poses[f, 0], poses[f, 1]
-        rho = landmarks[f, 0]
         c0, c1 = anchors[f, 0], anchors[f, 1]
         cphi, sphi = trig[0, f], trig[1, f]
         caw, saw = trig[2, f], trig[3, f]
         cas, sas = trig[4, f], trig[5, f]
-        # landmark in (r, α) (r_alpha_from_anchored), prediction (predict_line_measurement)
-        r_w = c0 * cphi + c1 * sphi + rho
-        z0 = r_w - x * caw - y * saw
-        z1 = _wrap(a_s[f])
-        # residual on the measurement's representative (line_residual)
-        d_alpha = _wrap(z1 - z[f, 1])
-        flip = abs(d_alpha) > half_pi
-        sign = -1.0 if flip else 1.0
-        e1 = _wrap(d_alpha + math.pi) if flip else _wrap(d_alpha)
-        e0 = sign * z0 - z[f, 0]
+        e0, e1, sign = _residual(x, y, landmarks[f, 0], c0, c1, trig, a_s[f], z, f)
         # measurement Jacobians, the r row times the sign; landmark one through the chart
         hp00 = -cas * sign
         hp01 = -sas * sign
@@ -289,31 +388,9 @@ def linearize_line_factors(
     """
     if kernel not in _KERNEL_CODE:
         raise ConfigError(f"unknown robust kernel {kernel!r}")
-    P = np.asarray(poses_world_laser, dtype=float)
-    V = np.asarray(landmarks, dtype=float)
-    C = np.asarray(anchors, dtype=float)
-    Z = np.asarray(z, dtype=float)
-    S = np.asarray(sqrt_info, dtype=float)
-    shape = np.broadcast_shapes(
-        P.shape[:-1], V.shape[:-1], C.shape[:-1], Z.shape[:-1], S.shape[:-2]
-    )
-    n = math.prod(shape)
-    pose = np.broadcast_to(P, (*shape, 3)).reshape(n, 3)
-    v = np.broadcast_to(V, (*shape, 2)).reshape(n, 2)
-    c = np.broadcast_to(C, (*shape, 2)).reshape(n, 2)
-    zm = np.broadcast_to(Z, (*shape, 2)).reshape(n, 2)
-    W = np.broadcast_to(S, (*shape, 2, 2)).reshape(n, 2, 2)
-    # the sines and cosines by numpy (the same functions as the numpy formulation)
-    phi = v[:, 1]
-    a_w = np.asarray(wrap_angle(phi))
-    a_s = a_w - pose[:, 2]
-    trig = np.empty((6, n))
-    np.cos(phi, out=trig[0])
-    np.sin(phi, out=trig[1])
-    np.cos(a_w, out=trig[2])
-    np.sin(a_w, out=trig[3])
-    np.cos(a_s, out=trig[4])
-    np.sin(a_s, out=trig[5])
+    shape, pose, v, c, zm, W = _rows(poses_world_laser, landmarks, anchors, z, sqrt_info)
+    trig, a_s = _angles(pose, v, jacobians=True)
+    n = pose.shape[0]
     A_pose = np.empty((n, 2, 3))
     A_landmark = np.empty((n, 2, 2))
     b = np.empty((n, 2))
