@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from itertools import chain
 
 import gtsam
 import numpy as np
@@ -120,6 +121,8 @@ class _BlockTemplate:
         The stacked factor (written in place).
     landmarks : ndarray, shape (k,)
         The landmark of each line factor, in order.
+    landmark_list : list of int
+        The same as a list.
     """
 
     def __init__(
@@ -133,6 +136,7 @@ class _BlockTemplate:
     ) -> None:
         self.factor = factor
         self.landmarks = landmarks
+        self.landmark_list: list[int] = landmarks.tolist()
         self._flat_A = flat_A
         self._b = b
         self._at_pose = at_pose
@@ -274,8 +278,8 @@ class Isam2Solver:
         """
         if not poses:
             return []
-        groups = [np.asarray(self._factors_of_pose[p], dtype=np.intp) for p in poses]
-        fs = np.concatenate(groups)
+        groups = [self._factors_of_pose[p] for p in poses]
+        fs = np.fromiter(chain.from_iterable(groups), dtype=np.intp)
         fp = graph.factor_pose[fs]
         lm = graph.factor_landmark[fs]
         theta_p = self._theta_poses.data[fp]
@@ -291,13 +295,14 @@ class Isam2Solver:
         )
         self._lin_pose.data[fs] = theta_p
         self._lin_lm.data[fs] = theta_l
-        offsets = np.cumsum([0] + [g.shape[0] for g in groups]).tolist()
+        offsets = np.cumsum([0] + [len(g) for g in groups]).tolist()
+        lm_list = lm.tolist()
         stacked: list[gtsam.JacobianFactor | None] = [None] * len(poses)
         fresh: list[int] = []
         for b, p in enumerate(poses):
             a, e = offsets[b], offsets[b + 1]
             template = self._templates.get(p)
-            if template is not None and np.array_equal(template.landmarks, lm[a:e]):
+            if template is not None and template.landmark_list == lm_list[a:e]:
                 template.write(lin.A_pose[a:e], lin.A_landmark[a:e], lin.b[a:e])
                 stacked[b] = template.factor
             else:
@@ -333,11 +338,11 @@ class Isam2Solver:
         # LinearContainerFactor copies only its own keys from it)
         values = gtsam.Values()
         key_p = keys_of("x", np.asarray(poses))
-        for key, tp in zip(key_p, self._theta_poses.data[poses], strict=True):
-            values.insert(key, gtsam.Pose2(tp[0], tp[1], tp[2]))
+        for key, (x, y, t) in zip(key_p, self._theta_poses.data[poses].tolist(), strict=True):
+            values.insert(key, gtsam.Pose2(x, y, t))
         lms = np.unique(lm)
-        for key, tl in zip(keys_of("l", lms), self._theta_lms.data[lms], strict=True):
-            values.insert(key, gtsam.Point2(tl[0], tl[1]))
+        for key, (r, a) in zip(keys_of("l", lms), self._theta_lms.data[lms].tolist(), strict=True):
+            values.insert(key, gtsam.Point2(r, a))
         blocks = []
         for stack in stacked:
             assert stack is not None
@@ -361,12 +366,12 @@ class Isam2Solver:
         touched_lms: set[int] = set()
         # new variables
         new_p = np.arange(self._n_poses, graph.n_poses)
-        for key, p in zip(keys_of("x", new_p), graph.poses[new_p], strict=True):
-            values.insert(key, gtsam.Pose2(p[0], p[1], p[2]))
+        for key, (x, y, t) in zip(keys_of("x", new_p), graph.poses[new_p].tolist(), strict=True):
+            values.insert(key, gtsam.Pose2(x, y, t))
         self._theta_poses.append(graph.poses[new_p])
         new_l = np.arange(self._n_landmarks, graph.n_landmarks)
-        for key, v in zip(keys_of("l", new_l), graph.landmarks[new_l], strict=True):
-            values.insert(key, gtsam.Point2(v[0], v[1]))
+        for key, (r, a) in zip(keys_of("l", new_l), graph.landmarks[new_l].tolist(), strict=True):
+            values.insert(key, gtsam.Point2(r, a))
         self._theta_lms.append(graph.landmarks[new_l])
         touched_poses.update(int(i) for i in new_p)
         touched_lms.update(int(j) for j in new_l)
@@ -427,7 +432,9 @@ class Isam2Solver:
             nfg.add(block)
         if rebuild:
             touched_poses.update(rebuild)
-            fs = np.concatenate([self._factors_of_pose[p] for p in rebuild]).astype(np.intp)
+            fs = np.fromiter(
+                chain.from_iterable(self._factors_of_pose[p] for p in rebuild), dtype=np.intp
+            )
             touched_lms.update(np.unique(graph.factor_landmark[fs]).tolist())
         self.stats.time_s["build"] += time.perf_counter() - t0
         if rebuild and len(rebuild) > 64:
