@@ -42,6 +42,7 @@ from itertools import chain
 
 import gtsam
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
@@ -104,6 +105,52 @@ class Isam2Stats:
     )
 
 
+@njit(cache=True, nogil=True)
+def _block_layout(
+    column: NDArray[np.int64],
+    n_landmarks: int,
+    A_pose: FloatArray,
+    A_landmark: FloatArray,
+    b: FloatArray,
+    flat_A: FloatArray,
+    flat_b: FloatArray,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], bool]:  # pragma: no cover - compiled
+    """Where a stacked factor keeps its line factors' entries, and whether it holds them.
+
+    ``k`` line factors, factor ``f`` on the landmark of column block ``column[f]`` (of
+    ``n_landmarks``, the pose's block after them), stacked in column-major memory ``flat_A``
+    (``2k`` rows) and ``flat_b``: row ``2f + r`` holds factor ``f``'s row ``r``.  Returns the
+    positions of ``A_pose`` ``(k, 2, 3)`` and ``A_landmark`` ``(k, 2, 2)`` in ``flat_A``, and
+    whether ``flat_A`` holds exactly these entries and zeros elsewhere and ``flat_b`` equals
+    ``b`` (``(2k,)``) (``np.array_equal``'s comparison: NaN never equal).
+    """
+    k = column.shape[0]
+    m = 2 * k
+    at_pose = np.empty((k, 2, 3), np.int64)
+    at_landmark = np.empty((k, 2, 2), np.int64)
+    expected = np.zeros(flat_A.shape[0])
+    for f in range(k):
+        for r in range(2):
+            row = 2 * f + r
+            for c in range(3):
+                at = (2 * n_landmarks + c) * m + row
+                at_pose[f, r, c] = at
+                expected[at] = A_pose[f, r, c]
+            for c in range(2):
+                at = (2 * column[f] + c) * m + row
+                at_landmark[f, r, c] = at
+                expected[at] = A_landmark[f, r, c]
+    same = flat_b.shape[0] == b.shape[0]
+    for i in range(flat_A.shape[0]):
+        if flat_A[i] != expected[i]:
+            same = False
+    if same:
+        for i in range(b.shape[0]):
+            if flat_b[i] != b[i]:
+                same = False
+    return at_pose, at_landmark, same
+
+
 class _BlockTemplate:
     """A keyframe's stacked line factors, kept to be overwritten when its block is rebuilt.
 
@@ -158,9 +205,12 @@ class _BlockTemplate:
         factors ``factor`` was stacked from.
         """
         k = landmarks.shape[0]
-        lms = np.unique(landmarks)
-        m, n = 2 * k, 2 * lms.shape[0] + 3
-        keys = keys_of("l", lms) + keys_of("x", np.array([pose]))
+        landmark_list = landmarks.tolist()
+        lms = sorted(set(landmark_list))
+        place = {j: i for i, j in enumerate(lms)}
+        column = np.array([place[j] for j in landmark_list], dtype=np.int64)
+        m, n = 2 * k, 2 * len(lms) + 3
+        keys = keys_of("l", np.array(lms, dtype=np.intp)) + keys_of("x", np.array([pose]))
         A, b_view = factor.getA(), factor.getb()
         if (
             list(factor.keys()) != keys
@@ -174,15 +224,16 @@ class _BlockTemplate:
         flat_A = A.T.reshape(-1)  # column-major memory: entry (r, c) at c·m + r
         if not np.shares_memory(flat_A, A):
             return None
-        row = 2 * np.arange(k)[:, None, None] + np.arange(2)[None, :, None]
-        col_l = 2 * np.searchsorted(lms, landmarks)[:, None, None] + np.arange(2)[None, None, :]
-        col_p = 2 * lms.shape[0] + np.arange(3)[None, None, :]
-        at_pose = col_p * m + row
-        at_landmark = col_l * m + row
-        expected = np.zeros(m * n)
-        expected[at_pose] = A_pose
-        expected[at_landmark] = A_landmark
-        if not (np.array_equal(flat_A, expected) and np.array_equal(b_view, b.reshape(-1))):
+        at_pose, at_landmark, laid_out = _block_layout(
+            column,
+            len(lms),
+            np.ascontiguousarray(A_pose),
+            np.ascontiguousarray(A_landmark),
+            np.ascontiguousarray(b).reshape(-1),
+            flat_A,
+            b_view,
+        )
+        if not laid_out:
             return None
         return cls(factor, landmarks.copy(), flat_A, b_view, at_pose, at_landmark)
 
