@@ -260,6 +260,11 @@ class Isam2Solver:
         self.stats = Isam2Stats()
         # per keyframe, its last stacked block (kept across restarts)
         self._templates: dict[int, _BlockTemplate] = {}
+        # the native odometry factors built so far and what they were built from (kept across
+        # restarts)
+        self._odometry: list[gtsam.NonlinearFactor] = []
+        self._odometry_measured = GrowableArray((3,))
+        self._odometry_cov = GrowableArray((3, 3))
         self._start()
 
     def _start(self) -> None:
@@ -289,6 +294,33 @@ class Isam2Solver:
         self._theta_lms = GrowableArray((2,))
         self._theta_changed = False
         self._since_full = 0
+
+    # -- native factors ----------------------------------------------------------------------
+    def _odometry_factors(self, graph: LineGraph, start: int) -> gtsam.NonlinearFactorGraph:
+        """The native odometry factors ``start:`` of ``graph`` (:func:`native_odometry_factors`).
+
+        Each factor is built once and given again after a restart (:meth:`restart`), as long as
+        the graph's odometry measurements and covariances are the ones it was built from (else
+        they are all built again).
+        """
+        built = len(self._odometry)
+        if start < built and not (
+            np.array_equal(self._odometry_measured.data, graph.odometry_measured[:built])
+            and np.array_equal(self._odometry_cov.data, graph.odometry_cov[:built])
+        ):
+            self._odometry = []
+            self._odometry_measured = GrowableArray((3,))
+            self._odometry_cov = GrowableArray((3, 3))
+            built = 0
+        if graph.n_odometry > built:
+            new = native_odometry_factors(graph, built, with_prior=False)
+            self._odometry.extend(new.at(i) for i in range(new.size()))
+            self._odometry_measured.append(graph.odometry_measured[built:])
+            self._odometry_cov.append(graph.odometry_cov[built:])
+        nfg = gtsam.NonlinearFactorGraph()
+        for factor in self._odometry[start : graph.n_odometry]:
+            nfg.push_back(factor)
+        return nfg
 
     # -- linearisation point -----------------------------------------------------------------
     def _refresh_theta(self) -> None:
@@ -431,7 +463,7 @@ class Isam2Solver:
             nfg.push_back(native_odometry_factors(graph, graph.n_odometry, with_prior=True))
             self._prior_added = True
         if graph.n_odometry > self._n_odometry:
-            nfg.push_back(native_odometry_factors(graph, self._n_odometry, with_prior=False))
+            nfg.push_back(self._odometry_factors(graph, self._n_odometry))
             touched_poses.update(int(i) for i in graph.odometry_first[self._n_odometry :])
             self._n_odometry = graph.n_odometry
         # new line factors
