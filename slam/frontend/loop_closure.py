@@ -581,6 +581,33 @@ def _constraint_votes(
     return votes, inside
 
 
+@njit(cache=True, nogil=True)
+def _smooth3(votes: FloatArray) -> FloatArray:  # pragma: no cover - compiled
+    """Sum of each cell's 3×3 neighbourhood of the square grid ``votes`` (zero outside).
+
+    Per cell, the neighbours are added in the order ``(dx, dy)`` = ``(−1, −1)``, then
+    ``(−1, 0)``, ... ``(1, 1)`` (row by row), starting from the first: the order in which the
+    shifted copies of a zero-padded grid would be summed.
+    """
+    nc = votes.shape[0]
+    pad = np.zeros((nc + 2, nc + 2))
+    pad[1 : nc + 1, 1 : nc + 1] = votes
+    sm = np.empty((nc, nc))
+    for x in range(nc):
+        for y in range(nc):
+            total = pad[x, y]
+            total += pad[x, y + 1]
+            total += pad[x, y + 2]
+            total += pad[x + 1, y]
+            total += pad[x + 1, y + 1]
+            total += pad[x + 1, y + 2]
+            total += pad[x + 2, y]
+            total += pad[x + 2, y + 1]
+            total += pad[x + 2, y + 2]
+            sm[x, y] = total
+    return sm
+
+
 def _top_cells(values: FloatArray, k: int) -> IntArray:
     """Indices of the ``k`` largest positive ``values``, largest first, ties by index.
 
@@ -629,14 +656,7 @@ def _translation_peaks(
     )
     if inside == 0:
         return []
-    votes = flat.reshape(nc, nc)
-    # smooth 3×3 (a crossing may straddle cells)
-    pad = np.pad(votes, 1)
-    sm: FloatArray = pad[0:nc, 0:nc].astype(float)
-    for dx in range(3):
-        for dy in range(3):
-            if dx or dy:
-                sm += pad[dx : dx + nc, dy : dy + nc]
+    sm = _smooth3(flat.reshape(nc, nc))  # a crossing may straddle cells
     peaks: list[FloatArray] = []
     min_sep = max(3, round(0.5 / cell))
     taken: list[tuple[int, int]] = []
