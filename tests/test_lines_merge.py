@@ -11,6 +11,7 @@ from slam.geometry import wrap_angle
 from slam.lines import (
     align_representative,
     chi2_gate,
+    chi2_ppf,
     extent_gap,
     fuse,
     fuse_many,
@@ -33,6 +34,14 @@ def test_gate_is_the_papers_three_sigma():
         assert chi2_gate(p, k) == pytest.approx(chi2.ppf(p, k), rel=1e-10)
     with pytest.raises(ConfigError):
         chi2_gate(1.0)
+
+
+def test_chi2_ppf_equals_scipy_stats_bit_for_bit():
+    for k in (1, 2, 3, 5, np.int64(2)):
+        for p in (1e-9, 0.01, 0.5, 0.6827, 0.9, 0.95, 0.99, 0.9973, 0.999, 1 - 1e-9):
+            assert chi2_ppf(p, k) == float(chi2.ppf(p, k))
+    assert chi2_ppf(0.0, 2) == 0.0 and chi2_ppf(1.0, 2) == np.inf
+    assert np.isnan(chi2_ppf(1.5, 2)) and np.isnan(chi2_ppf(0.5, 0))
 
 
 def test_mahalanobis_vectorised_matches_pairwise_and_is_representative_invariant(rng):

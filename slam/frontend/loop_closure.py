@@ -32,6 +32,7 @@ if the optimised graph explains it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -195,33 +196,91 @@ class LoopSearch:
     reason: str
 
 
+@njit(cache=True, nogil=True)
+def _wrap(a: float) -> float:  # pragma: no cover - compiled
+    """:func:`linefit.line.wrap_angle` of one float (the same operations)."""
+    return math.pi - (math.pi - a) % (2.0 * math.pi)
+
+
+@njit(cache=True, nogil=True)
+def _pairs_kernel(
+    l_alpha: FloatArray,
+    l_r: FloatArray,
+    l_ends: FloatArray,
+    o_alpha: FloatArray,
+    o_r: FloatArray,
+    o_ends: FloatArray,
+    o_tangent: FloatArray,
+    angle_tolerance: float,
+    offset_tolerance: float,
+    overlap_margin: float,
+) -> tuple[IntArray, IntArray, FloatArray]:  # pragma: no cover - compiled
+    """The pairing of :func:`_pairs_at` (compiled).
+
+    ``o_tangent`` holds the old lines' tangents ``(−sin α, cos α)``.
+
+    Per local line, over the old lines in order: the angle and offset differences, the
+    overlap along the old line's tangent (each end point's coordinate summed as ``einsum``
+    sums it) for those within the tolerances, and the first old line of least cost among
+    those that overlap enough (``np.argmin``'s choice).
+    """
+    K, M = l_alpha.shape[0], o_alpha.shape[0]
+    rows = np.empty(K, np.intp)
+    cols = np.empty(K, np.intp)
+    lengths = np.empty(K)
+    n = 0
+    for k in range(K):
+        best = np.inf
+        best_m = -1
+        best_overlap = 0.0
+        for m in range(M):
+            da = abs(_wrap(l_alpha[k] - o_alpha[m]))
+            dr = abs(l_r[k] - o_r[m])
+            if not (da < angle_tolerance and dr < offset_tolerance):
+                continue
+            t0, t1 = o_tangent[m, 0], o_tangent[m, 1]
+            a0 = 0.0 + l_ends[k, 0, 0] * t0 + l_ends[k, 0, 1] * t1
+            a1 = 0.0 + l_ends[k, 1, 0] * t0 + l_ends[k, 1, 1] * t1
+            b0 = 0.0 + o_ends[m, 0, 0] * t0 + o_ends[m, 0, 1] * t1
+            b1 = 0.0 + o_ends[m, 1, 0] * t0 + o_ends[m, 1, 1] * t1
+            overlap = min(max(a0, a1), max(b0, b1)) - max(min(a0, a1), min(b0, b1))
+            if not overlap > -overlap_margin:
+                continue
+            cost = dr / offset_tolerance + da / angle_tolerance
+            if cost < best:
+                best, best_m, best_overlap = cost, m, overlap
+        if best_m >= 0:
+            rows[n], cols[n] = k, best_m
+            lengths[n] = max(best_overlap, 0.0)
+            n += 1
+    return rows[:n], cols[:n], lengths[:n]
+
+
 def _pairs_at(
     local: LoopLines, old: LoopLines, config: LoopConfig
 ) -> tuple[IntArray, IntArray, FloatArray]:
     """Best old line for each local line (already transformed): rows and overlap lengths.
 
-    Segment overlaps are computed only for the pairs within the angle and offset tolerances
-    (a small fraction of all pairs).
+    An old line pairs a local one within the angle and offset tolerances and when their
+    segments overlap (along the old line) by more than ``-overlap_margin_m``; the best has the
+    least ``dr / offset_tolerance + da / angle_tolerance`` (the first such old line on ties).
     """
-    da = np.abs(np.asarray(wrap_angle(local.alpha[:, None] - old.alpha[None, :])))
-    dr = np.abs(local.r[:, None] - old.r[None, :])
-    ok = (da < config.angle_tolerance_rad) & (dr < config.offset_tolerance_m)
-    if not np.any(ok):
-        return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0)
-    k, m = np.nonzero(ok)
-    t = np.stack([-np.sin(old.alpha[m]), np.cos(old.alpha[m])], -1)  # (P, 2) old tangents
-    s_loc = np.einsum("npd,nd->np", local.ends[k], t)
-    s_old = np.einsum("npd,nd->np", old.ends[m], t)
-    overlap = np.full(ok.shape, -np.inf)
-    overlap[k, m] = np.minimum(s_loc.max(-1), s_old.max(-1)) - np.maximum(
-        s_loc.min(-1), s_old.min(-1)
+    tangent = np.empty((len(old), 2))
+    np.negative(np.sin(old.alpha), out=tangent[:, 0])
+    np.cos(old.alpha, out=tangent[:, 1])
+    f = np.ascontiguousarray
+    return _pairs_kernel(
+        f(local.alpha, dtype=float),
+        f(local.r, dtype=float),
+        f(local.ends, dtype=float),
+        f(old.alpha, dtype=float),
+        f(old.r, dtype=float),
+        f(old.ends, dtype=float),
+        tangent,
+        float(config.angle_tolerance_rad),
+        float(config.offset_tolerance_m),
+        float(config.overlap_margin_m),
     )
-    ok &= overlap > -config.overlap_margin_m
-    cost = np.where(ok, dr / config.offset_tolerance_m + da / config.angle_tolerance_rad, np.inf)
-    j = np.argmin(cost, axis=1)
-    i = np.flatnonzero(np.isfinite(cost[np.arange(cost.shape[0]), j]))
-    j = j[i]
-    return i, j, np.maximum(overlap[i, j], 0.0)
 
 
 def _refine(
@@ -522,6 +581,33 @@ def _constraint_votes(
     return votes, inside
 
 
+@njit(cache=True, nogil=True)
+def _smooth3(votes: FloatArray) -> FloatArray:  # pragma: no cover - compiled
+    """Sum of each cell's 3×3 neighbourhood of the square grid ``votes`` (zero outside).
+
+    Per cell, the neighbours are added in the order ``(dx, dy)`` = ``(−1, −1)``, then
+    ``(−1, 0)``, ... ``(1, 1)`` (row by row), starting from the first: the order in which the
+    shifted copies of a zero-padded grid would be summed.
+    """
+    nc = votes.shape[0]
+    pad = np.zeros((nc + 2, nc + 2))
+    pad[1 : nc + 1, 1 : nc + 1] = votes
+    sm = np.empty((nc, nc))
+    for x in range(nc):
+        for y in range(nc):
+            total = pad[x, y]
+            total += pad[x, y + 1]
+            total += pad[x, y + 2]
+            total += pad[x + 1, y]
+            total += pad[x + 1, y + 1]
+            total += pad[x + 1, y + 2]
+            total += pad[x + 2, y]
+            total += pad[x + 2, y + 1]
+            total += pad[x + 2, y + 2]
+            sm[x, y] = total
+    return sm
+
+
 def _top_cells(values: FloatArray, k: int) -> IntArray:
     """Indices of the ``k`` largest positive ``values``, largest first, ties by index.
 
@@ -570,14 +656,7 @@ def _translation_peaks(
     )
     if inside == 0:
         return []
-    votes = flat.reshape(nc, nc)
-    # smooth 3×3 (a crossing may straddle cells)
-    pad = np.pad(votes, 1)
-    sm: FloatArray = pad[0:nc, 0:nc].astype(float)
-    for dx in range(3):
-        for dy in range(3):
-            if dx or dy:
-                sm += pad[dx : dx + nc, dy : dy + nc]
+    sm = _smooth3(flat.reshape(nc, nc))  # a crossing may straddle cells
     peaks: list[FloatArray] = []
     min_sep = max(3, round(0.5 / cell))
     taken: list[tuple[int, int]] = []

@@ -38,9 +38,11 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from itertools import chain
 
 import gtsam
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
@@ -103,6 +105,52 @@ class Isam2Stats:
     )
 
 
+@njit(cache=True, nogil=True)
+def _block_layout(
+    column: NDArray[np.int64],
+    n_landmarks: int,
+    A_pose: FloatArray,
+    A_landmark: FloatArray,
+    b: FloatArray,
+    flat_A: FloatArray,
+    flat_b: FloatArray,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], bool]:  # pragma: no cover - compiled
+    """Where a stacked factor keeps its line factors' entries, and whether it holds them.
+
+    ``k`` line factors, factor ``f`` on the landmark of column block ``column[f]`` (of
+    ``n_landmarks``, the pose's block after them), stacked in column-major memory ``flat_A``
+    (``2k`` rows) and ``flat_b``: row ``2f + r`` holds factor ``f``'s row ``r``.  Returns the
+    positions of ``A_pose`` ``(k, 2, 3)`` and ``A_landmark`` ``(k, 2, 2)`` in ``flat_A``, and
+    whether ``flat_A`` holds exactly these entries and zeros elsewhere and ``flat_b`` equals
+    ``b`` (``(2k,)``) (``np.array_equal``'s comparison: NaN never equal).
+    """
+    k = column.shape[0]
+    m = 2 * k
+    at_pose = np.empty((k, 2, 3), np.int64)
+    at_landmark = np.empty((k, 2, 2), np.int64)
+    expected = np.zeros(flat_A.shape[0])
+    for f in range(k):
+        for r in range(2):
+            row = 2 * f + r
+            for c in range(3):
+                at = (2 * n_landmarks + c) * m + row
+                at_pose[f, r, c] = at
+                expected[at] = A_pose[f, r, c]
+            for c in range(2):
+                at = (2 * column[f] + c) * m + row
+                at_landmark[f, r, c] = at
+                expected[at] = A_landmark[f, r, c]
+    same = flat_b.shape[0] == b.shape[0]
+    for i in range(flat_A.shape[0]):
+        if flat_A[i] != expected[i]:
+            same = False
+    if same:
+        for i in range(b.shape[0]):
+            if flat_b[i] != b[i]:
+                same = False
+    return at_pose, at_landmark, same
+
+
 class _BlockTemplate:
     """A keyframe's stacked line factors, kept to be overwritten when its block is rebuilt.
 
@@ -120,6 +168,8 @@ class _BlockTemplate:
         The stacked factor (written in place).
     landmarks : ndarray, shape (k,)
         The landmark of each line factor, in order.
+    landmark_list : list of int
+        The same as a list.
     """
 
     def __init__(
@@ -133,6 +183,7 @@ class _BlockTemplate:
     ) -> None:
         self.factor = factor
         self.landmarks = landmarks
+        self.landmark_list: list[int] = landmarks.tolist()
         self._flat_A = flat_A
         self._b = b
         self._at_pose = at_pose
@@ -154,9 +205,12 @@ class _BlockTemplate:
         factors ``factor`` was stacked from.
         """
         k = landmarks.shape[0]
-        lms = np.unique(landmarks)
-        m, n = 2 * k, 2 * lms.shape[0] + 3
-        keys = keys_of("l", lms) + keys_of("x", np.array([pose]))
+        landmark_list = landmarks.tolist()
+        lms = sorted(set(landmark_list))
+        place = {j: i for i, j in enumerate(lms)}
+        column = np.array([place[j] for j in landmark_list], dtype=np.int64)
+        m, n = 2 * k, 2 * len(lms) + 3
+        keys = keys_of("l", np.array(lms, dtype=np.intp)) + keys_of("x", np.array([pose]))
         A, b_view = factor.getA(), factor.getb()
         if (
             list(factor.keys()) != keys
@@ -170,15 +224,16 @@ class _BlockTemplate:
         flat_A = A.T.reshape(-1)  # column-major memory: entry (r, c) at c·m + r
         if not np.shares_memory(flat_A, A):
             return None
-        row = 2 * np.arange(k)[:, None, None] + np.arange(2)[None, :, None]
-        col_l = 2 * np.searchsorted(lms, landmarks)[:, None, None] + np.arange(2)[None, None, :]
-        col_p = 2 * lms.shape[0] + np.arange(3)[None, None, :]
-        at_pose = col_p * m + row
-        at_landmark = col_l * m + row
-        expected = np.zeros(m * n)
-        expected[at_pose] = A_pose
-        expected[at_landmark] = A_landmark
-        if not (np.array_equal(flat_A, expected) and np.array_equal(b_view, b.reshape(-1))):
+        at_pose, at_landmark, laid_out = _block_layout(
+            column,
+            len(lms),
+            np.ascontiguousarray(A_pose),
+            np.ascontiguousarray(A_landmark),
+            np.ascontiguousarray(b).reshape(-1),
+            flat_A,
+            b_view,
+        )
+        if not laid_out:
             return None
         return cls(factor, landmarks.copy(), flat_A, b_view, at_pose, at_landmark)
 
@@ -205,6 +260,11 @@ class Isam2Solver:
         self.stats = Isam2Stats()
         # per keyframe, its last stacked block (kept across restarts)
         self._templates: dict[int, _BlockTemplate] = {}
+        # the native odometry factors built so far and what they were built from (kept across
+        # restarts)
+        self._odometry: list[gtsam.NonlinearFactor] = []
+        self._odometry_measured = GrowableArray((3,))
+        self._odometry_cov = GrowableArray((3, 3))
         self._start()
 
     def _start(self) -> None:
@@ -234,6 +294,33 @@ class Isam2Solver:
         self._theta_lms = GrowableArray((2,))
         self._theta_changed = False
         self._since_full = 0
+
+    # -- native factors ----------------------------------------------------------------------
+    def _odometry_factors(self, graph: LineGraph, start: int) -> gtsam.NonlinearFactorGraph:
+        """The native odometry factors ``start:`` of ``graph`` (:func:`native_odometry_factors`).
+
+        Each factor is built once and given again after a restart (:meth:`restart`), as long as
+        the graph's odometry measurements and covariances are the ones it was built from (else
+        they are all built again).
+        """
+        built = len(self._odometry)
+        if start < built and not (
+            np.array_equal(self._odometry_measured.data, graph.odometry_measured[:built])
+            and np.array_equal(self._odometry_cov.data, graph.odometry_cov[:built])
+        ):
+            self._odometry = []
+            self._odometry_measured = GrowableArray((3,))
+            self._odometry_cov = GrowableArray((3, 3))
+            built = 0
+        if graph.n_odometry > built:
+            new = native_odometry_factors(graph, built, with_prior=False)
+            self._odometry.extend(new.at(i) for i in range(new.size()))
+            self._odometry_measured.append(graph.odometry_measured[built:])
+            self._odometry_cov.append(graph.odometry_cov[built:])
+        nfg = gtsam.NonlinearFactorGraph()
+        for factor in self._odometry[start : graph.n_odometry]:
+            nfg.push_back(factor)
+        return nfg
 
     # -- linearisation point -----------------------------------------------------------------
     def _refresh_theta(self) -> None:
@@ -274,8 +361,8 @@ class Isam2Solver:
         """
         if not poses:
             return []
-        groups = [np.asarray(self._factors_of_pose[p], dtype=np.intp) for p in poses]
-        fs = np.concatenate(groups)
+        groups = [self._factors_of_pose[p] for p in poses]
+        fs = np.fromiter(chain.from_iterable(groups), dtype=np.intp)
         fp = graph.factor_pose[fs]
         lm = graph.factor_landmark[fs]
         theta_p = self._theta_poses.data[fp]
@@ -291,13 +378,14 @@ class Isam2Solver:
         )
         self._lin_pose.data[fs] = theta_p
         self._lin_lm.data[fs] = theta_l
-        offsets = np.cumsum([0] + [g.shape[0] for g in groups]).tolist()
+        offsets = np.cumsum([0] + [len(g) for g in groups]).tolist()
+        lm_list = lm.tolist()
         stacked: list[gtsam.JacobianFactor | None] = [None] * len(poses)
         fresh: list[int] = []
         for b, p in enumerate(poses):
             a, e = offsets[b], offsets[b + 1]
             template = self._templates.get(p)
-            if template is not None and np.array_equal(template.landmarks, lm[a:e]):
+            if template is not None and template.landmark_list == lm_list[a:e]:
                 template.write(lin.A_pose[a:e], lin.A_landmark[a:e], lin.b[a:e])
                 stacked[b] = template.factor
             else:
@@ -333,11 +421,11 @@ class Isam2Solver:
         # LinearContainerFactor copies only its own keys from it)
         values = gtsam.Values()
         key_p = keys_of("x", np.asarray(poses))
-        for key, tp in zip(key_p, self._theta_poses.data[poses], strict=True):
-            values.insert(key, gtsam.Pose2(tp[0], tp[1], tp[2]))
+        for key, (x, y, t) in zip(key_p, self._theta_poses.data[poses].tolist(), strict=True):
+            values.insert(key, gtsam.Pose2(x, y, t))
         lms = np.unique(lm)
-        for key, tl in zip(keys_of("l", lms), self._theta_lms.data[lms], strict=True):
-            values.insert(key, gtsam.Point2(tl[0], tl[1]))
+        for key, (r, a) in zip(keys_of("l", lms), self._theta_lms.data[lms].tolist(), strict=True):
+            values.insert(key, gtsam.Point2(r, a))
         blocks = []
         for stack in stacked:
             assert stack is not None
@@ -361,12 +449,12 @@ class Isam2Solver:
         touched_lms: set[int] = set()
         # new variables
         new_p = np.arange(self._n_poses, graph.n_poses)
-        for key, p in zip(keys_of("x", new_p), graph.poses[new_p], strict=True):
-            values.insert(key, gtsam.Pose2(p[0], p[1], p[2]))
+        for key, (x, y, t) in zip(keys_of("x", new_p), graph.poses[new_p].tolist(), strict=True):
+            values.insert(key, gtsam.Pose2(x, y, t))
         self._theta_poses.append(graph.poses[new_p])
         new_l = np.arange(self._n_landmarks, graph.n_landmarks)
-        for key, v in zip(keys_of("l", new_l), graph.landmarks[new_l], strict=True):
-            values.insert(key, gtsam.Point2(v[0], v[1]))
+        for key, (r, a) in zip(keys_of("l", new_l), graph.landmarks[new_l].tolist(), strict=True):
+            values.insert(key, gtsam.Point2(r, a))
         self._theta_lms.append(graph.landmarks[new_l])
         touched_poses.update(int(i) for i in new_p)
         touched_lms.update(int(j) for j in new_l)
@@ -375,7 +463,7 @@ class Isam2Solver:
             nfg.push_back(native_odometry_factors(graph, graph.n_odometry, with_prior=True))
             self._prior_added = True
         if graph.n_odometry > self._n_odometry:
-            nfg.push_back(native_odometry_factors(graph, self._n_odometry, with_prior=False))
+            nfg.push_back(self._odometry_factors(graph, self._n_odometry))
             touched_poses.update(int(i) for i in graph.odometry_first[self._n_odometry :])
             self._n_odometry = graph.n_odometry
         # new line factors
@@ -427,7 +515,9 @@ class Isam2Solver:
             nfg.add(block)
         if rebuild:
             touched_poses.update(rebuild)
-            fs = np.concatenate([self._factors_of_pose[p] for p in rebuild]).astype(np.intp)
+            fs = np.fromiter(
+                chain.from_iterable(self._factors_of_pose[p] for p in rebuild), dtype=np.intp
+            )
             touched_lms.update(np.unique(graph.factor_landmark[fs]).tolist())
         self.stats.time_s["build"] += time.perf_counter() - t0
         if rebuild and len(rebuild) > 64:

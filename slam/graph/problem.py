@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from gtsam.symbol_shorthand import L, X
+from numba import njit
 from numpy.typing import NDArray
 
 from slam.errors import EstimationError, InputError
@@ -86,6 +87,35 @@ class GrowableArray:
         idx = np.arange(self._n, need, dtype=np.intp)
         self._n = need
         return idx
+
+
+@njit(cache=True, nogil=True)
+def _extents_kernel(
+    endpoints: FloatArray, poses: FloatArray, anchors: FloatArray, trig: FloatArray, out: FloatArray
+) -> None:  # pragma: no cover - compiled
+    """The arithmetic of :meth:`LineGraph.factor_extents` after its sines and cosines.
+
+    ``trig`` holds the rows ``cos θ`` and ``sin θ`` of each factor's pose and the tangent
+    ``(−sin α, cos α)`` of its landmark.  The end points are moved into the world as
+    :func:`slam.geometry.pose_compose` moves them, their coordinates along the tangent summed
+    as ``einsum`` sums them; ``out`` gets ``(min, max)`` per factor.
+    """
+    for f in range(endpoints.shape[0]):
+        c, s = trig[0, f], trig[1, f]
+        t0, t1 = trig[2, f], trig[3, f]
+        lo = hi = 0.0
+        for k in range(2):
+            ex, ey = endpoints[f, k, 0], endpoints[f, k, 1]
+            x = poses[f, 0] + c * ex - s * ey
+            y = poses[f, 1] + s * ex + c * ey
+            u = 0.0 + (x - anchors[f, 0]) * t0 + (y - anchors[f, 1]) * t1
+            if k == 0:
+                lo = hi = u
+            else:
+                lo = min(lo, u)
+                hi = max(hi, u)
+        out[f, 0] = lo
+        out[f, 1] = hi
 
 
 @dataclass(frozen=True)
@@ -499,12 +529,19 @@ class LineGraph:
         moved into the world with the current pose estimate.  Shape ``(F, 2)``.
         """
         f = np.arange(self.n_line_factors) if factors is None else np.asarray(factors)
-        pts = self.world_endpoints(f)
         lm = self.factor_landmark[f]
+        theta = self.poses[self.factor_pose[f], 2]
         a = self.landmarks[lm, 1]  # φ = α
-        t = np.stack([-np.sin(a), np.cos(a)], -1)
-        s = np.einsum("fkd,fd->fk", pts - self.anchors[lm][:, None, :], t)
-        return np.stack([s.min(axis=1), s.max(axis=1)], axis=-1)
+        trig = np.empty((4, f.shape[0]))
+        np.cos(theta, out=trig[0])
+        np.sin(theta, out=trig[1])
+        np.negative(np.sin(a), out=trig[2])
+        np.cos(a, out=trig[3])
+        out = np.empty((f.shape[0], 2))
+        _extents_kernel(
+            self.factor_endpoints[f], self.poses[self.factor_pose[f]], self.anchors[lm], trig, out
+        )
+        return out
 
     def landmark_extents(self) -> FloatArray:
         """Extent ``(s_min, s_max)`` of each landmark (see :meth:`factor_extents`), ``(M, 2)``.

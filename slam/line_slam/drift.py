@@ -28,18 +28,18 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from slam.geometry import pose_between, pose_compose
 from slam.graph.problem import GrowableArray
+from slam.lines.merge import chi2_ppf
 
 __all__ = ["DriftAccumulator"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
-_MEDIAN_CHI2_1 = float(chi2.ppf(0.5, 1))
-_MEDIAN_CHI2_2 = float(chi2.ppf(0.5, 2))
+_MEDIAN_CHI2_1 = chi2_ppf(0.5, 1)
+_MEDIAN_CHI2_2 = chi2_ppf(0.5, 2)
 
 
 class DriftAccumulator:

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from linefit.line import wrap_angle
 from slam.frontend.config import FrontendConfig
@@ -38,6 +37,7 @@ from slam.graph.problem import LineGraph
 from slam.line_slam.local_map import LocalMap
 from slam.line_slam.observations import ScanLines
 from slam.lines.lineset import LineSet
+from slam.lines.merge import chi2_ppf
 
 __all__ = [
     "Registration",
@@ -128,7 +128,7 @@ def _passes(
 ) -> tuple[bool, FloatArray, float]:
     c = pose_log(pose_between(x_pred, reg.pose_world_laser))
     d2, dof = correction_consistency(c, P0, reg.cov)
-    ok = dof == 0 or d2 <= float(chi2.ppf(probability, dof))
+    ok = dof == 0 or d2 <= chi2_ppf(probability, dof)
     return ok, c, d2
 
 

@@ -19,11 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from slam.graph.factors import line_factor_residuals
 from slam.graph.problem import LineGraph
 from slam.line_slam.keyframes import EveryKeyframes
+from slam.lines.merge import chi2_ppf
 from slam.models.anchored import model_error_covariance
 
 __all__ = ["LineModelErrorEstimator", "LineReweighting", "midpoint_residuals"]
@@ -40,7 +40,7 @@ REWEIGHT_CHANGE = 0.2
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
-_MEDIAN_CHI2_1 = float(chi2.ppf(0.5, 1))
+_MEDIAN_CHI2_1 = chi2_ppf(0.5, 1)
 
 
 def midpoint_residuals(

@@ -35,7 +35,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2 as _chi2_dist
 
 from linefit.line import wrap_angle
 from slam.association import candidate_landmarks
@@ -49,6 +48,7 @@ from slam.line_slam.config import SlamConfig
 from slam.line_slam.drift import DriftAccumulator
 from slam.line_slam.keyframes import EveryKeyframes, KeyframeTrack
 from slam.line_slam.landmarks import LandmarkBook
+from slam.lines.merge import chi2_ppf
 
 __all__ = ["ClosureAttempt", "Hypothesis", "LoopCloser", "spread_correction"]
 
@@ -394,7 +394,7 @@ class LoopCloser:
         )
 
     def _chi2_limit(self, dof: int) -> float:
-        return float(_chi2_dist.ppf(self.config.loop_closure.consistency_probability, dof))
+        return chi2_ppf(self.config.loop_closure.consistency_probability, dof)
 
     def _mahalanobis(self, e: FloatArray, cov: FloatArray, normals: list[FloatArray]) -> float:
         """``eᵀ S⁻¹ e`` with the components along any corridor (``normals``' tangents) left out."""
