@@ -68,25 +68,33 @@ VARIANTS: dict[str, Perturbation] = {
 }
 
 
-def relations_error(out: Path, log: str) -> tuple[float, float]:
-    """Mean absolute translational (m) and rotational (deg) relations error of a run."""
+def relations_error(out: Path, log: str, relations_path: Path | None = None) -> tuple[float, float]:
+    """Mean absolute translational (m) and rotational (deg) relations error of a run.
+
+    The relations are ``relations_path``, else the catalogue's for ``log``.
+    """
     from slam.evaluation import relations_metric, relations_within
     from slam.io.catalog import resolve_log
     from slam.io.relations import read_relations
     from slam.io.tum import read_tum
 
-    resolved = resolve_log(log)
-    if resolved.relations is None:
-        raise SystemExit(f"{log}: no relations file in the catalogue")
+    if relations_path is None:
+        resolved = resolve_log(log)
+        if resolved.relations is None:
+            raise SystemExit(f"{log}: no relations file in the catalogue (give --relations)")
+        relations_path = Path(resolved.relations)
     trajectory = read_tum(out / "trajectory.tum")
-    relations = relations_within(read_relations(resolved.relations), trajectory.timestamps)
+    relations = relations_within(read_relations(relations_path), trajectory.timestamps)
     metric = relations_metric(trajectory, relations)
     return metric.abs_trans_m.mean, metric.abs_rot_deg.mean
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("log", help="dataset name or log file with relations")
+    parser.add_argument("log", help="dataset name or log file")
+    parser.add_argument(
+        "--relations", type=Path, default=None, help="relations file (default: the catalogue's)"
+    )
     parser.add_argument(
         "--variants", nargs="+", choices=sorted(VARIANTS), default=list(VARIANTS), metavar="V"
     )
@@ -105,7 +113,7 @@ def main() -> None:
             t0 = time.perf_counter()
             run_slam(args.log, out, config, max_scans=args.max_scans)
             dt = time.perf_counter() - t0
-            t, r = relations_error(out, args.log)
+            t, r = relations_error(out, args.log, args.relations)
             trans.append(t)
             rot.append(r)
             print(f"{name:<18}{t:>11.4f}{r:>11.3f}{dt:>10.1f}", flush=True)

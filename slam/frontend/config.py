@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar, Literal
 
 from slam.frontend.registration import RegistrationConfig
+from slam.frontend.scan_match import ScanMatchConfig
 from slam.validate import nonneg, positive, require
 
 __all__ = ["FrontendConfig", "LoopClosureConfig", "RelocalisationConfig", "TentativeConfig"]
@@ -112,6 +113,10 @@ class FrontendConfig:
         Gates, iterations, kernel of :func:`slam.frontend.register_lines`.
     relocalisation : RelocalisationConfig
         Fallback search when the registration pairs too few lines.
+    scan_matching : ScanMatchConfig
+        Dense matching of each keyframe's points against the previous keyframe's
+        (:mod:`slam.frontend.scan_match`): fused with the odometry into the prediction, and a
+        relative-pose factor between the two keyframes.
     prior_sigma_xy_m, prior_sigma_theta_rad : float
         Added (in quadrature) to the odometry covariance of the prediction used as the
         registration's prior, so that a bad odometry step (wheel slip) can be corrected.
@@ -137,6 +142,7 @@ class FrontendConfig:
 
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
     relocalisation: RelocalisationConfig = field(default_factory=RelocalisationConfig)
+    scan_matching: ScanMatchConfig = field(default_factory=ScanMatchConfig)
     prior_sigma_xy_m: float = 0.02
     prior_sigma_theta_rad: float = 0.01
     drift_xy_per_m: float = 0.01

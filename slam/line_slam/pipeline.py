@@ -13,6 +13,9 @@ For each keyframe:
 2. **Usable lines** (:mod:`~slam.line_slam.observations`): too few points, too short, or a
    degenerate covariance: dropped; the model-error floor is added to the others.
 3. **Prediction**: ``x̂ = x_k ∘ δ`` with the motion noise ``Q(δ)`` (:mod:`slam.models.motion`).
+   With ``frontend.scan_matching.enabled`` the keyframe's points are first matched against the
+   previous keyframe's with ``(δ, Q)`` as the prior (:mod:`slam.frontend.scan_match`), and an
+   accepted match replaces ``δ`` in ``x̂`` (``Q`` is kept; the match is no graph factor).
 4. **Front end** (:mod:`~slam.line_slam.local_map`, :mod:`~slam.line_slam.front_end`): the
    lines are registered against the local map around ``x̂``; the registered pose is the
    keyframe's initial estimate and the registration's pairs are the data association.
@@ -48,7 +51,8 @@ from linefit.config import LineFitConfig
 from linefit.line import Line
 from slam import interrupts
 from slam.extraction import extract_lines_of_scans, extract_scan_lines
-from slam.geometry import pose_between, pose_compose
+from slam.frontend.scan_match import ScanPoints, match_scans, scan_points
+from slam.geometry import pose_between, pose_compose, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
 from slam.graph.problem import LineGraph
 from slam.inputs import InputPolicy
@@ -130,6 +134,7 @@ class LineSlam:
         self.track = KeyframeTrack(cfg.keyframes)
         self.drift = DriftAccumulator(cfg.frontend.drift_xy_per_m, cfg.frontend.drift_theta_per_m)
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
+        self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
         self.line_noise = LineModelErrorEstimator(
             cfg.line_model_sigma_r_m, cfg.line_model_sigma_alpha_rad
         )
@@ -212,7 +217,16 @@ class LineSlam:
         self.counters["lines_fit"] += len(lines)
         self.counters["points"] += int(np.count_nonzero(scan.valid_mask()))
         self.track.begin_keyframe(step, scan_no)
-        report = self._keyframe(scan_no, step, lines)
+        points = None
+        if self.config.frontend.scan_matching.enabled:
+            points = scan_points(
+                scan.ranges,
+                scan.bearings,
+                scan.max_range_m,
+                self.linefit_config.noise,
+                self.config.frontend.scan_matching,
+            )
+        report = self._keyframe(scan_no, step, lines, points)
         self.track.end_keyframe(step)
         self._record(scan, report.pose_index, np.zeros(3), True, t_start)
         return report
@@ -230,7 +244,13 @@ class LineSlam:
         )
 
     # -- one keyframe ------------------------------------------------------------------------
-    def _keyframe(self, scan_no: int, step: OdometryStep, lines: Sequence[Line]) -> ScanReport:
+    def _keyframe(
+        self,
+        scan_no: int,
+        step: OdometryStep,
+        lines: Sequence[Line],
+        points: ScanPoints | None = None,
+    ) -> ScanReport:
         cfg = self.config
         g = self.graph
         # 2. usable lines
@@ -244,8 +264,21 @@ class LineSlam:
             step.pose_odom_laser.copy() if step.first else pose_compose(g.poses[prev], step.delta)
         )
         Q = self.odometry_noise.model.covariance(step.delta)
-        # 4. front end: registration against the local map = initial guess + association
+        x_odo = x_pred
+        # 4. front end: the scan's points matched against the previous keyframe's with the
+        # odometry as the prior (a slip the points see is corrected before the lines are
+        # paired); then the lines registered against the local map = initial guess +
+        # association.  The match moves the prediction only: its covariance stays the
+        # odometry's, and it is no factor of the graph (the lines carry the laser's evidence)
         with self.clock("frontend"):
+            if points is not None and self._points is not None and not step.first:
+                match = match_scans(self._points, points, step.delta, Q, cfg.frontend.scan_matching)
+                self.counters["scan_matches"] += 1
+                if match.accepted:
+                    x_pred = pose_compose(g.poses[prev], match.delta)
+                else:
+                    self.counters["scan_matches_rejected"] += 1
+            self._points = points
             local = LocalMap.empty()
             if K and not step.first:
                 local = build_local_map(self.book, self.drift, x_pred, cfg)
@@ -261,7 +294,13 @@ class LineSlam:
             None if step.first else pose_between(g.poses[prev], reg.pose_world_laser),
         )
         if reg.cov is not None:
-            self.odometry_noise.add(step.delta, reg.correction, reg.prior_cov, reg.cov)
+            # the odometry's own error, as the registration sees it
+            c_odo = (
+                reg.correction
+                if x_pred is x_odo
+                else pose_log(pose_between(x_odo, reg.pose_world_laser))
+            )
+            self.odometry_noise.add(step.delta, c_odo, reg.prior_cov, reg.cov)
         self.odometry_noise.keyframe()
         with self.clock("associate"):
             # 5. the pose and its odometry

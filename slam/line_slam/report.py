@@ -44,6 +44,8 @@ COUNTERS = (
     "registrations_rejected",
     "relocalisations",
     "relocalisations_used",
+    "scan_matches",
+    "scan_matches_rejected",
     "loop_closure_attempts",
     "loop_closure_candidates",
     "loop_closures",

@@ -1,0 +1,640 @@
+"""Dense scan matching: a keyframe's points registered against the previous keyframe's.
+
+The lines of a scan constrain its pose only where there are lines, and a line registration
+needs lines that the local map already holds.  Where lines are few, parallel or new, and
+where the wheel odometry slips (a turn misreported by tens of degrees), every point of the
+scan still carries information: the scan is registered against the previous keyframe's
+points, point to line (each reference point's local line from its neighbours in beam
+order), each residual weighted by the paper's per-point noise (Eq. 8) plus the walls' model
+error, with Cauchy weights, and the odometry step as a Gaussian prior.  The result is the
+posterior mode of the relative pose between the two keyframes and its covariance.
+
+**Search.**  Point-to-line iterations converge only from a few degrees; a slip can be tens
+of degrees.  The match therefore starts from the odometry and from rotations of it over
+``rotation_window_rad`` (steps of ``rotation_step_rad``), runs a few iterations from each,
+refines the odometry's own start and the two other starts of most overlap, and keeps
+the refined one of least negative log-posterior (Cauchy cost of the pairs, an outlier's cost
+for each unpaired point, and the prior).
+
+**Covariance.**  The points' part is a sandwich ``H⁻¹ M H⁻¹`` (``H = Σ w JᵀJ`` with the
+Cauchy weights over each residual's variance); in ``M`` the model error is one offset shared
+by the points on one piece of reference wall, so that many points on one wall weigh as one
+wall; it is combined with the prior's information.  Known limits (``tests/test_scan_match.py``):
+the fixed-weight sandwich is about 13 % smaller than the Cauchy estimator's own covariance
+for Gaussian residuals, and with noisy ranges the tilt of the five-point local lines reads as
+information along a corridor's axis, so the covariance there is too small.
+
+:func:`scan_points` makes the points of a scan; :func:`match_scans` matches two.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from linefit.config import SensorNoiseConfig
+from linefit.noise import point_covariance_entries
+from slam.validate import nonneg, positive, require
+
+__all__ = ["ScanMatch", "ScanMatchConfig", "ScanPoints", "match_scans", "scan_points"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ScanMatchConfig:
+    """Dense scan matching between consecutive keyframes (``[slam.frontend.scan_matching]``).
+
+    Attributes
+    ----------
+    enabled : bool
+        Match each keyframe's points against the previous keyframe's with the odometry step as
+        the prior; an accepted match is the keyframe's prediction (the graph keeps the odometry
+        factor and the line factors).
+    model_sigma_m : float
+        The walls' model error along a reference line's normal (m), added to the Eq. 8
+        variance of every residual.
+    normal_points : int
+        Points (in beam order, odd) that define a reference point's local line.
+    max_neighbour_gap_m : float
+        A reference point's local line is used only when its neighbours are within this of
+        each other (m; no line across a depth jump).
+    max_line_thickness : float
+        ... and when they are thin: the smaller eigenvalue of their scatter is at most this
+        fraction of the larger (a straight piece of wall, not a corner).
+    max_correspondence_m : float
+        A point pairs with the nearest reference point within this (m) in the first
+        iterations.
+    inlier_m : float
+        ... and within this (m) in the last ones; the points within it count as the overlap.
+    rotation_window_rad, rotation_step_rad : float
+        Starts of the search: the odometry's rotation and rotations of it by multiples of
+        the step up to the window (rad).
+    coarse_iterations, max_iterations : int
+        Iterations from each start; iterations of the refinement of the best start.
+    min_overlap : float
+        A match is used only when at least this fraction of the current scan's points lie
+        within ``inlier_m`` of a reference line.
+    """
+
+    enabled: bool = False
+    model_sigma_m: float = 0.02
+    normal_points: int = 5
+    max_neighbour_gap_m: float = 0.3
+    max_line_thickness: float = 0.05
+    max_correspondence_m: float = 0.5
+    inlier_m: float = 0.1
+    rotation_window_rad: float = 0.7
+    rotation_step_rad: float = 0.175
+    coarse_iterations: int = 6
+    max_iterations: int = 30
+    min_overlap: float = 0.5
+
+    def __post_init__(self) -> None:
+        nonneg("model_sigma_m", self.model_sigma_m)
+        require(
+            self.normal_points >= 3 and self.normal_points % 2 == 1,
+            "normal_points must be an odd number >= 3",
+        )
+        positive("max_neighbour_gap_m", self.max_neighbour_gap_m)
+        require(0.0 < self.max_line_thickness < 1.0, "max_line_thickness must be in (0, 1)")
+        positive("max_correspondence_m", self.max_correspondence_m)
+        positive("inlier_m", self.inlier_m)
+        nonneg("rotation_window_rad", self.rotation_window_rad)
+        positive("rotation_step_rad", self.rotation_step_rad)
+        require(self.coarse_iterations >= 1, "coarse_iterations must be >= 1")
+        require(self.max_iterations >= 1, "max_iterations must be >= 1")
+        require(0.0 <= self.min_overlap <= 1.0, "min_overlap must be in [0, 1]")
+
+
+@dataclass(frozen=True, eq=False)
+class ScanPoints:
+    """The valid points of one scan, in beam order, with their Eq. 8 covariances.
+
+    Attributes
+    ----------
+    xy : ndarray, shape (n, 2)
+        Points in the laser frame (m).
+    q11, q12, q22 : ndarray, shape (n,)
+        Entries of each point's covariance (m², laser frame).
+    normals : ndarray, shape (n, 2)
+        Unit normal of each point's local line (zero where there is none).
+    has_normal : ndarray of bool, shape (n,)
+        Whether the point has a local line (it can then be a reference for another scan).
+    segment : ndarray of int, shape (n,)
+        The piece of wall each point with a local line lies on: runs of consecutive such
+        points without a depth jump share one (−1 for the others).  A wall's model error is
+        shared by its points.
+    """
+
+    xy: FloatArray
+    q11: FloatArray
+    q12: FloatArray
+    q22: FloatArray
+    normals: FloatArray
+    has_normal: NDArray[np.bool_]
+    segment: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.xy.shape[0])
+
+
+def _local_lines(xy: FloatArray, config: ScanMatchConfig) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Normals of each point's local line (``normal_points`` consecutive points centred on it)."""
+    n = xy.shape[0]
+    h = config.normal_points // 2
+    normals = np.zeros((n, 2))
+    ok = np.zeros(n, dtype=bool)
+    if n < config.normal_points:
+        return normals, ok
+    k = config.normal_points
+    # windows of k consecutive points, centred on points h .. n-h-1
+    idx = np.arange(n - k + 1)[:, None] + np.arange(k)[None, :]
+    W = xy[idx]  # (m, k, 2)
+    gaps = np.linalg.norm(np.diff(W, axis=1), axis=2).max(axis=1)
+    c = W - W.mean(axis=1, keepdims=True)
+    sxx = np.einsum("mk,mk->m", c[..., 0], c[..., 0])
+    sxy = np.einsum("mk,mk->m", c[..., 0], c[..., 1])
+    syy = np.einsum("mk,mk->m", c[..., 1], c[..., 1])
+    # eigen-decomposition of [[sxx, sxy], [sxy, syy]]
+    tr = sxx + syy
+    disc = np.sqrt(np.maximum((sxx - syy) ** 2 + 4.0 * sxy**2, 0.0))
+    lam_max = 0.5 * (tr + disc)
+    lam_min = 0.5 * (tr - disc)
+    # the line's direction is the eigenvector of the larger eigenvalue: angle φ with
+    # tan 2φ = 2 sxy / (sxx − syy); the normal is perpendicular to it
+    phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    good = (gaps <= config.max_neighbour_gap_m) & (lam_max > 0.0)
+    good &= lam_min <= config.max_line_thickness * np.where(lam_max > 0.0, lam_max, 1.0)
+    centre = np.arange(h, n - h)
+    normals[centre, 0] = -np.sin(phi)
+    normals[centre, 1] = np.cos(phi)
+    ok[centre] = good
+    normals[~ok] = 0.0
+    return normals, ok
+
+
+def scan_points(
+    ranges: FloatArray,
+    bearings: FloatArray,
+    max_range_m: float,
+    noise: SensorNoiseConfig,
+    config: ScanMatchConfig,
+) -> ScanPoints:
+    """The valid readings of a scan as :class:`ScanPoints` (laser frame).
+
+    Readings that are not finite, not positive, or at or beyond ``max_range_m`` (no return)
+    are left out.
+    """
+    d = np.asarray(ranges, dtype=float)
+    b = np.asarray(bearings, dtype=float)
+    valid = np.isfinite(d) & (d > 0.0) & (d < max_range_m)
+    d, b = d[valid], b[valid]
+    xy = np.stack([d * np.cos(b), d * np.sin(b)], axis=-1)
+    q11, q12, q22 = point_covariance_entries(d, b, noise)
+    normals, ok = _local_lines(xy, config)
+    return ScanPoints(xy, q11, q12, q22, normals, ok, _segments(xy, ok, config))
+
+
+def _segments(xy: FloatArray, ok: NDArray[np.bool_], config: ScanMatchConfig) -> NDArray[np.int64]:
+    """Segment id of each point with a local line (module docstring of :class:`ScanPoints`)."""
+    n = xy.shape[0]
+    seg = np.full(n, -1, dtype=np.int64)
+    if n == 0:
+        return seg
+    gap = np.r_[np.inf, np.linalg.norm(np.diff(xy, axis=0), axis=1)]
+    # a new segment starts at a point with a line whose predecessor has none or is far
+    prev_ok = np.r_[False, ok[:-1]]
+    start = ok & (~prev_ok | (gap > config.max_neighbour_gap_m))
+    ids = np.cumsum(start) - 1
+    seg[ok] = ids[ok]
+    return seg
+
+
+@dataclass(frozen=True, eq=False)
+class ScanMatch:
+    """Outcome of :func:`match_scans`.
+
+    Attributes
+    ----------
+    delta : ndarray, shape (3,)
+        Pose of the current scan's laser in the reference scan's laser frame ``(x, y, θ)``.
+    cov : ndarray, shape (3, 3)
+        Its covariance.
+    overlap : float
+        Fraction of the current scan's points within ``inlier_m`` of a reference line.
+    inliers : int
+        Their number.
+    start_offset_rad : float
+        The rotation added to the odometry at the start the match was refined from.
+    accepted : bool
+        ``overlap >= min_overlap`` and a finite, positive-definite covariance.
+    """
+
+    delta: FloatArray
+    cov: FloatArray
+    overlap: float
+    inliers: int
+    start_offset_rad: float
+    accepted: bool
+
+
+jit = njit(cache=True, error_model="numpy", nogil=True)
+
+
+@jit
+def _grid(p: FloatArray, cell: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Sorted cell keys of the points ``p`` (cells of side ``cell``) and the sorting order."""
+    m = p.shape[0]
+    keys = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        cx = np.int64(np.floor(p[i, 0] / cell)) + _OFFSET
+        cy = np.int64(np.floor(p[i, 1] / cell)) + _OFFSET
+        keys[i] = cx * _SPAN + cy
+    order = np.argsort(keys, kind="mergesort")
+    return keys[order], order
+
+
+@jit
+def _nearest(
+    qx: float,
+    qy: float,
+    p: FloatArray,
+    keys: NDArray[np.int64],
+    order: NDArray[np.int64],
+    cell: float,
+    d_max: float,
+) -> int:
+    """Index of the point of ``p`` nearest to ``(qx, qy)`` within ``d_max`` (≤ ``cell``), or −1."""
+    cx = np.int64(np.floor(qx / cell)) + _OFFSET
+    cy = np.int64(np.floor(qy / cell)) + _OFFSET
+    best = -1
+    best_d2 = d_max * d_max
+    for dx in range(-1, 2):
+        for dy in range(-1, 2):
+            k = (cx + dx) * _SPAN + (cy + dy)
+            lo = np.searchsorted(keys, k)
+            while lo < keys.size and keys[lo] == k:
+                j = order[lo]
+                ex = p[j, 0] - qx
+                ey = p[j, 1] - qy
+                d2 = ex * ex + ey * ey
+                if d2 <= best_d2:
+                    best_d2 = d2
+                    best = j
+                lo += 1
+    return best
+
+
+@jit
+def _normal_equations(
+    x: FloatArray,
+    p: FloatArray,
+    n: FloatArray,
+    var_ref: FloatArray,
+    keys: NDArray[np.int64],
+    order: NDArray[np.int64],
+    cell: float,
+    d_max: float,
+    q: FloatArray,
+    q11: FloatArray,
+    q12: FloatArray,
+    q22: FloatArray,
+    inlier_m: float,
+) -> tuple[FloatArray, FloatArray, int, int, float, float]:
+    """``H = Σ w JᵀJ``, ``g = Σ w J e`` at ``x`` (Cauchy weights over each residual's variance).
+
+    Also returns the number of pairs within ``d_max``, of residuals within ``inlier_m``,
+    ``Σ w e²`` and the robust cost ``Σ ½ log(1 + e²/σ²)`` of the pairs.
+    """
+    c = np.cos(x[2])
+    s = np.sin(x[2])
+    H = np.zeros((3, 3))
+    g = np.zeros(3)
+    pairs = 0
+    inliers = 0
+    wee = 0.0
+    cost = 0.0
+    for i in range(q.shape[0]):
+        qx = c * q[i, 0] - s * q[i, 1] + x[0]
+        qy = s * q[i, 0] + c * q[i, 1] + x[1]
+        j = _nearest(qx, qy, p, keys, order, cell, d_max)
+        if j < 0:
+            continue
+        nx = n[j, 0]
+        ny = n[j, 1]
+        e = nx * (qx - p[j, 0]) + ny * (qy - p[j, 1])
+        # the current point's covariance along the normal (normal rotated into its frame)
+        lx = c * nx + s * ny
+        ly = -s * nx + c * ny
+        var = var_ref[j] + lx * lx * q11[i] + 2.0 * lx * ly * q12[i] + ly * ly * q22[i]
+        w = 1.0 / (var + e * e)  # Cauchy weight over the variance: 1 / (σ² (1 + e²/σ²))
+        dqx = -s * q[i, 0] - c * q[i, 1]
+        dqy = c * q[i, 0] - s * q[i, 1]
+        J0 = nx
+        J1 = ny
+        J2 = nx * dqx + ny * dqy
+        H[0, 0] += w * J0 * J0
+        H[0, 1] += w * J0 * J1
+        H[0, 2] += w * J0 * J2
+        H[1, 1] += w * J1 * J1
+        H[1, 2] += w * J1 * J2
+        H[2, 2] += w * J2 * J2
+        g[0] += w * J0 * e
+        g[1] += w * J1 * e
+        g[2] += w * J2 * e
+        wee += w * e * e
+        cost += 0.5 * np.log1p(e * e / var)
+        pairs += 1
+        if abs(e) <= inlier_m:
+            inliers += 1
+    H[1, 0] = H[0, 1]
+    H[2, 0] = H[0, 2]
+    H[2, 1] = H[1, 2]
+    return H, g, pairs, inliers, wee, cost
+
+
+@jit
+def _gauss_newton(
+    x0: FloatArray,
+    iterations: int,
+    x_prior: FloatArray,
+    info_prior: FloatArray,
+    p: FloatArray,
+    n: FloatArray,
+    var_ref: FloatArray,
+    keys: NDArray[np.int64],
+    order: NDArray[np.int64],
+    cell: float,
+    d_max: float,
+    q: FloatArray,
+    q11: FloatArray,
+    q12: FloatArray,
+    q22: FloatArray,
+) -> FloatArray:
+    """Gauss-Newton from ``x0`` with the prior ``(x_prior, info_prior)``.
+
+    At most ``iterations``; stops when a step is below 1e-7 (m, rad).
+    """
+    x = x0.copy()
+    for _ in range(iterations):
+        H, g, _, _, _, _ = _normal_equations(
+            x, p, n, var_ref, keys, order, cell, d_max, q, q11, q12, q22, d_max
+        )
+        r = x - x_prior
+        r[2] = np.arctan2(np.sin(r[2]), np.cos(r[2]))
+        H = H + info_prior
+        g = g + info_prior @ r
+        if np.linalg.det(H) <= 0.0:
+            break
+        dx = -np.linalg.solve(H, g)
+        x = x + dx
+        if np.max(np.abs(dx)) < 1e-7:
+            break
+    return x
+
+
+@jit
+def _sandwich(
+    x: FloatArray,
+    p: FloatArray,
+    n: FloatArray,
+    var_ref: FloatArray,
+    keys: NDArray[np.int64],
+    order: NDArray[np.int64],
+    d_max: float,
+    q: FloatArray,
+    q11: FloatArray,
+    q12: FloatArray,
+    q22: FloatArray,
+    seg: NDArray[np.int64],
+    n_seg: int,
+    var_model: float,
+) -> tuple[FloatArray, FloatArray, int, int, float]:
+    """``H``, the meat ``M`` of the sandwich covariance, pairs, inliers and ``Σ w e²`` at ``x``.
+
+    ``M = Σ w² (σ² − σ_m²) JᵀJ + σ_m² Σ_segments (Σ w J)ᵀ(Σ w J)``: the residuals' own
+    variances, and one model-error offset per reference segment.
+    """
+    c = np.cos(x[2])
+    s = np.sin(x[2])
+    H = np.zeros((3, 3))
+    M = np.zeros((3, 3))
+    S = np.zeros((n_seg, 3))
+    pairs = 0
+    inliers = 0
+    wee = 0.0
+    J = np.zeros(3)
+    for i in range(q.shape[0]):
+        qx = c * q[i, 0] - s * q[i, 1] + x[0]
+        qy = s * q[i, 0] + c * q[i, 1] + x[1]
+        j = _nearest(qx, qy, p, keys, order, d_max, d_max)
+        if j < 0:
+            continue
+        nx = n[j, 0]
+        ny = n[j, 1]
+        e = nx * (qx - p[j, 0]) + ny * (qy - p[j, 1])
+        lx = c * nx + s * ny
+        ly = -s * nx + c * ny
+        var = var_ref[j] + lx * lx * q11[i] + 2.0 * lx * ly * q12[i] + ly * ly * q22[i]
+        w = 1.0 / (var + e * e)
+        J[0] = nx
+        J[1] = ny
+        J[2] = nx * (-s * q[i, 0] - c * q[i, 1]) + ny * (c * q[i, 0] - s * q[i, 1])
+        own = var - var_model
+        for a in range(3):
+            for b in range(3):
+                H[a, b] += w * J[a] * J[b]
+                M[a, b] += w * w * own * J[a] * J[b]
+            S[seg[j], a] += w * J[a]
+        wee += w * e * e
+        pairs += 1
+        if abs(e) <= d_max:
+            inliers += 1
+    for k in range(n_seg):
+        for a in range(3):
+            for b in range(3):
+                M[a, b] += var_model * S[k, a] * S[k, b]
+    return H, M, pairs, inliers, wee
+
+
+_OFFSET = np.int64(1 << 20)
+_SPAN = np.int64(1 << 22)
+
+
+class _Matcher:
+    """Point-to-line Gauss-Newton of one current scan against one reference scan."""
+
+    def __init__(
+        self,
+        ref: ScanPoints,
+        cur: ScanPoints,
+        config: ScanMatchConfig,
+        x_prior: FloatArray,
+        info_prior: FloatArray,
+    ) -> None:
+        self.cfg = config
+        self.x_prior = np.asarray(x_prior, dtype=float)
+        self.info_prior = np.asarray(info_prior, dtype=float)
+        keep = np.flatnonzero(ref.has_normal)
+        self.p = np.ascontiguousarray(ref.xy[keep])
+        self.n = np.ascontiguousarray(ref.normals[keep])
+        # the reference point's variance along its normal (Eq. 8) plus the model error
+        n = self.n
+        self.var_ref = (
+            n[:, 0] ** 2 * ref.q11[keep] + 2 * n[:, 0] * n[:, 1] * ref.q12[keep]
+            + n[:, 1] ** 2 * ref.q22[keep] + config.model_sigma_m**2
+        )  # fmt: skip
+        self.seg = np.ascontiguousarray(ref.segment[keep])
+        self.n_seg = int(self.seg.max(initial=-1)) + 1
+        self.q = np.ascontiguousarray(cur.xy)
+        self.cq = (cur.q11, cur.q12, cur.q22)
+        self._grids: dict[float, tuple[NDArray[np.int64], NDArray[np.int64]]] = {}
+
+    def _grid(self, d_max: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        if d_max not in self._grids:
+            self._grids[d_max] = _grid(self.p, d_max)
+        return self._grids[d_max]
+
+    def normal_equations(
+        self, x: FloatArray, d_max: float
+    ) -> tuple[FloatArray, FloatArray, int, int, float, float]:
+        """``(H, g, pairs, inliers, Σ w e², cost)`` at ``x`` for the pairs within ``d_max``."""
+        keys, order = self._grid(d_max)
+        return _normal_equations(
+            np.asarray(x, dtype=float), self.p, self.n, self.var_ref, keys, order, d_max,
+            d_max, self.q, *self.cq, self.cfg.inlier_m,
+        )  # fmt: skip
+
+    def solve(self, x0: FloatArray, iterations: int, d_max: float) -> FloatArray:
+        """Gauss-Newton with Cauchy weights from ``x0`` (pairs within ``d_max``)."""
+        if self.p.shape[0] < 3:
+            return np.array(x0, dtype=float)
+        keys, order = self._grid(d_max)
+        return _gauss_newton(
+            np.array(x0, dtype=float), iterations, self.x_prior, self.info_prior, self.p, self.n,
+            self.var_ref, keys, order, d_max, d_max, self.q, *self.cq,
+        )  # fmt: skip
+
+    def objective(self, x: FloatArray) -> float:
+        """The negative log-posterior at ``x`` (up to a constant).
+
+        ``Σ ½ log(1 + e²/σ²)`` over the pairs within ``inlier_m``, ``½ log(1 + inlier_m²/σ_m²)``
+        for each unpaired point (an outlier's cost), ``½ χ²`` of the prior.
+        """
+        cfg = self.cfg
+        out = 0.5 * math.log1p(cfg.inlier_m**2 / max(cfg.model_sigma_m**2, 1e-12))
+        if self.p.shape[0] < 3:
+            data = self.q.shape[0] * out
+        else:
+            _, _, pairs, _, _, cost = self.normal_equations(x, cfg.inlier_m)
+            data = cost + (self.q.shape[0] - pairs) * out
+        r = np.asarray(x, dtype=float) - self.x_prior
+        r[2] = math.remainder(float(r[2]), 2.0 * math.pi)
+        return float(data + 0.5 * r @ self.info_prior @ r)
+
+    def inliers(self, x: FloatArray) -> int:
+        """Current points within ``inlier_m`` of a reference line at ``x``."""
+        if self.p.shape[0] < 3:
+            return 0
+        return int(self.normal_equations(x, self.cfg.inlier_m)[3])
+
+    def covariance(self, x: FloatArray) -> tuple[FloatArray, int]:
+        """Covariance of the match at ``x`` and the number of inliers.
+
+        A sandwich ``H⁻¹ M H⁻¹`` over the pairs within ``inlier_m``: ``H = Σ w JᵀJ`` as in
+        the solve; in ``M`` each residual's Eq. 8 variance is its own, while the model error
+        (``model_sigma_m``) is one offset shared by the points on one piece of reference wall
+        (:attr:`ScanPoints.segment`), so that many points on one wall weigh as one wall.
+        Times the variance factor of the robust residuals when it exceeds 1.
+        """
+        if self.p.shape[0] < 3:
+            return np.full((3, 3), np.nan), 0
+        keys, order = self._grid(self.cfg.inlier_m)
+        H, M, pairs, inl, wee = _sandwich(
+            np.asarray(x, dtype=float), self.p, self.n, self.var_ref, keys, order,
+            self.cfg.inlier_m, self.q, *self.cq, self.seg, self.n_seg,
+            self.cfg.model_sigma_m**2,
+        )  # fmt: skip
+        if pairs < 3 or np.linalg.det(H) <= 0.0:
+            return np.full((3, 3), np.nan), inl
+        s2 = max(wee / max(pairs - 3, 1), 1.0)
+        Hi = np.linalg.inv(H)
+        cov = s2 * Hi @ M @ Hi
+        return 0.5 * (cov + cov.T), inl
+
+
+def match_scans(
+    reference: ScanPoints,
+    current: ScanPoints,
+    delta0: FloatArray,
+    prior_cov: FloatArray,
+    config: ScanMatchConfig,
+) -> ScanMatch:
+    """Register ``current`` against ``reference``, with the odometry as the prior.
+
+    The estimate is the posterior mode of the relative pose: the points' robust likelihood
+    (Cauchy) times the odometry's Gaussian ``N(delta0, prior_cov)``.  Where the points
+    constrain the pose (nearly always the rotation) they decide, even against an odometry
+    step tens of degrees off; where they do not (along a corridor) the odometry does.
+
+    Parameters
+    ----------
+    reference, current : ScanPoints
+        The previous keyframe's points and the current keyframe's.
+    delta0 : ndarray, shape (3,)
+        The odometry's pose of the current laser in the reference laser's frame.
+    prior_cov : ndarray, shape (3, 3)
+        Its covariance (the motion noise), positive definite.
+    config : ScanMatchConfig
+
+    Returns
+    -------
+    ScanMatch
+        ``delta`` and ``cov`` are the posterior (odometry and points together).
+    """
+    cfg = config
+    x0 = np.asarray(delta0, dtype=float)
+    info_prior = np.linalg.inv(np.asarray(prior_cov, dtype=float))
+    info_prior = 0.5 * (info_prior + info_prior.T)
+    matcher = _Matcher(reference, current, cfg, x0, info_prior)
+    k = math.floor(cfg.rotation_window_rad / cfg.rotation_step_rad + 1e-9)
+    offsets = [0.0] + [sg * i * cfg.rotation_step_rad for i in range(1, k + 1) for sg in (1, -1)]
+    # a few iterations from every start (the prior keeps each near the odometry except in
+    # rotation, which the start sets); the odometry's own start and the two others of most
+    # overlap are refined; the refined one of least negative log-posterior is the match
+    coarse: list[tuple[int, float, FloatArray]] = []
+    for off in offsets:
+        start = x0 + np.array([0.0, 0.0, off])
+        x = matcher.solve(start, cfg.coarse_iterations, cfg.max_correspondence_m)
+        coarse.append((matcher.inliers(x), off, x))
+    candidates = [coarse[0]] + sorted(coarse[1:], key=lambda c: -c[0])[:2]
+    best: tuple[float, float, FloatArray] | None = None
+    for _, off, x in candidates:
+        x = matcher.solve(x, cfg.max_iterations, cfg.max_correspondence_m)
+        x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
+        obj = matcher.objective(x)
+        if best is None or obj < best[0]:
+            best = (obj, off, x)
+    assert best is not None
+    _, offset, x = best
+    x[2] = math.remainder(float(x[2]), 2.0 * math.pi)
+    cov_points, inl = matcher.covariance(x)
+    overlap = inl / max(len(current), 1)
+    ok = bool(np.all(np.isfinite(cov_points)))
+    cov: FloatArray = np.asarray(prior_cov, dtype=np.float64).copy()
+    if ok:
+        try:
+            info = np.linalg.inv(cov_points) + info_prior
+            post = np.linalg.inv(0.5 * (info + info.T))
+            post = 0.5 * (post + post.T)
+            ok = bool(np.all(np.linalg.eigvalsh(post) > 0.0))
+            if ok:
+                cov = post
+        except np.linalg.LinAlgError:
+            ok = False
+    return ScanMatch(x, cov, float(overlap), inl, float(offset), ok and overlap >= cfg.min_overlap)

@@ -1,0 +1,548 @@
+"""Dense scan matching (``slam.frontend.scan_match``): known answers, slips, a corridor, NEES,
+bad input, and the pipeline with ``[slam.frontend.scan_matching] enabled = true``.
+
+The scans are ray cast (:func:`slam.sim.raycast.cast_scan`) in small worlds built here: a
+closed L-shaped room with three boxes (no symmetry), and a corridor of two long parallel walls.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import REPO_ROOT
+from scipy import integrate, stats
+
+from linefit.config import SensorNoiseConfig
+from linefit.noise import point_covariance_entries
+from slam.config import RunConfig
+from slam.errors import ConfigError
+from slam.evaluation.relations_metric import relations_metric
+from slam.frontend.scan_match import (
+    ScanMatch,
+    ScanMatchConfig,
+    ScanPoints,
+    match_scans,
+    scan_points,
+)
+from slam.geometry import pose_between, pose_compose
+from slam.io import read_tum
+from slam.io.relations import read_relations
+from slam.models import MotionNoiseConfig
+from slam.runner import run_slam
+from slam.sim.raycast import cast_scan
+from slam.sim.world import World, WorldBuilder
+
+DEMO = REPO_ROOT / "datasets" / "sim" / "demo"
+MAX_RANGE_M = 30.0
+FULL = np.deg2rad(np.arange(360.0) - 180.0)  # 360 beams over 360°
+HALF = np.deg2rad(np.linspace(-90.0, 90.0, 181))  # 181 beams over 180°
+NOISE = SensorNoiseConfig()  # the paper's: σ_d = 5 mm, σ_φ = 1e-4 rad
+POSE_A = np.array([3.0, 3.0, 0.2])  # reference laser in the room
+TRUE_DELTA = np.array([0.4, 0.1, 0.3])  # current laser in the reference laser's frame
+
+
+def _room() -> World:
+    """An L-shaped room (10 m × 8 m, a 4 m × 4 m corner cut off) with three boxes."""
+    b = WorldBuilder()
+    b.polyline([(0, 0), (10, 0), (10, 4), (6, 4), (6, 8), (0, 8)], closed=True)
+    b.box(2.0, 1.0, 1.0, 0.6)
+    b.rotated_box(7.5, 2.0, 0.8, 0.5, 0.4, "box")
+    b.box(1.0, 5.5, 0.7, 1.2)
+    return b.build("room")
+
+
+def _corridor() -> World:
+    """Two parallel walls along x, 2.2 m apart, far longer than the laser's range."""
+    b = WorldBuilder()
+    b.segment((-200.0, -1.2), (200.0, -1.2))
+    b.segment((-200.0, 1.0), (200.0, 1.0))
+    return b.build("corridor")
+
+
+ROOM = _room()
+CORRIDOR = _corridor()
+
+
+def _ranges(world: World, pose: np.ndarray, bearings: np.ndarray) -> np.ndarray:
+    return cast_scan(pose, bearings, world, MAX_RANGE_M)[0]
+
+
+def _pair(
+    world: World,
+    bearings: np.ndarray,
+    config: ScanMatchConfig,
+    pose_a: np.ndarray = POSE_A,
+    delta: np.ndarray = TRUE_DELTA,
+    noise: SensorNoiseConfig = NOISE,
+) -> tuple[ScanPoints, ScanPoints]:
+    """Noise-free points of the reference scan at ``pose_a``, the current at ``pose_a ∘ delta``."""
+    ra = _ranges(world, pose_a, bearings)
+    rb = _ranges(world, pose_compose(pose_a, delta), bearings)
+    return (
+        scan_points(ra, bearings, MAX_RANGE_M, noise, config),
+        scan_points(rb, bearings, MAX_RANGE_M, noise, config),
+    )
+
+
+def _odometry_cov(delta0: np.ndarray) -> np.ndarray:
+    """The pipeline's prior: the default motion model's covariance of the odometry step."""
+    return MotionNoiseConfig().covariance(np.asarray(delta0, dtype=float))
+
+
+def _angle(a: float) -> float:
+    return math.remainder(a, 2.0 * math.pi)
+
+
+def _pose_error(match: ScanMatch, truth: np.ndarray) -> tuple[float, float]:
+    """(position error (m), |heading error| (rad)) of a match."""
+    e = match.delta - truth
+    return float(np.hypot(e[0], e[1])), abs(_angle(float(e[2])))
+
+
+# --------------------------------------------------------------------------------------------
+# scan_points
+
+
+def test_scan_points_drop_invalid_readings_and_find_the_walls_local_lines():
+    """Two walls at different depths (a depth jump between them), with invalid readings
+    mixed in: the valid readings' points in beam order with their Eq. 8 covariances, the
+    walls' normals, one segment per wall, no local line across the jump."""
+    b = WorldBuilder()
+    b.segment((2.0, -3.0), (2.0, 0.0))  # wall x = 2 m below the x axis
+    b.segment((4.0, 0.0), (4.0, 3.0))  # wall x = 4 m above it
+    world = b.build("step")
+    bearings = np.deg2rad(np.linspace(-50.0, 35.0, 86))
+    ranges = _ranges(world, np.zeros(3), bearings)
+    assert np.all(ranges < MAX_RANGE_M)
+    bad = np.zeros(bearings.size, dtype=bool)
+    bad[[3, 40, 80]] = True
+    ranges[3], ranges[40], ranges[80] = np.nan, 0.0, MAX_RANGE_M
+    cfg = ScanMatchConfig()
+    pts = scan_points(ranges, bearings, MAX_RANGE_M, NOISE, cfg)
+    d, phi = ranges[~bad], bearings[~bad]
+    assert len(pts) == d.size
+    np.testing.assert_allclose(pts.xy, np.column_stack([d * np.cos(phi), d * np.sin(phi)]))
+    want = point_covariance_entries(d, phi, NOISE)
+    for got, expected in zip((pts.q11, pts.q12, pts.q22), want, strict=True):
+        np.testing.assert_allclose(got, expected, rtol=1e-12, atol=0.0)
+    # local lines: on each wall, normal ±x; none at the two ends of the scan or over the jump
+    h = cfg.normal_points // 2
+    assert not pts.has_normal[:h].any() and not pts.has_normal[-h:].any()
+    wall = np.where(pts.xy[:, 0] < 3.0, 0, 1)
+    jump = int(np.flatnonzero(np.diff(wall))[0])  # last point of the first wall
+    assert not pts.has_normal[jump - h + 1 : jump + h + 1].any()
+    ok = pts.has_normal
+    assert ok.sum() == len(pts) - 4 * h
+    np.testing.assert_allclose(np.abs(pts.normals[ok, 0]), 1.0, atol=1e-9)
+    np.testing.assert_allclose(pts.normals[~ok], 0.0)
+    # one segment per wall, −1 where there is no local line
+    assert np.all(pts.segment[~ok] == -1)
+    assert set(pts.segment[ok & (wall == 0)]) == {0} and set(pts.segment[ok & (wall == 1)]) == {1}
+
+
+# --------------------------------------------------------------------------------------------
+# 1. known answer, noise-free
+
+
+def _reversed_delta() -> np.ndarray:
+    """The reference laser's pose in the current laser's frame."""
+    return pose_between(pose_compose(POSE_A, TRUE_DELTA), POSE_A)
+
+
+@pytest.mark.parametrize("swap", [False, True], ids=["forward", "swapped"])
+@pytest.mark.parametrize("bearings", [FULL, HALF], ids=["360beams-360deg", "181beams-180deg"])
+def test_noise_free_match_returns_the_true_relative_pose(bearings, swap):
+    """Odometry off by (3 cm, −2 cm, 2°); ``delta`` is the current laser's pose in the
+    reference laser's frame (swapping the scans gives the inverse pose).
+
+    * Only exactly straight local lines (``max_line_thickness = 1e-6``) and a flat prior (the
+      motion model's covariance × 1e4): the true pose to 1e-6 (measured ≤ 6e-8), with or
+      without a model error.
+    * The same lines, no model error, the motion model's prior: the posterior mode is pulled
+      towards the odometry by ~1e-5 (measured ≤ 5e-5 m, 1e-5 rad).
+    * The defaults: within 1e-3 m and 3e-4 rad (measured ≤ 8.1e-4 m, 2.2e-4 rad with the
+      181 beams).  The model error (2 cm) lets the prior pull harder, and a few windows that
+      straddle a corner pass ``max_line_thickness = 0.05`` and leave residuals of up to 1 cm
+      at the true pose.
+    """
+    truth = _reversed_delta() if swap else TRUE_DELTA
+    delta0 = truth + np.array([0.03, -0.02, np.deg2rad(2.0)])
+    prior = _odometry_cov(delta0)
+    exact = ScanMatchConfig(model_sigma_m=0.0, max_line_thickness=1e-6)
+    cases = [
+        (exact, 1e4, 1e-6, 1e-6),
+        (replace(exact, model_sigma_m=0.02), 1e4, 1e-6, 1e-6),
+        (exact, 1.0, 1e-4, 2e-5),
+        (ScanMatchConfig(), 1.0, 1e-3, 3e-4),
+    ]
+    for cfg, widen, tol_m, tol_rad in cases:
+        ref, cur = _pair(ROOM, bearings, cfg)
+        if swap:
+            ref, cur = cur, ref
+        m = match_scans(ref, cur, delta0, widen * prior, cfg)
+        err_m, err_rad = _pose_error(m, truth)
+        assert err_m < tol_m and err_rad < tol_rad, (m.delta - truth, cfg, widen)
+        assert m.accepted and m.overlap > 0.6 and m.inliers == round(m.overlap * len(cur))
+        # (a rotated start may win the search when it converges to the same pose)
+        assert np.all(np.isfinite(m.cov)) and np.all(np.linalg.eigvalsh(m.cov) > 0.0)
+        assert np.all(np.diag(m.cov) < np.diag(widen * prior))
+        assert m.cov[2, 2] < 0.05 * prior[2, 2]  # the walls fix the rotation
+
+
+# --------------------------------------------------------------------------------------------
+# 2. a slip
+
+
+@pytest.mark.parametrize("slip_deg", [-30.0, -25.0, 28.0])
+def test_rotation_search_recovers_an_odometry_slip(slip_deg):
+    """The odometry's heading off by tens of degrees (10-20 σ of the motion model; its
+    translation right): the multi-start search finds the true pose (within 1e-3) from a
+    rotated start; without the search (``rotation_window_rad = 0``) the match stays in a
+    wrong minimum and is rejected."""
+    delta0 = TRUE_DELTA + np.array([0.0, 0.0, np.deg2rad(slip_deg)])
+    prior = _odometry_cov(delta0)
+    assert 0.01 < math.sqrt(prior[2, 2]) < 0.06  # σθ of one to a few degrees
+    cfg = ScanMatchConfig()
+    ref, cur = _pair(ROOM, FULL, cfg)
+    m = match_scans(ref, cur, delta0, prior, cfg)
+    err_m, err_rad = _pose_error(m, TRUE_DELTA)
+    assert err_m < 1e-3 and err_rad < 1e-3, m.delta - TRUE_DELTA
+    assert m.accepted and m.overlap > 0.8
+    assert np.sign(m.start_offset_rad) == -np.sign(slip_deg)  # refined from a rotated start
+    no_search = replace(cfg, rotation_window_rad=0.0)
+    m0 = match_scans(ref, cur, delta0, prior, no_search)
+    assert m0.start_offset_rad == 0.0
+    assert _pose_error(m0, TRUE_DELTA)[1] > np.deg2rad(10.0)
+    assert not m0.accepted and m0.overlap < 0.2
+
+
+# --------------------------------------------------------------------------------------------
+# 3. corridor
+
+
+def _corridor_match(
+    rng: np.random.Generator | None, sigma_range_m: float
+) -> tuple[ScanMatch, np.ndarray, np.ndarray]:
+    """A match in the corridor: odometry off by (8 cm, −3 cm, 2°), prior σ (5 cm, 4 cm, 3°)."""
+    cfg = ScanMatchConfig()
+    pose_a = np.zeros(3)
+    ra = _ranges(CORRIDOR, pose_a, FULL)
+    rb = _ranges(CORRIDOR, pose_compose(pose_a, TRUE_DELTA), FULL)
+    if rng is not None:
+        ra = ra + sigma_range_m * rng.standard_normal(ra.size)
+        rb = rb + sigma_range_m * rng.standard_normal(rb.size)
+    ref = scan_points(ra, FULL, MAX_RANGE_M, NOISE, cfg)
+    cur = scan_points(rb, FULL, MAX_RANGE_M, NOISE, cfg)
+    delta0 = TRUE_DELTA + np.array([0.08, -0.03, np.deg2rad(2.0)])
+    prior = np.diag([0.05**2, 0.04**2, np.deg2rad(3.0) ** 2])
+    return match_scans(ref, cur, delta0, prior, cfg), delta0, prior
+
+
+def test_corridor_leaves_the_position_along_it_to_the_odometry():
+    """Two parallel walls, noise-free: along the corridor the estimate stays at the odometry's
+    and so does the variance (within 10 %); across it and in rotation the points decide."""
+    m, delta0, prior = _corridor_match(None, 0.0)
+    assert m.accepted
+    assert abs(m.delta[0] - delta0[0]) < 1e-6
+    assert abs(m.delta[1] - TRUE_DELTA[1]) < 1e-3 and abs(m.delta[2] - TRUE_DELTA[2]) < 1e-4
+    assert 0.9 < m.cov[0, 0] / prior[0, 0] < 1.1
+    assert m.cov[1, 1] < 0.2 * prior[1, 1] and m.cov[2, 2] < 0.01 * prior[2, 2]
+    # across it: each wall's model error is one offset shared by all its points, so the two
+    # walls give σ_m²/2, fused with the prior (the points' own 5 mm noise adds < 1 %)
+    sigma_m = ScanMatchConfig().model_sigma_m
+    across = 1.0 / (2.0 / sigma_m**2 + 1.0 / prior[1, 1])
+    assert 0.97 < m.cov[1, 1] / across < 1.05
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="scan_match bug: with range noise the local normals' random tilts act as "
+    "information along a corridor: posterior σ along it 0.8-2 cm instead of the prior's 5 cm "
+    "(variance ratio 0.02-0.15), while the error there stays the odometry's (7-10 cm)",
+)
+def test_corridor_with_range_noise_leaves_the_position_along_it_to_the_odometry():
+    """As above with the paper's 5 mm range noise (10 seeded runs): the scene carries no
+    information along the corridor, so neither the estimate (which does stay within 1 cm rms
+    of the odometry's) nor its variance there may move much from the odometry's, and the
+    error along it must stay within 3 σ of the stated variance."""
+    moved, ratio, z = [], [], []
+    for seed in range(10):
+        m, delta0, prior = _corridor_match(np.random.default_rng(500 + seed), 0.005)
+        moved.append(m.delta[0] - delta0[0])
+        ratio.append(m.cov[0, 0] / prior[0, 0])
+        z.append((m.delta[0] - TRUE_DELTA[0]) / math.sqrt(m.cov[0, 0]))
+    assert np.sqrt(np.mean(np.square(moved))) < 0.02, moved
+    assert min(ratio) > 0.9, ratio
+    assert np.max(np.abs(z)) < 3.0, z
+
+
+# --------------------------------------------------------------------------------------------
+# 4. Monte-Carlo consistency
+
+N_MC = 200
+SIGMA_MC = 0.01  # σ_d = 1 cm (σ_φ = 0: the simulated noise is exactly the Eq. 8 model's)
+
+
+@pytest.fixture(scope="module")
+def mc_nees() -> np.ndarray:
+    """NEES of ``delta − true`` against ``cov`` over ``N_MC`` seeded runs in the room.
+
+    Both scans get N(0, σ_d²) range noise, ``model_sigma_m = 0`` (the walls are exact) and the
+    odometry is drawn from N(true, prior) each run.
+    """
+    cfg = ScanMatchConfig(model_sigma_m=0.0)
+    noise = SensorNoiseConfig(sigma_range_m=SIGMA_MC, sigma_bearing_rad=0.0)
+    prior = np.diag([0.05**2, 0.05**2, np.deg2rad(3.0) ** 2])
+    chol = np.linalg.cholesky(prior)
+    ra0 = _ranges(ROOM, POSE_A, FULL)
+    rb0 = _ranges(ROOM, pose_compose(POSE_A, TRUE_DELTA), FULL)
+    nees = np.empty(N_MC)
+    for k in range(N_MC):
+        rng = np.random.default_rng(1000 + k)
+        ra = ra0 + SIGMA_MC * rng.standard_normal(ra0.size)
+        rb = rb0 + SIGMA_MC * rng.standard_normal(rb0.size)
+        ref = scan_points(ra, FULL, MAX_RANGE_M, noise, cfg)
+        cur = scan_points(rb, FULL, MAX_RANGE_M, noise, cfg)
+        delta0 = TRUE_DELTA + chol @ rng.standard_normal(3)
+        m = match_scans(ref, cur, delta0, prior, cfg)
+        assert m.accepted
+        e = m.delta - TRUE_DELTA
+        e[2] = _angle(float(e[2]))
+        nees[k] = e @ np.linalg.solve(m.cov, e)
+    return nees
+
+
+def _chi2_band(n: int) -> tuple[float, float]:
+    """99 % band of the mean of ``n`` independent χ²₃ values."""
+    return stats.chi2.ppf(0.005, 3 * n) / n, stats.chi2.ppf(0.995, 3 * n) / n
+
+
+def _cauchy_sandwich_deficit() -> float:
+    """How much the module's covariance understates the Cauchy M-estimator's, Gaussian data.
+
+    The module's sandwich is ``H⁻¹ M H⁻¹`` with ``H = Σ w JᵀJ``, ``M = Σ w² σ² JᵀJ``,
+    ``w = 1/(σ² + e²)`` (the weights of the last iteration, held fixed).  The estimator's own
+    asymptotic covariance is ``A⁻¹ B A⁻¹`` with ``A = Σ ψ'(e) JᵀJ``, ``B = Σ ψ(e)² JᵀJ``,
+    ``ψ(e) = e/(σ² + e²)``.  For ``e ~ N(0, σ²)`` (the Cauchy scale equal to the residuals' σ,
+    as in the module) the ratio of the two is ``E[ψ²]/E[ψ']² ÷ E[w²σ²]/E[w]²`` ≈ 1.129.
+    """
+
+    def mean(f):  # E[f(z)], z ~ N(0, 1)
+        return integrate.quad(lambda z: f(z) * stats.norm.pdf(z), -np.inf, np.inf)[0]
+
+    e_w = mean(lambda z: 1.0 / (1.0 + z * z))
+    e_w2 = mean(lambda z: 1.0 / (1.0 + z * z) ** 2)
+    e_psi2 = mean(lambda z: z * z / (1.0 + z * z) ** 2)
+    e_dpsi = mean(lambda z: (1.0 - z * z) / (1.0 + z * z) ** 2)
+    return (e_psi2 / e_dpsi**2) / (e_w2 / e_w**2)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="scan_match bug: the covariance is the fixed-weight (IRLS) sandwich, not the Cauchy "
+    "M-estimator's; it is ~13 % too small for Gaussian residuals (mean NEES 3.60 over 200 "
+    "runs, 99 % band [2.57, 3.46])",
+)
+def test_monte_carlo_nees_is_in_the_chi2_band(mc_nees):
+    """The mean NEES of ``N_MC`` runs lies in the 99 % band of the mean of χ²₃ values."""
+    lo, hi = _chi2_band(N_MC)
+    assert lo < mc_nees.mean() < hi, mc_nees.mean()
+
+
+def test_monte_carlo_nees_is_in_the_chi2_band_up_to_the_sandwich_deficit(mc_nees):
+    """What the covariance does today, stated exactly: the mean NEES, divided by the analytic
+    deficit of the fixed-weight sandwich (≈ 1.13, :func:`_cauchy_sandwich_deficit`), lies in
+    the 99 % band.  Any further inconsistency (a wrong Eq. 8 term, a lost prior, a wrong
+    Jacobian) moves it out."""
+    kappa = _cauchy_sandwich_deficit()
+    assert 1.12 < kappa < 1.14
+    lo, hi = _chi2_band(N_MC)
+    assert lo < mc_nees.mean() / kappa < hi, (mc_nees.mean(), kappa)  # today 3.60 / 1.129
+
+
+# --------------------------------------------------------------------------------------------
+# 5. bad input
+
+BAD_SCANS = {
+    "nan": np.full(HALF.size, np.nan),
+    "inf": np.full(HALF.size, np.inf),
+    "-inf": np.full(HALF.size, -np.inf),
+    "zero": np.zeros(HALF.size),
+    "negative": np.full(HALF.size, -1.0),
+    "max-range": np.full(HALF.size, MAX_RANGE_M),
+    "beyond-max-range": np.full(HALF.size, 2.0 * MAX_RANGE_M),
+    "two-valid": np.where(np.isin(np.arange(HALF.size), [10, 50]), 2.0, np.nan),
+    "three-valid": np.where(np.isin(np.arange(HALF.size), [10, 11, 12]), 2.0, np.nan),
+}
+
+
+@pytest.mark.parametrize("name", list(BAD_SCANS))
+def test_bad_scans_give_no_usable_points_and_rejected_matches(name):
+    cfg = ScanMatchConfig()
+    pts = scan_points(BAD_SCANS[name], HALF, MAX_RANGE_M, NOISE, cfg)
+    n_valid = {"two-valid": 2, "three-valid": 3}.get(name, 0)
+    assert (
+        len(pts) == n_valid and pts.xy.shape == (n_valid, 2) and pts.normals.shape == (n_valid, 2)
+    )
+    for field in (pts.q11, pts.q12, pts.q22, pts.has_normal, pts.segment):
+        assert field.shape == (n_valid,)
+    assert not pts.has_normal.any() and np.all(pts.segment == -1)
+    assert np.all(np.isfinite(pts.xy))
+    good, _ = _pair(ROOM, HALF, cfg)
+    delta0 = np.array([0.3, -0.1, 0.2])
+    prior = _odometry_cov(delta0)
+    for ref, cur in ((pts, good), (good, pts), (pts, pts)):
+        m = match_scans(ref, cur, delta0, prior, cfg)
+        assert not m.accepted and m.inliers == 0 and m.overlap == 0.0
+        np.testing.assert_array_equal(m.cov, prior)
+        assert m.cov is not prior  # a copy
+        assert np.all(np.isfinite(m.delta))
+
+
+def test_empty_reference_rejects_the_match():
+    cfg = ScanMatchConfig()
+    empty = scan_points(np.empty(0), np.empty(0), MAX_RANGE_M, NOISE, cfg)
+    assert len(empty) == 0 and empty.xy.shape == (0, 2)
+    _, cur = _pair(ROOM, FULL, cfg)
+    delta0 = TRUE_DELTA.copy()
+    prior = _odometry_cov(delta0)
+    m = match_scans(empty, cur, delta0, prior, cfg)
+    assert not m.accepted and m.overlap == 0.0
+    np.testing.assert_array_equal(m.cov, prior)
+    np.testing.assert_allclose(m.delta, delta0)  # only the prior: its mode
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"normal_points": 4},
+        {"normal_points": 1},
+        {"min_overlap": 1.5},
+        {"min_overlap": -0.1},
+        {"inlier_m": 0.0},
+        {"inlier_m": math.nan},
+        {"model_sigma_m": -0.01},
+        {"max_line_thickness": 0.0},
+        {"max_line_thickness": 1.0},
+        {"max_neighbour_gap_m": 0.0},
+        {"max_correspondence_m": math.inf},
+        {"rotation_window_rad": -0.1},
+        {"rotation_step_rad": 0.0},
+        {"coarse_iterations": 0},
+        {"max_iterations": 0},
+    ],
+)
+def test_bad_config_values_raise_config_error(bad):
+    with pytest.raises(ConfigError):
+        ScanMatchConfig(**bad)
+
+
+def test_bad_scan_matching_table_in_a_config_file_raises_config_error(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text("[slam.frontend.scan_matching]\nenabled = true\nnormal_points = 4\n")
+    with pytest.raises(ConfigError, match="normal_points"):
+        RunConfig.from_toml(path)
+
+
+# --------------------------------------------------------------------------------------------
+# 6. pipeline
+
+
+def _scan_matching_config(tmp_path: Path) -> RunConfig:
+    """A run configuration with scan matching on, read from a file as a user writes it."""
+    path = tmp_path / "scan_matching.toml"
+    path.write_text("[slam.frontend.scan_matching]\nenabled = true\n")
+    config = RunConfig.from_toml(path)
+    assert config.slam.frontend.scan_matching == ScanMatchConfig(enabled=True)
+    return config
+
+
+def _relations_error_m(out: Path) -> float:
+    traj = read_tum(out / "trajectory.tum")
+    metric = relations_metric(traj, read_relations(DEMO / "relations.txt"))
+    assert metric.n_unmatched == 0
+    return metric.abs_trans_m.mean
+
+
+def test_demo_log_with_scan_matching(tmp_path):
+    """Every keyframe after the first is matched against the previous one (the demo's scans
+    are all keyframes), few matches are rejected, and the relations error stays at the
+    default run's (about 9 mm)."""
+    summary = run_slam(DEMO / "log.clf", tmp_path / "sm", _scan_matching_config(tmp_path))
+    assert summary["scan_matches"] == summary["keyframes"] - 1 > 300
+    assert summary["scan_matches_rejected"] <= 0.05 * summary["scan_matches"]
+    assert _relations_error_m(tmp_path / "sm") < 0.02
+
+
+def test_default_config_does_no_scan_matching(tmp_path):
+    assert not RunConfig().slam.frontend.scan_matching.enabled
+    summary = run_slam(DEMO / "log.clf", tmp_path / "default", RunConfig(), max_scans=40)
+    assert summary["scan_matches"] == 0 and summary["scan_matches_rejected"] == 0
+
+
+# --------------------------------------------------------------------------------------------
+# 7. a slip in a log
+
+
+def _slipped_log(source: Path, target: Path, at_scan: int, angle_rad: float) -> None:
+    """``source`` with every odometry pose after the ``at_scan``-th ``FLASER`` line rotated by
+    ``angle_rad`` about the robot's position at that scan (an odometry heading slip)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    centre: tuple[float, float] | None = None
+
+    def rotated(tokens: list[str], start: int) -> None:
+        assert centre is not None
+        x, y, th = (float(v) for v in tokens[start : start + 3])
+        dx, dy = x - centre[0], y - centre[1]
+        new = (centre[0] + c * dx - s * dy, centre[1] + s * dx + c * dy, th + angle_rad)
+        tokens[start : start + 3] = [f"{v:.6f}" for v in new]
+
+    scan = -1
+    out = []
+    for line in source.read_text().splitlines():
+        tokens = line.split()
+        if tokens and tokens[0] == "FLASER":
+            scan += 1
+            n = int(tokens[1])
+            if scan == at_scan:  # laser pose at 2 + n, odometry pose at 5 + n
+                centre = (float(tokens[5 + n]), float(tokens[6 + n]))
+            elif centre is not None:
+                rotated(tokens, 2 + n)
+                rotated(tokens, 5 + n)
+                line = " ".join(tokens)
+        elif tokens and tokens[0] == "ODOM" and centre is not None:
+            rotated(tokens, 1)
+            line = " ".join(tokens)
+        out.append(line)
+    assert centre is not None
+    target.write_text("\n".join(out) + "\n")
+
+
+def _final_heading_error_rad(out: Path) -> float:
+    """Heading change start → end of the run against the ground truth's (frame-free)."""
+    traj = read_tum(out / "trajectory.tum")
+    truth = read_tum(DEMO / "ground_truth.tum")
+    np.testing.assert_allclose(traj.timestamps, truth.timestamps)
+    turned = traj.poses[-1, 2] - traj.poses[0, 2]
+    return abs(_angle(float(turned - (truth.poses[-1, 2] - truth.poses[0, 2]))))
+
+
+def test_scan_matching_corrects_a_heading_slip_in_the_demo_log(tmp_path):
+    """A 20° odometry slip at scan 200 (of 383; before the loop is closed): without scan
+    matching the slip goes uncorrected, the loop is not closed and the run ends 20° off; with
+    it the points see the slip and the final heading error stays at the clean run's (0.01°).
+    (A slip at scan 100 or 300 is repaired by the loop closure even without scan matching.)"""
+    log = tmp_path / "slip.clf"
+    _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(20.0))
+    run_slam(log, tmp_path / "without", RunConfig())
+    run_slam(log, tmp_path / "with", _scan_matching_config(tmp_path))
+    without = _final_heading_error_rad(tmp_path / "without")
+    with_sm = _final_heading_error_rad(tmp_path / "with")
+    assert without > np.deg2rad(10.0)
+    assert with_sm < np.deg2rad(0.2)
