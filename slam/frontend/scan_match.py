@@ -275,18 +275,19 @@ def _nearest(
     best = -1
     best_d2 = d_max * d_max
     for dx in range(-1, 2):
-        for dy in range(-1, 2):
-            k = (cx + dx) * _SPAN + (cy + dy)
-            lo = np.searchsorted(keys, k)
-            while lo < keys.size and keys[lo] == k:
-                j = order[lo]
-                ex = p[j, 0] - qx
-                ey = p[j, 1] - qy
-                d2 = ex * ex + ey * ey
-                if d2 <= best_d2:
-                    best_d2 = d2
-                    best = j
-                lo += 1
+        # the three cells (cx + dx, cy − 1 .. cy + 1) have consecutive keys: one search
+        row = (cx + dx) * _SPAN
+        lo = np.searchsorted(keys, row + cy - 1)
+        last = row + cy + 1
+        while lo < keys.size and keys[lo] <= last:
+            j = order[lo]
+            ex = p[j, 0] - qx
+            ey = p[j, 1] - qy
+            d2 = ex * ex + ey * ey
+            if d2 <= best_d2:
+                best_d2 = d2
+                best = j
+            lo += 1
     return best
 
 
