@@ -16,13 +16,12 @@ refines the odometry's own start and the two other starts of most overlap, and k
 the refined one of least negative log-posterior (Cauchy cost of the pairs, an outlier's cost
 for each unpaired point, and the prior).
 
-**Covariance.**  The points' part is a sandwich ``H⁻¹ M H⁻¹`` (``H = Σ w JᵀJ`` with the
-Cauchy weights over each residual's variance); in ``M`` the model error is one offset shared
-by the points on one piece of reference wall, so that many points on one wall weigh as one
-wall; it is combined with the prior's information.  Known limits (``tests/test_scan_match.py``):
-the fixed-weight sandwich is about 13 % smaller than the Cauchy estimator's own covariance
-for Gaussian residuals, and with noisy ranges the tilt of the five-point local lines reads as
-information along a corridor's axis, so the covariance there is too small.
+**Covariance.**  The points' part is the Cauchy M-estimator's sandwich ``A⁻¹ B A⁻¹`` in
+expectation under the noise model (``A = E[ψ'] Σ JᵀJ/σ²``; in ``B`` the model error is one
+offset shared by the points on one piece of reference wall, so that many points on one wall
+weigh as one wall); it is combined with the prior's information.  A known limit
+(``tests/test_scan_match.py``): with noisy ranges the tilt of the five-point local lines
+reads as information along a corridor's axis, so the covariance there is too small.
 
 :func:`scan_points` makes the points of a scan; :func:`match_scans` matches two.
 """
@@ -40,7 +39,15 @@ from linefit.config import SensorNoiseConfig
 from linefit.noise import point_covariance_entries
 from slam.validate import nonneg, positive, require
 
-__all__ = ["ScanMatch", "ScanMatchConfig", "ScanPoints", "match_scans", "scan_points"]
+__all__ = [
+    "CAUCHY_DPSI",
+    "CAUCHY_PSI2",
+    "ScanMatch",
+    "ScanMatchConfig",
+    "ScanPoints",
+    "match_scans",
+    "scan_points",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -399,6 +406,22 @@ def _gauss_newton(
     return x
 
 
+def _cauchy_moments() -> tuple[float, float]:
+    """``(E[ψ'], E[ψ²])`` of the Cauchy score ``ψ(r) = r/(1 + r²)`` for ``r ~ N(0, 1)``.
+
+    ``ψ'(r) = (1 − r²)/(1 + r²)²``; Gauss-Hermite quadrature (probabilists', 200 nodes: to
+    about 1e-10).
+    """
+    z, w = np.polynomial.hermite_e.hermegauss(200)
+    w = w / math.sqrt(2.0 * math.pi)
+    d = 1.0 + z * z
+    return float(np.sum(w * (1.0 - z * z) / d**2)), float(np.sum(w * z * z / d**2))
+
+
+CAUCHY_DPSI, CAUCHY_PSI2 = _cauchy_moments()
+"""``E[ψ']`` and ``E[ψ²]`` of the Cauchy score for standard normal residuals (the sandwich)."""
+
+
 @jit
 def _sandwich(
     x: FloatArray,
@@ -415,16 +438,21 @@ def _sandwich(
     seg: NDArray[np.int64],
     n_seg: int,
     var_model: float,
+    e_dpsi: float,
+    e_psi2: float,
 ) -> tuple[FloatArray, FloatArray, int, int, float]:
-    """``H``, the meat ``M`` of the sandwich covariance, pairs, inliers and ``Σ w e²`` at ``x``.
+    """``A``, ``B`` of the sandwich ``A⁻¹ B A⁻¹``, pairs, inliers and ``Σ w e²`` at ``x``.
 
-    ``M = Σ w² (σ² − σ_m²) JᵀJ + σ_m² Σ_segments (Σ w J)ᵀ(Σ w J)``: the residuals' own
-    variances, and one model-error offset per reference segment.
+    The Cauchy estimator's, in expectation under the noise model (each residual ``N(0, σ²)``,
+    ``σ²`` its Eq. 8 variance plus ``σ_m²``): ``A = E[ψ'] Σ JᵀJ/σ²``;
+    ``B = Σ (E[ψ²]/σ² − E[ψ']² σ_m²/σ⁴) JᵀJ + E[ψ']² σ_m² Σ_segments (Σ J/σ²)ᵀ(Σ J/σ²)``:
+    each residual's own score variance, and the model error as one offset per reference
+    segment, shared by its points' scores.
     """
     c = np.cos(x[2])
     s = np.sin(x[2])
-    H = np.zeros((3, 3))
-    M = np.zeros((3, 3))
+    A = np.zeros((3, 3))
+    B = np.zeros((3, 3))
     S = np.zeros((n_seg, 3))
     pairs = 0
     inliers = 0
@@ -442,25 +470,26 @@ def _sandwich(
         lx = c * nx + s * ny
         ly = -s * nx + c * ny
         var = var_ref[j] + lx * lx * q11[i] + 2.0 * lx * ly * q12[i] + ly * ly * q22[i]
-        w = 1.0 / (var + e * e)
         J[0] = nx
         J[1] = ny
         J[2] = nx * (-s * q[i, 0] - c * q[i, 1]) + ny * (c * q[i, 0] - s * q[i, 1])
-        own = var - var_model
+        a_i = e_dpsi / var
+        b_i = e_psi2 / var - e_dpsi * e_dpsi * var_model / (var * var)
         for a in range(3):
             for b in range(3):
-                H[a, b] += w * J[a] * J[b]
-                M[a, b] += w * w * own * J[a] * J[b]
-            S[seg[j], a] += w * J[a]
-        wee += w * e * e
+                A[a, b] += a_i * J[a] * J[b]
+                B[a, b] += b_i * J[a] * J[b]
+            S[seg[j], a] += J[a] / var
+        wee += e * e / (var + e * e)
         pairs += 1
         if abs(e) <= d_max:
             inliers += 1
+    k2 = e_dpsi * e_dpsi * var_model
     for k in range(n_seg):
         for a in range(3):
             for b in range(3):
-                M[a, b] += var_model * S[k, a] * S[k, b]
-    return H, M, pairs, inliers, wee
+                B[a, b] += k2 * S[k, a] * S[k, b]
+    return A, B, pairs, inliers, wee
 
 
 _OFFSET = np.int64(1 << 20)
@@ -545,27 +574,28 @@ class _Matcher:
         return int(self.normal_equations(x, self.cfg.inlier_m)[3])
 
     def covariance(self, x: FloatArray) -> tuple[FloatArray, int]:
-        """Covariance of the match at ``x`` and the number of inliers.
+        """Covariance of the match at ``x`` (the points' part) and the number of inliers.
 
-        A sandwich ``H⁻¹ M H⁻¹`` over the pairs within ``inlier_m``: ``H = Σ w JᵀJ`` as in
-        the solve; in ``M`` each residual's Eq. 8 variance is its own, while the model error
-        (``model_sigma_m``) is one offset shared by the points on one piece of reference wall
-        (:attr:`ScanPoints.segment`), so that many points on one wall weigh as one wall.
-        Times the variance factor of the robust residuals when it exceeds 1.
+        The Cauchy M-estimator's sandwich ``A⁻¹ B A⁻¹`` over the pairs within ``inlier_m``, in
+        expectation under the noise model (:func:`_sandwich`): each residual's Eq. 8 variance
+        is its own, while the model error (``model_sigma_m``) is one offset shared by the
+        points on one piece of reference wall (:attr:`ScanPoints.segment`), so that many
+        points on one wall weigh as one wall.  Times the variance factor of the robust
+        residuals when it exceeds 1.
         """
         if self.p.shape[0] < 3:
             return np.full((3, 3), np.nan), 0
         keys, order = self._grid(self.cfg.inlier_m)
-        H, M, pairs, inl, wee = _sandwich(
+        A, B, pairs, inl, wee = _sandwich(
             np.asarray(x, dtype=float), self.p, self.n, self.var_ref, keys, order,
             self.cfg.inlier_m, self.q, *self.cq, self.seg, self.n_seg,
-            self.cfg.model_sigma_m**2,
+            self.cfg.model_sigma_m**2, CAUCHY_DPSI, CAUCHY_PSI2,
         )  # fmt: skip
-        if pairs < 3 or np.linalg.det(H) <= 0.0:
+        if pairs < 3 or np.linalg.det(A) <= 0.0:
             return np.full((3, 3), np.nan), inl
         s2 = max(wee / max(pairs - 3, 1), 1.0)
-        Hi = np.linalg.inv(H)
-        cov = s2 * Hi @ M @ Hi
+        Ai = np.linalg.inv(A)
+        cov = s2 * Ai @ B @ Ai
         return 0.5 * (cov + cov.T), inl
 
 
