@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
@@ -48,7 +49,15 @@ __all__ = [
     "predict_line_measurement",
     "right_jacobian_pose2",
     "wrap_angle",
+    "wrap_angle_compiled",
 ]
+
+
+@njit(cache=True, nogil=True)
+def wrap_angle_compiled(a: float) -> float:  # pragma: no cover - compiled
+    """:func:`linefit.line.wrap_angle` of one float in compiled code (the same operations)."""
+    return math.pi - (math.pi - a) % (2.0 * math.pi)
+
 
 FloatArray = NDArray[np.float64]
 

@@ -32,7 +32,6 @@ if the optimised graph explains it.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -41,7 +40,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
-from slam.geometry import pose_between, pose_inverse
+from slam.geometry import pose_between, pose_inverse, wrap_angle_compiled
 
 __all__ = [
     "LoopClosure",
@@ -197,12 +196,6 @@ class LoopSearch:
 
 
 @njit(cache=True, nogil=True)
-def _wrap(a: float) -> float:  # pragma: no cover - compiled
-    """:func:`linefit.line.wrap_angle` of one float (the same operations)."""
-    return math.pi - (math.pi - a) % (2.0 * math.pi)
-
-
-@njit(cache=True, nogil=True)
 def _pairs_kernel(
     l_alpha: FloatArray,
     l_r: FloatArray,
@@ -234,7 +227,7 @@ def _pairs_kernel(
         best_m = -1
         best_overlap = 0.0
         for m in range(M):
-            da = abs(_wrap(l_alpha[k] - o_alpha[m]))
+            da = abs(wrap_angle_compiled(l_alpha[k] - o_alpha[m]))
             dr = abs(l_r[k] - o_r[m])
             if not (da < angle_tolerance and dr < offset_tolerance):
                 continue

@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
 from slam.errors import ConfigError, DegenerateGeometryError, InputError
+from slam.geometry import wrap_angle_compiled
 from slam.graph.robust import RobustKernel, robust_cost
 
 __all__ = [
@@ -215,12 +216,6 @@ _KERNEL_CODE = {"none": 0, "huber": 1, "cauchy": 2}
 
 
 @njit(cache=True, nogil=True)
-def _wrap(a: float) -> float:  # pragma: no cover - compiled
-    """:func:`linefit.line.wrap_angle` of one float (the same operations)."""
-    return math.pi - (math.pi - a) % (2.0 * math.pi)
-
-
-@njit(cache=True, nogil=True)
 def _residual(
     x: float,
     y: float,
@@ -239,11 +234,11 @@ def _residual(
     """
     r_w = c0 * trig[0, f] + c1 * trig[1, f] + rho
     z0 = r_w - x * trig[2, f] - y * trig[3, f]
-    z1 = _wrap(a_s)
-    d_alpha = _wrap(z1 - z[f, 1])
+    z1 = wrap_angle_compiled(a_s)
+    d_alpha = wrap_angle_compiled(z1 - z[f, 1])
     flip = abs(d_alpha) > math.pi / 2.0
     sign = -1.0 if flip else 1.0
-    e1 = _wrap(d_alpha + math.pi) if flip else _wrap(d_alpha)
+    e1 = wrap_angle_compiled(d_alpha + math.pi) if flip else wrap_angle_compiled(d_alpha)
     e0 = sign * z0 - z[f, 0]
     return e0, e1, sign
 
