@@ -11,11 +11,13 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
 2. **Repeats.**  A hypothesis that repeats one rejected recently (same correction, no more pairs)
    is not judged again (``skip_repeated_rejections``).
 3. **Consistency.**  The hypothesis, as a relative pose between the old keyframe and the
-   current one, must agree with the front end's own trajectory between them (free of loop
-   closures, so an earlier wrong closure cannot bias the test) under the drift between them,
-   and with ``confirmations`` other recent hypotheses (pairwise consistency through the front
-   end's chains, as in PCM, Mangelson et al. 2018); within the ``consistency_probability``
-   quantile of χ².  A revisit is thus recognised twice before it is judged.
+   current one, is compared with the front end's own trajectory between them (free of loop
+   closures, so an earlier wrong closure cannot bias it) under the drift between them: the
+   squared Mahalanobis distance is logged (``correction_chi2``), not used as a gate.  With
+   ``confirmations`` of 1 or more it must agree with that many other recent hypotheses
+   (pairwise consistency through the front end's chains, as in PCM, Mangelson et al. 2018;
+   within the ``consistency_probability`` quantile of χ²): a revisit is then recognised twice
+   before it is judged.
 4. **Judge.**  A large correction is first spread over the loop (:func:`spread_correction`); the
    paired landmarks are merged and a batch solve of the loop
    (:class:`slam.graph.batch.BatchSolver`, at most ``judge_iterations``) outside the back-end
