@@ -27,7 +27,10 @@ from slam.frontend.scan_match import (
     ScanMatch,
     ScanMatchConfig,
     ScanPoints,
+    _Matcher,
+    _OdometryPrior,
     match_scans,
+    normal_half_window,
     scan_points,
 )
 from slam.geometry import pose_between, pose_compose
@@ -109,6 +112,19 @@ def _pose_error(match: ScanMatch, truth: np.ndarray) -> tuple[float, float]:
 # scan_points
 
 
+@pytest.mark.parametrize(
+    ("step_deg", "h"), [(0.25, 4), (0.5, 2), (1.0, 1), (1.0056, 1), (2.0, 1), (4.0, 1)]
+)
+def test_local_line_window_covers_two_degrees_whatever_the_beam_spacing(step_deg, h):
+    """``2h + 1`` points: the nearest whole number of beam steps to 1° on each side, at
+    least one; the steps' median decides (a missing beam does not)."""
+    bearings = np.deg2rad(np.arange(0.0, 180.0, step_deg))
+    bearings = np.delete(bearings, 7)
+    assert normal_half_window(bearings, ScanMatchConfig()) == h
+    assert normal_half_window(bearings[::-1], ScanMatchConfig()) == h
+    assert normal_half_window(bearings[:1], ScanMatchConfig()) == 1
+
+
 def test_scan_points_drop_invalid_readings_and_find_the_walls_local_lines():
     """Two walls at different depths (a depth jump between them), with invalid readings
     mixed in: the valid readings' points in beam order with their Eq. 8 covariances, the
@@ -132,7 +148,8 @@ def test_scan_points_drop_invalid_readings_and_find_the_walls_local_lines():
     for got, expected in zip((pts.q11, pts.q12, pts.q22), want, strict=True):
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=0.0)
     # local lines: on each wall, normal ±x; none at the two ends of the scan or over the jump
-    h = cfg.normal_points // 2
+    h = normal_half_window(bearings, cfg)
+    assert h == 1  # 1° beam steps, the default 2° window: three points
     assert not pts.has_normal[:h].any() and not pts.has_normal[-h:].any()
     wall = np.where(pts.xy[:, 0] < 3.0, 0, 1)
     jump = int(np.flatnonzero(np.diff(wall))[0])  # last point of the first wall
@@ -162,11 +179,11 @@ def test_noise_free_match_returns_the_true_relative_pose(bearings, swap):
     reference laser's frame (swapping the scans gives the inverse pose).
 
     * Only exactly straight local lines (``max_line_thickness = 1e-6``) and a flat prior (the
-      motion model's covariance × 1e4): the true pose to 1e-6 (measured ≤ 6e-8), with or
+      motion model's covariance × 1e4): the true pose to 1e-6 (measured ≤ 4.3e-8), with or
       without a model error.
     * The same lines, no model error, the motion model's prior: the posterior mode is pulled
-      towards the odometry by ~1e-5 (measured ≤ 5e-5 m, 1e-5 rad).
-    * The defaults: within 1e-3 m and 3e-4 rad (measured ≤ 8.1e-4 m, 2.2e-4 rad with the
+      towards the odometry by ~1e-5 (measured ≤ 3.7e-5 m, 6.6e-6 rad).
+    * The defaults: within 1e-3 m and 3e-4 rad (measured ≤ 2.7e-4 m, 9.9e-5 rad with the
       181 beams).  The model error (2 cm) lets the prior pull harder, and a few windows that
       straddle a corner pass ``max_line_thickness = 0.05`` and leave residuals of up to 1 cm
       at the true pose.
@@ -220,6 +237,74 @@ def test_rotation_search_recovers_an_odometry_slip(slip_deg):
     assert m0.start_offset_rad == 0.0
     assert _pose_error(m0, TRUE_DELTA)[1] > np.deg2rad(10.0)
     assert not m0.accepted and m0.overlap < 0.2
+
+
+@pytest.mark.parametrize("slip_deg", [-25.0, 28.0])
+def test_slip_mixture_flags_a_slip_and_widens_the_odometry_rotation(slip_deg):
+    """With ``slip_probability`` the odometry's rotation is a mixture of its Gaussian and a
+    slip (``slip_sigma_rad`` more spread).  A step whose heading is off by tens of degrees is
+    found and flagged as a slip, its rotation the points'; the same step without the slip is
+    not flagged and matches as it does without the mixture."""
+    cfg = ScanMatchConfig(slip_probability=0.01)
+    ref, cur = _pair(ROOM, FULL, cfg)
+    delta0 = TRUE_DELTA + np.array([0.0, 0.0, np.deg2rad(slip_deg)])
+    prior = _odometry_cov(delta0)
+    m = match_scans(ref, cur, delta0, prior, cfg)
+    err_m, err_rad = _pose_error(m, TRUE_DELTA)
+    assert err_m < 1e-3 and err_rad < 1e-3, m.delta - TRUE_DELTA
+    assert m.accepted and m.slip
+    # the rotation is the points' alone: far below the slip's spread, near the Gaussian case's
+    assert m.cov[2, 2] < 0.05 * prior[2, 2]
+    # no slip: not flagged, the same match as without the mixture
+    delta1 = TRUE_DELTA + np.array([0.01, -0.01, np.deg2rad(1.0)])
+    prior1 = _odometry_cov(delta1)
+    m1 = match_scans(ref, cur, delta1, prior1, cfg)
+    m0 = match_scans(ref, cur, delta1, prior1, replace(cfg, slip_probability=0.0))
+    assert not m1.slip and not m0.slip
+    np.testing.assert_allclose(m1.delta, m0.delta, atol=1e-7)
+    np.testing.assert_allclose(m1.cov, m0.cov, rtol=1e-6)
+
+
+def test_slip_mixture_flags_no_slip_under_the_motion_model(rng):
+    """No slip: odometry drawn from its own Gaussian, ranges with the Eq. 8 noise (σ_d = 1 cm,
+    twice the paper's).  In 60 seeded matches none is flagged as a slip (at ``slip_probability =
+    0.01`` a step is a slip when it is ~4 σ off) and every match is within 1 cm and 0.2° of
+    the truth."""
+    noise = replace(NOISE, sigma_range_m=0.01)
+    cfg = ScanMatchConfig(slip_probability=0.01)
+    pa = POSE_A
+    pb = pose_compose(POSE_A, TRUE_DELTA)
+    flagged = 0
+    for _ in range(60):
+        ra = _ranges(ROOM, pa, FULL) + rng.normal(0.0, noise.sigma_range_m, FULL.size)
+        rb = _ranges(ROOM, pb, FULL) + rng.normal(0.0, noise.sigma_range_m, FULL.size)
+        ref = scan_points(ra, FULL, MAX_RANGE_M, noise, cfg)
+        cur = scan_points(rb, FULL, MAX_RANGE_M, noise, cfg)
+        prior = _odometry_cov(TRUE_DELTA)
+        delta0 = TRUE_DELTA + rng.multivariate_normal(np.zeros(3), prior)
+        m = match_scans(ref, cur, delta0, prior, cfg)
+        flagged += int(m.slip)
+        err_m, err_rad = _pose_error(m, TRUE_DELTA)
+        assert m.accepted and err_m < 0.01 and err_rad < np.deg2rad(0.2)
+    assert flagged == 0
+
+
+def test_overconfidence_of_the_summed_cost():
+    """κ = tr(H C)/3 (:meth:`_Matcher.overconfidence`), by which the points' summed cost
+    overstates their evidence.  Noise-free points without a model error: the cost's curvature
+    at zero residuals against the Cauchy M-estimator's sandwich gives E[ψ²]/E[ψ']² (1.31) to
+    within 5 %.  With the 2 cm model error shared by the points of a wall, the 360 points of
+    the room weigh as its 14 walls: κ is of the order of points per wall (25.7)."""
+    for model_sigma_m, low, high in [(0.0, 0.95, 1.05), (0.02, 0.5 * 360 / 14, 2.0 * 360 / 14)]:
+        cfg = ScanMatchConfig(model_sigma_m=model_sigma_m)
+        ref, cur = _pair(ROOM, FULL, cfg)
+        assert len(cur) == 360 and int(ref.segment.max()) + 1 == 14
+        prior = _OdometryPrior(TRUE_DELTA, _odometry_cov(TRUE_DELTA), cfg)
+        matcher = _Matcher(ref, cur, cfg, TRUE_DELTA, prior.info, prior.cost)
+        kappa = matcher.overconfidence(TRUE_DELTA)
+        if model_sigma_m == 0.0:
+            kappa /= CAUCHY_PSI2 / CAUCHY_DPSI**2
+        assert low < kappa < high, (model_sigma_m, kappa)
 
 
 # --------------------------------------------------------------------------------------------
@@ -355,7 +440,8 @@ BAD_SCANS = {
     "max-range": np.full(HALF.size, MAX_RANGE_M),
     "beyond-max-range": np.full(HALF.size, 2.0 * MAX_RANGE_M),
     "two-valid": np.where(np.isin(np.arange(HALF.size), [10, 50]), 2.0, np.nan),
-    "three-valid": np.where(np.isin(np.arange(HALF.size), [10, 11, 12]), 2.0, np.nan),
+    # fewer than the three points of a local line at 1° beam steps
+    "two-adjacent": np.where(np.isin(np.arange(HALF.size), [10, 11]), 2.0, np.nan),
 }
 
 
@@ -363,7 +449,7 @@ BAD_SCANS = {
 def test_bad_scans_give_no_usable_points_and_rejected_matches(name):
     cfg = ScanMatchConfig()
     pts = scan_points(BAD_SCANS[name], HALF, MAX_RANGE_M, NOISE, cfg)
-    n_valid = {"two-valid": 2, "three-valid": 3}.get(name, 0)
+    n_valid = {"two-valid": 2, "two-adjacent": 2}.get(name, 0)
     assert (
         len(pts) == n_valid and pts.xy.shape == (n_valid, 2) and pts.normals.shape == (n_valid, 2)
     )
@@ -398,8 +484,11 @@ def test_empty_reference_rejects_the_match():
 @pytest.mark.parametrize(
     "bad",
     [
-        {"normal_points": 4},
-        {"normal_points": 1},
+        {"normal_span_rad": 0.0},
+        {"normal_span_rad": -0.01},
+        {"slip_probability": 1.0},
+        {"slip_probability": -0.01},
+        {"slip_sigma_rad": 0.0},
         {"min_overlap": 1.5},
         {"min_overlap": -0.1},
         {"inlier_m": 0.0},
@@ -422,8 +511,12 @@ def test_bad_config_values_raise_config_error(bad):
 
 def test_bad_scan_matching_table_in_a_config_file_raises_config_error(tmp_path):
     path = tmp_path / "bad.toml"
-    path.write_text("[slam.frontend.scan_matching]\nenabled = true\nnormal_points = 4\n")
-    with pytest.raises(ConfigError, match="normal_points"):
+    path.write_text("[slam.frontend.scan_matching]\nenabled = true\nmin_overlap = 2.0\n")
+    with pytest.raises(ConfigError, match="min_overlap"):
+        RunConfig.from_toml(path)
+    # the former key says what replaced it
+    path.write_text("[slam.frontend.scan_matching]\nenabled = true\nnormal_points = 5\n")
+    with pytest.raises(ConfigError, match=r"normal_points.*replaced by normal_span_rad"):
         RunConfig.from_toml(path)
 
 
@@ -449,11 +542,12 @@ def _relations_error_m(out: Path) -> float:
 
 def test_demo_log_with_scan_matching(tmp_path):
     """Every keyframe after the first is matched against the previous one (the demo's scans
-    are all keyframes), few matches are rejected, and the relations error stays at the
-    default run's (about 9 mm)."""
+    are all keyframes), few matches are rejected, none finds a slip (the demo's odometry has
+    none), and the relations error stays at the default run's (about 9 mm)."""
     summary = run_slam(DEMO / "log.clf", tmp_path / "sm", _scan_matching_config(tmp_path))
     assert summary["scan_matches"] == summary["keyframes"] - 1 > 300
     assert summary["scan_matches_rejected"] <= 0.05 * summary["scan_matches"]
+    assert summary["scan_match_slips"] == 0
     assert _relations_error_m(tmp_path / "sm") < 0.02
 
 
@@ -518,8 +612,51 @@ def test_scan_matching_corrects_a_heading_slip_in_the_demo_log(tmp_path):
     log = tmp_path / "slip.clf"
     _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(20.0))
     run_slam(log, tmp_path / "without", RunConfig())
-    run_slam(log, tmp_path / "with", _scan_matching_config(tmp_path))
+    summary = run_slam(log, tmp_path / "with", _scan_matching_config(tmp_path))
+    assert summary["scan_match_slips"] == 1  # that step's factor is the match
     without = _final_heading_error_rad(tmp_path / "without")
     with_sm = _final_heading_error_rad(tmp_path / "with")
     assert without > np.deg2rad(10.0)
     assert with_sm < np.deg2rad(0.2)
+
+
+# fr079: three relations over which the wheel odometry misreports a turn (t1, t2)
+FR079_SLIPS = [
+    (2203.410566, 2205.330253),  # odometry +3.3°, relation +21.6°
+    (2207.250364, 2211.940507),  # odometry −22.4°, relation −36.2°
+    (2211.940507, 2213.010825),  # odometry −12.9°, relation −35.6°
+]
+
+
+def test_slip_mixture_recovers_the_turns_fr079s_odometry_misreports(shared_data):
+    """Three relations of fr079 where the wheel odometry misreports a turn by 14-23°.  The
+    scans at the two ends matched with the odometry as the prior: with the slip mixture each
+    is flagged as a slip and within 1° of the relation's heading change; with the Gaussian
+    prior alone (``slip_probability = 0``) the first stays within 4° of the odometry."""
+    from slam.io.carmen import iter_scans
+
+    rows = read_relations(shared_data / "fr079" / "fr079.relations")
+    log = shared_data / "fr079" / "fr079.clf"
+    scans = [s for s in iter_scans(log) if 2203.0 < s.timestamp < 2214.0]
+    stamps = np.array([s.timestamp for s in scans])
+    cfg = ScanMatchConfig(slip_probability=0.01)
+    motion = MotionNoiseConfig()
+
+    def points(scan):
+        return scan_points(scan.ranges, scan.bearings, scan.max_range_m, NOISE, cfg)
+
+    for k, (t0, t1) in enumerate(FR079_SLIPS):
+        (row,) = np.flatnonzero(np.isclose(rows.t1, t0) & np.isclose(rows.t2, t1))
+        turned = float(rows.poses[row, 2])
+        a = scans[int(np.argmin(abs(stamps - t0)))]
+        b = scans[int(np.argmin(abs(stamps - t1)))]
+        assert abs(a.timestamp - t0) < 1e-3 and abs(b.timestamp - t1) < 1e-3
+        delta0 = pose_between(a.pose_odom_laser, b.pose_odom_laser)
+        assert abs(_angle(delta0[2] - turned)) > np.deg2rad(13.0)  # the odometry's slip
+        prior = motion.covariance(delta0)
+        m = match_scans(points(a), points(b), delta0, prior, cfg)
+        assert m.accepted and m.slip
+        assert abs(_angle(m.delta[2] - turned)) < np.deg2rad(1.0), np.rad2deg(m.delta[2])
+        if k == 0:
+            g = match_scans(points(a), points(b), delta0, prior, replace(cfg, slip_probability=0.0))
+            assert abs(_angle(g.delta[2] - delta0[2])) < np.deg2rad(4.0)

@@ -14,7 +14,16 @@ of degrees.  The match therefore starts from the odometry and from rotations of 
 ``rotation_window_rad`` (steps of ``rotation_step_rad``), runs a few iterations from each,
 refines the odometry's own start and the two other starts of most overlap, and keeps
 the refined one of least negative log-posterior (Cauchy cost of the pairs, an outlier's cost
-for each unpaired point, and the prior).
+for each unpaired point, and the prior).  The points' summed cost treats them as independent
+and so overstates their evidence; it is divided by ``κ = tr(H C)/3`` (``H`` its curvature,
+``C`` the sandwich covariance below), the magnitude adjustment of a composite likelihood
+(Chandler & Bate 2007), before it is weighed against the prior.
+
+**Slips.**  With ``slip_probability > 0`` the odometry's heading is a mixture: its Gaussian, or
+with that probability a slip (``slip_sigma_rad`` more spread in rotation).  The search weighs
+the starts under the mixture; the component more probable at the match is then its prior (a
+max-mixture, Olson & Agarwal 2012): a slip's match keeps the rotation the points say, and
+:attr:`ScanMatch.slip` tells the caller that the odometry's rotation did not hold.
 
 **Covariance.**  The points' part is the Cauchy M-estimator's sandwich ``A⁻¹ B A⁻¹`` in
 expectation under the noise model (``A = E[ψ'] Σ JᵀJ/σ²``; in ``B`` the model error is one
@@ -29,7 +38,9 @@ reads as information along a corridor's axis, so the covariance there is too sma
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from numba import njit
@@ -46,6 +57,7 @@ __all__ = [
     "ScanMatchConfig",
     "ScanPoints",
     "match_scans",
+    "normal_half_window",
     "scan_points",
 ]
 
@@ -65,8 +77,12 @@ class ScanMatchConfig:
     model_sigma_m : float
         The walls' model error along a reference line's normal (m), added to the Eq. 8
         variance of every residual.
-    normal_points : int
-        Points (in beam order, odd) that define a reference point's local line.
+    normal_span_rad : float
+        A reference point's local line is fitted to the points of this angle of the scan
+        centred on it (rad): ``2h + 1`` consecutive points with ``h`` the nearest whole number
+        of beam steps to half the angle, at least one (the 2° default: five points at 0.5°
+        beam spacing, three at 1° and coarser), so that it covers the same piece of wall
+        whatever the scanner's beam density.
     max_neighbour_gap_m : float
         A reference point's local line is used only when its neighbours are within this of
         each other (m; no line across a depth jump).
@@ -86,11 +102,22 @@ class ScanMatchConfig:
     min_overlap : float
         A match is used only when at least this fraction of the current scan's points lie
         within ``inlier_m`` of a reference line.
+    slip_probability : float
+        Prior probability that a step's odometry heading is a slip (0: the odometry's
+        Gaussian alone).
+    slip_sigma_rad : float
+        Standard deviation of a slip's heading error (rad), added to the odometry's; the
+        search's ``rotation_window_rad`` covers two of them.
     """
+
+    RENAMED_KEYS: ClassVar[dict[str, str]] = {
+        "normal_points": "replaced by normal_span_rad: the local line covers an angle of the "
+        "scan, whatever its beam spacing",
+    }
 
     enabled: bool = False
     model_sigma_m: float = 0.02
-    normal_points: int = 5
+    normal_span_rad: float = math.radians(2.0)
     max_neighbour_gap_m: float = 0.3
     max_line_thickness: float = 0.05
     max_correspondence_m: float = 0.5
@@ -100,13 +127,12 @@ class ScanMatchConfig:
     coarse_iterations: int = 6
     max_iterations: int = 30
     min_overlap: float = 0.5
+    slip_probability: float = 0.01
+    slip_sigma_rad: float = 0.35
 
     def __post_init__(self) -> None:
         nonneg("model_sigma_m", self.model_sigma_m)
-        require(
-            self.normal_points >= 3 and self.normal_points % 2 == 1,
-            "normal_points must be an odd number >= 3",
-        )
+        positive("normal_span_rad", self.normal_span_rad)
         positive("max_neighbour_gap_m", self.max_neighbour_gap_m)
         require(0.0 < self.max_line_thickness < 1.0, "max_line_thickness must be in (0, 1)")
         positive("max_correspondence_m", self.max_correspondence_m)
@@ -116,6 +142,8 @@ class ScanMatchConfig:
         require(self.coarse_iterations >= 1, "coarse_iterations must be >= 1")
         require(self.max_iterations >= 1, "max_iterations must be >= 1")
         require(0.0 <= self.min_overlap <= 1.0, "min_overlap must be in [0, 1]")
+        require(0.0 <= self.slip_probability < 1.0, "slip_probability must be in [0, 1)")
+        positive("slip_sigma_rad", self.slip_sigma_rad)
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,15 +178,29 @@ class ScanPoints:
         return int(self.xy.shape[0])
 
 
-def _local_lines(xy: FloatArray, config: ScanMatchConfig) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """Normals of each point's local line (``normal_points`` consecutive points centred on it)."""
+def normal_half_window(bearings: FloatArray, config: ScanMatchConfig) -> int:
+    """``h``: a local line is fitted to ``2h + 1`` consecutive points (``normal_span_rad``).
+
+    The beam step is the median step between consecutive bearings.
+    """
+    b = np.asarray(bearings, dtype=float)
+    steps = np.abs(np.diff(b))
+    steps = steps[steps > 0.0]
+    if steps.size == 0:
+        return 1
+    return max(1, round(config.normal_span_rad / (2.0 * float(np.median(steps)))))
+
+
+def _local_lines(
+    xy: FloatArray, h: int, config: ScanMatchConfig
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Normals of each point's local line (``2h + 1`` consecutive points centred on it)."""
     n = xy.shape[0]
-    h = config.normal_points // 2
     normals = np.zeros((n, 2))
     ok = np.zeros(n, dtype=bool)
-    if n < config.normal_points:
+    k = 2 * h + 1
+    if n < k:
         return normals, ok
-    k = config.normal_points
     # windows of k consecutive points, centred on points h .. n-h-1
     idx = np.arange(n - k + 1)[:, None] + np.arange(k)[None, :]
     W = xy[idx]  # (m, k, 2)
@@ -199,11 +241,12 @@ def scan_points(
     """
     d = np.asarray(ranges, dtype=float)
     b = np.asarray(bearings, dtype=float)
+    h = normal_half_window(b, config)
     valid = np.isfinite(d) & (d > 0.0) & (d < max_range_m)
     d, b = d[valid], b[valid]
     xy = np.stack([d * np.cos(b), d * np.sin(b)], axis=-1)
     q11, q12, q22 = point_covariance_entries(d, b, noise)
-    normals, ok = _local_lines(xy, config)
+    normals, ok = _local_lines(xy, h, config)
     return ScanPoints(xy, q11, q12, q22, normals, ok, _segments(xy, ok, config))
 
 
@@ -240,6 +283,10 @@ class ScanMatch:
         The rotation added to the odometry at the start the match was refined from.
     accepted : bool
         ``overlap >= min_overlap`` and a finite, positive-definite covariance.
+    slip : bool
+        Accepted, and the odometry's heading slipped (the slip component of the prior is the
+        more probable at the match; :class:`ScanMatchConfig` ``slip_probability``): ``cov``
+        then holds the odometry's translation with the slip's rotation spread and the points.
     """
 
     delta: FloatArray
@@ -248,6 +295,7 @@ class ScanMatch:
     inliers: int
     start_offset_rad: float
     accepted: bool
+    slip: bool = False
 
 
 jit = njit(cache=True, error_model="numpy", nogil=True)
@@ -506,10 +554,14 @@ class _Matcher:
         config: ScanMatchConfig,
         x_prior: FloatArray,
         info_prior: FloatArray,
+        prior_cost: Callable[[FloatArray], float],
     ) -> None:
         self.cfg = config
         self.x_prior = np.asarray(x_prior, dtype=float)
         self.info_prior = np.asarray(info_prior, dtype=float)
+        """The Gauss-Newton iterations' prior information (about ``x_prior``)."""
+        self.prior_cost = prior_cost
+        """The prior's negative log density in :meth:`objective`."""
         keep = np.flatnonzero(ref.has_normal)
         self.p = np.ascontiguousarray(ref.xy[keep])
         self.n = np.ascontiguousarray(ref.normals[keep])
@@ -550,11 +602,12 @@ class _Matcher:
             self.var_ref, keys, order, d_max, d_max, self.q, *self.cq,
         )  # fmt: skip
 
-    def objective(self, x: FloatArray) -> float:
+    def objective(self, x: FloatArray, kappa: float = 1.0) -> float:
         """The negative log-posterior at ``x`` (up to a constant).
 
         ``Σ ½ log(1 + e²/σ²)`` over the pairs within ``inlier_m``, ``½ log(1 + inlier_m²/σ_m²)``
-        for each unpaired point (an outlier's cost), ``½ χ²`` of the prior.
+        for each unpaired point (an outlier's cost), divided by ``kappa`` (the points are not
+        independent: :meth:`overconfidence`), plus the prior's cost.
         """
         cfg = self.cfg
         out = 0.5 * math.log1p(cfg.inlier_m**2 / max(cfg.model_sigma_m**2, 1e-12))
@@ -563,9 +616,22 @@ class _Matcher:
         else:
             _, _, pairs, _, _, cost = self.normal_equations(x, cfg.inlier_m)
             data = cost + (self.q.shape[0] - pairs) * out
-        r = np.asarray(x, dtype=float) - self.x_prior
-        r[2] = math.remainder(float(r[2]), 2.0 * math.pi)
-        return float(data + 0.5 * r @ self.info_prior @ r)
+        return float(data / kappa + self.prior_cost(np.asarray(x, dtype=float)))
+
+    def overconfidence(self, x: FloatArray) -> float:
+        """How much the summed cost overstates the points' evidence at ``x`` (at least 1).
+
+        The cost treats every point as independent; its curvature ``H`` is the information it
+        claims, while the sandwich covariance ``C`` (:meth:`covariance`) is the one the
+        points carry.  ``κ = tr(H C) / 3``, the mean of the eigenvalues of ``H C``, scales
+        cost differences to log-likelihood ratios (the magnitude adjustment of a composite
+        likelihood, Chandler & Bate 2007).
+        """
+        C, _ = self.covariance(x)
+        if not np.all(np.isfinite(C)):
+            return 1.0
+        H = self.normal_equations(x, self.cfg.inlier_m)[0]
+        return max(float(np.trace(H @ C)) / 3.0, 1.0)
 
     def inliers(self, x: FloatArray) -> int:
         """Current points within ``inlier_m`` of a reference line at ``x``."""
@@ -599,6 +665,56 @@ class _Matcher:
         return 0.5 * (cov + cov.T), inl
 
 
+class _OdometryPrior:
+    """The odometry step as the match's prior: its Gaussian, or a mixture with a heading slip.
+
+    ``N(x0, Q)`` with probability ``1 − ε`` and ``N(x0, Q + diag(0, 0, σ_slip²))`` with
+    probability ``ε`` (``slip_probability``, ``slip_sigma_rad``); ``ε = 0``: the Gaussian.
+    """
+
+    def __init__(self, x0: FloatArray, Q: FloatArray, config: ScanMatchConfig) -> None:
+        self.x0 = x0
+        self.slip_probability = eps = config.slip_probability
+        self.cov = Q
+        self.cov_slip = Q.copy()
+        self.cov_slip[2, 2] += config.slip_sigma_rad**2
+        self.info = _symmetric_inverse(Q)
+        self.info_slip = _symmetric_inverse(self.cov_slip)
+        self.info_search = self.info_slip if eps > 0.0 else self.info
+        # log weights (mixture weight / √det) of the two components
+        self._log_w = (
+            math.log1p(-eps) - 0.5 * math.log(np.linalg.det(Q)),
+            (math.log(eps) if eps > 0.0 else -math.inf)
+            - 0.5 * math.log(np.linalg.det(self.cov_slip)),
+        )
+
+    def _components(self, x: FloatArray) -> tuple[float, float]:
+        """Log density (up to a shared constant) of each component at ``x``."""
+        r = np.asarray(x, dtype=float) - self.x0
+        r[2] = math.remainder(float(r[2]), 2.0 * math.pi)
+        return (
+            self._log_w[0] - 0.5 * float(r @ self.info @ r),
+            self._log_w[1] - 0.5 * float(r @ self.info_slip @ r),
+        )
+
+    def cost(self, x: FloatArray) -> float:
+        """Negative log prior at ``x``, zero at ``x0`` without slips (``½ χ²`` of the Gaussian)."""
+        l0, l1 = self._components(x)
+        top = max(l0, l1)
+        log_p = top + math.log(math.exp(l0 - top) + math.exp(l1 - top))
+        return self._log_w[0] - log_p
+
+    def is_slip(self, x: FloatArray) -> bool:
+        """Whether the slip component is the more probable at ``x``."""
+        l0, l1 = self._components(x)
+        return l1 > l0
+
+
+def _symmetric_inverse(c: FloatArray) -> FloatArray:
+    inv = np.linalg.inv(c)
+    return np.asarray(0.5 * (inv + inv.T), dtype=np.float64)
+
+
 def match_scans(
     reference: ScanPoints,
     current: ScanPoints,
@@ -609,9 +725,10 @@ def match_scans(
     """Register ``current`` against ``reference``, with the odometry as the prior.
 
     The estimate is the posterior mode of the relative pose: the points' robust likelihood
-    (Cauchy) times the odometry's Gaussian ``N(delta0, prior_cov)``.  Where the points
-    constrain the pose (nearly always the rotation) they decide, even against an odometry
-    step tens of degrees off; where they do not (along a corridor) the odometry does.
+    (Cauchy) times the odometry's Gaussian ``N(delta0, prior_cov)`` (or, with
+    ``slip_probability``, its mixture with a slip).  Where the points constrain the pose
+    (nearly always the rotation) they decide, even against an odometry step tens of degrees
+    off; where they do not (along a corridor) the odometry does.
 
     Parameters
     ----------
@@ -630,9 +747,10 @@ def match_scans(
     """
     cfg = config
     x0 = np.asarray(delta0, dtype=float)
-    info_prior = np.linalg.inv(np.asarray(prior_cov, dtype=float))
-    info_prior = 0.5 * (info_prior + info_prior.T)
-    matcher = _Matcher(reference, current, cfg, x0, info_prior)
+    prior = _OdometryPrior(x0, np.asarray(prior_cov, dtype=float), cfg)
+    # the search and the choice between starts under the mixture (with its wide component's
+    # Gauss-Newton prior); the refinement under the component more probable at the match
+    matcher = _Matcher(reference, current, cfg, x0, prior.info_search, prior.cost)
     k = math.floor(cfg.rotation_window_rad / cfg.rotation_step_rad + 1e-9)
     offsets = [0.0] + [sg * i * cfg.rotation_step_rad for i in range(1, k + 1) for sg in (1, -1)]
     # a few iterations from every start (the prior keeps each near the odometry except in
@@ -644,20 +762,31 @@ def match_scans(
         x = matcher.solve(start, cfg.coarse_iterations, cfg.max_correspondence_m)
         coarse.append((matcher.inliers(x), off, x))
     candidates = [coarse[0]] + sorted(coarse[1:], key=lambda c: -c[0])[:2]
-    best: tuple[float, float, FloatArray] | None = None
+    refined = []
     for _, off, x in candidates:
         x = matcher.solve(x, cfg.max_iterations, cfg.max_correspondence_m)
         x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
-        obj = matcher.objective(x)
+        refined.append((off, x))
+    # the points' evidence as a log-likelihood ratio: their summed cost over-counts it by κ
+    # (measured at the odometry's own start)
+    kappa = matcher.overconfidence(refined[0][1])
+    best: tuple[float, float, FloatArray] | None = None
+    for off, x in refined:
+        obj = matcher.objective(x, kappa)
         if best is None or obj < best[0]:
             best = (obj, off, x)
     assert best is not None
     _, offset, x = best
+    slip = prior.is_slip(x)
+    used_cov, info_prior = (prior.cov_slip, prior.info_slip) if slip else (prior.cov, prior.info)
+    if not slip and prior.slip_probability > 0.0:
+        matcher.info_prior = info_prior
+        x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
     x[2] = math.remainder(float(x[2]), 2.0 * math.pi)
     cov_points, inl = matcher.covariance(x)
     overlap = inl / max(len(current), 1)
     ok = bool(np.all(np.isfinite(cov_points)))
-    cov: FloatArray = np.asarray(prior_cov, dtype=np.float64).copy()
+    cov: FloatArray = np.asarray(used_cov, dtype=np.float64).copy()
     if ok:
         try:
             info = np.linalg.inv(cov_points) + info_prior
@@ -668,4 +797,5 @@ def match_scans(
                 cov = post
         except np.linalg.LinAlgError:
             ok = False
-    return ScanMatch(x, cov, float(overlap), inl, float(offset), ok and overlap >= cfg.min_overlap)
+    accepted = ok and overlap >= cfg.min_overlap
+    return ScanMatch(x, cov, float(overlap), inl, float(offset), accepted, slip and accepted)

@@ -15,7 +15,11 @@ For each keyframe:
 3. **Prediction**: ``x̂ = x_k ∘ δ`` with the motion noise ``Q(δ)`` (:mod:`slam.models.motion`).
    With ``frontend.scan_matching.enabled`` the keyframe's points are first matched against the
    previous keyframe's with ``(δ, Q)`` as the prior (:mod:`slam.frontend.scan_match`), and an
-   accepted match replaces ``δ`` in ``x̂`` (``Q`` is kept; the match is no graph factor).
+   accepted match replaces ``δ`` in ``x̂`` (``Q`` is kept; the match is no graph factor).  A
+   match that finds the odometry's heading slipped (``scan_matching.slip_probability``)
+   replaces the keyframe's odometry factor (the match's posterior: the odometry's
+   translation, the points' rotation), and the step is left out of the odometry-noise
+   estimate.
 4. **Front end** (:mod:`~slam.line_slam.local_map`, :mod:`~slam.line_slam.front_end`): the
    lines are registered against the local map around ``x̂``; the registered pose is the
    keyframe's initial estimate and the registration's pairs are the data association.
@@ -51,7 +55,7 @@ from linefit.config import LineFitConfig
 from linefit.line import Line
 from slam import interrupts
 from slam.extraction import extract_lines_of_scans, extract_scan_lines
-from slam.frontend.scan_match import ScanPoints, match_scans, scan_points
+from slam.frontend.scan_match import ScanMatch, ScanPoints, match_scans, scan_points
 from slam.geometry import pose_between, pose_compose, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
 from slam.graph.problem import LineGraph
@@ -265,6 +269,7 @@ class LineSlam:
         )
         Q = self.odometry_noise.model.covariance(step.delta)
         x_odo = x_pred
+        slip: ScanMatch | None = None
         # 4. front end: the scan's points matched against the previous keyframe's with the
         # odometry as the prior (a slip the points see is corrected before the lines are
         # paired); then the lines registered against the local map = initial guess +
@@ -276,6 +281,9 @@ class LineSlam:
                 self.counters["scan_matches"] += 1
                 if match.accepted:
                     x_pred = pose_compose(g.poses[prev], match.delta)
+                    if match.slip:
+                        slip = match
+                        self.counters["scan_match_slips"] += 1
                 else:
                     self.counters["scan_matches_rejected"] += 1
             self._points = points
@@ -293,7 +301,7 @@ class LineSlam:
             self.track.path_m,
             None if step.first else pose_between(g.poses[prev], reg.pose_world_laser),
         )
-        if reg.cov is not None:
+        if reg.cov is not None and slip is None:
             # the odometry's own error, as the registration sees it
             c_odo = (
                 reg.correction
@@ -308,7 +316,12 @@ class LineSlam:
             if step.first:
                 g.set_prior(reg.pose_world_laser, cfg.prior_cov)
             else:
-                g.add_odometry(prev, i, step.delta, Q)
+                if slip is None:
+                    g.add_odometry(prev, i, step.delta, Q)
+                else:
+                    # the odometry's heading slipped: the step's factor is the match (the
+                    # odometry's translation, the points' rotation)
+                    g.add_odometry(prev, i, slip.delta, slip.cov)
                 if cfg.frontend.pose_factor == "inflated" and reg.cov is not None:
                     add_registration_factor(g, prev, i, reg, cfg.frontend.pose_factor_inflation)
             # 6. association: line factors and tentative landmarks

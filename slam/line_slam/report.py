@@ -46,6 +46,7 @@ COUNTERS = (
     "relocalisations_used",
     "scan_matches",
     "scan_matches_rejected",
+    "scan_match_slips",
     "loop_closure_attempts",
     "loop_closure_candidates",
     "loop_closures",
