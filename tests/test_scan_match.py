@@ -524,12 +524,12 @@ def test_bad_scan_matching_table_in_a_config_file_raises_config_error(tmp_path):
 # 6. pipeline
 
 
-def _scan_matching_config(tmp_path: Path) -> RunConfig:
-    """A run configuration with scan matching on, read from a file as a user writes it."""
-    path = tmp_path / "scan_matching.toml"
-    path.write_text("[slam.frontend.scan_matching]\nenabled = true\n")
+def _without_scan_matching(tmp_path: Path) -> RunConfig:
+    """The defaults with scan matching off, read from a file as a user writes it."""
+    path = tmp_path / "no_scan_matching.toml"
+    path.write_text("[slam.frontend.scan_matching]\nenabled = false\n")
     config = RunConfig.from_toml(path)
-    assert config.slam.frontend.scan_matching == ScanMatchConfig(enabled=True)
+    assert config.slam.frontend.scan_matching == ScanMatchConfig(enabled=False)
     return config
 
 
@@ -541,20 +541,23 @@ def _relations_error_m(out: Path) -> float:
 
 
 def test_demo_log_with_scan_matching(tmp_path):
-    """Every keyframe after the first is matched against the previous one (the demo's scans
-    are all keyframes), few matches are rejected, none finds a slip (the demo's odometry has
-    none), and the relations error stays at the default run's (about 9 mm)."""
-    summary = run_slam(DEMO / "log.clf", tmp_path / "sm", _scan_matching_config(tmp_path))
+    """The defaults match every keyframe after the first against the previous one (the demo's
+    scans are all keyframes), few matches are rejected, none finds a slip (the demo's odometry
+    has none), and the relations error stays at about 9 mm."""
+    assert RunConfig().slam.frontend.scan_matching.enabled
+    summary = run_slam(DEMO / "log.clf", tmp_path / "sm", RunConfig())
     assert summary["scan_matches"] == summary["keyframes"] - 1 > 300
     assert summary["scan_matches_rejected"] <= 0.05 * summary["scan_matches"]
     assert summary["scan_match_slips"] == 0
     assert _relations_error_m(tmp_path / "sm") < 0.02
 
 
-def test_default_config_does_no_scan_matching(tmp_path):
-    assert not RunConfig().slam.frontend.scan_matching.enabled
-    summary = run_slam(DEMO / "log.clf", tmp_path / "default", RunConfig(), max_scans=40)
+def test_scan_matching_can_be_turned_off(tmp_path):
+    summary = run_slam(
+        DEMO / "log.clf", tmp_path / "off", _without_scan_matching(tmp_path), max_scans=40
+    )
     assert summary["scan_matches"] == 0 and summary["scan_matches_rejected"] == 0
+    assert summary["scan_match_slips"] == 0
 
 
 # --------------------------------------------------------------------------------------------
@@ -611,8 +614,8 @@ def test_scan_matching_corrects_a_heading_slip_in_the_demo_log(tmp_path):
     (A slip at scan 100 or 300 is repaired by the loop closure even without scan matching.)"""
     log = tmp_path / "slip.clf"
     _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(20.0))
-    run_slam(log, tmp_path / "without", RunConfig())
-    summary = run_slam(log, tmp_path / "with", _scan_matching_config(tmp_path))
+    run_slam(log, tmp_path / "without", _without_scan_matching(tmp_path))
+    summary = run_slam(log, tmp_path / "with", RunConfig())
     assert summary["scan_match_slips"] == 1  # that step's factor is the match
     without = _final_heading_error_rad(tmp_path / "without")
     with_sm = _final_heading_error_rad(tmp_path / "with")

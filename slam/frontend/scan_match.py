@@ -73,7 +73,8 @@ class ScanMatchConfig:
     enabled : bool
         Match each keyframe's points against the previous keyframe's with the odometry step as
         the prior; an accepted match is the keyframe's prediction (the graph keeps the odometry
-        factor and the line factors).
+        factor, unless the match finds a slip, and the line factors).  False: the odometry
+        alone predicts.
     model_sigma_m : float
         The walls' model error along a reference line's normal (m), added to the Eq. 8
         variance of every residual.
@@ -115,7 +116,7 @@ class ScanMatchConfig:
         "scan, whatever its beam spacing",
     }
 
-    enabled: bool = False
+    enabled: bool = True
     model_sigma_m: float = 0.02
     normal_span_rad: float = math.radians(2.0)
     max_neighbour_gap_m: float = 0.3
