@@ -1,0 +1,125 @@
+"""Is the scan matcher's covariance honest on real scans?  Chained matches against the relations.
+
+Every scan of a log is matched against the one before it (:func:`slam.frontend.scan_match.
+match_scans`, the run configuration's ``[slam.frontend.scan_matching]``, the configured motion
+model as the odometry's prior, the odometry the estimators read); a match that is not accepted
+leaves the odometry step with its prior covariance.  The matches are chained
+(:func:`slam.lines.transform.compose_chain`, independent steps) and, for every relation
+shorter than ``--max-gap-s`` seconds, the chain's relative pose between the relation's two
+scans is compared with the relation in the relation's frame (the base, through the log's
+laser mounting):
+
+* the mean absolute translation and rotation errors of the chain and of the odometry alone;
+* the chain's NEES ``eᵀ C⁻¹ e`` (``e = Log(relation⁻¹ · chain)``, ``C`` its chained covariance):
+  mean and median, against 3 and 2.37 for an honest covariance (the relations' own scatter is
+  part of ``e``: see ``lineslam evaluate``'s "relations' own").
+
+    LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/scan_match_consistency.py fr079
+    .venv/bin/python scripts/scan_match_consistency.py aces --max-scans 3000 --config my.toml
+
+Nothing is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from slam.config import RunConfig
+from slam.evaluation.timestamps import match_timestamps
+from slam.frontend.scan_match import match_scans, scan_points
+from slam.geometry import pose_between, pose_compose, pose_inverse, pose_log
+from slam.inputs import open_log
+from slam.io.relations import read_relations
+from slam.lines.transform import compose_chain
+
+
+def _adjoint(pose: np.ndarray) -> np.ndarray:
+    """SE(2) adjoint of ``pose`` (maps a tangent vector at the identity through ``pose``)."""
+    x, y, th = pose
+    c, s = np.cos(th), np.sin(th)
+    return np.array([[c, -s, y], [s, c, -x], [0.0, 0.0, 1.0]])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("log", help="dataset name or log file")
+    parser.add_argument("--relations", type=Path, default=None, help="default: the catalogue's")
+    parser.add_argument("--max-gap-s", type=float, default=10.0)
+    parser.add_argument("--max-scans", type=int, default=None)
+    parser.add_argument("--config", type=Path, default=None, help="TOML run configuration")
+    args = parser.parse_args()
+    config = RunConfig() if args.config is None else RunConfig.from_toml(args.config)
+    source = open_log(args.log, config.scanner, max_scans=args.max_scans)
+    relations_path = args.relations or source.relations
+    if relations_path is None:
+        parser.error(f"{args.log}: no relations file known; give --relations FILE")
+    sm = config.slam.frontend.scan_matching
+    motion = config.slam.motion
+    noise = config.linefit.noise
+    stamps, steps, covs, odo_steps, mounts = [], [], [], [], []
+    prev = prev_points = None
+    n_used = n_slips = 0
+    for scan in tqdm(source.scans(args.max_scans), desc="matching", unit="scan"):
+        points = scan_points(scan.ranges, scan.bearings, scan.max_range_m, noise, sm)
+        if prev is not None and prev_points is not None:
+            delta = pose_between(prev.pose_odom_laser, scan.pose_odom_laser)
+            Q = motion.covariance(delta)
+            m = match_scans(prev_points, points, delta, Q, sm)
+            n_used += int(m.accepted)
+            n_slips += int(m.slip)
+            steps.append(m.delta if m.accepted else delta)
+            covs.append(m.cov if m.accepted else Q)
+            odo_steps.append(delta)
+        stamps.append(scan.timestamp)
+        mounts.append(pose_between(scan.pose_odom_base, scan.pose_odom_laser))
+        prev, prev_points = scan, points
+    t = np.asarray(stamps)
+    steps_a, covs_a, odo_a = np.asarray(steps), np.asarray(covs), np.asarray(odo_steps)
+    rel = read_relations(relations_path)
+    i1, ok1 = match_timestamps(rel.t1, t, 1e-5)
+    i2, ok2 = match_timestamps(rel.t2, t, 1e-5)
+    keep = ok1 & ok2 & (rel.t2 - rel.t1 < args.max_gap_s) & (rel.t2 > rel.t1) & (i2 > i1)
+    err_m, err_rad, odo_m, odo_rad, nees = [], [], [], [], []
+    for k in np.flatnonzero(keep):
+        a, b = int(i1[k]), int(i2[k])
+        poses, pcov = compose_chain(steps_a[a:b], covs_a[a:b])
+        chain, C = poses[-1], pcov[-1]
+        odo = compose_chain(odo_a[a:b])[0][-1]
+        # laser-frame relative poses in the base frame: mount ∘ δ ∘ mount⁻¹
+        mount = mounts[a]
+        to_base = pose_compose(mount, pose_compose(chain, pose_inverse(mount)))
+        odo_base = pose_compose(mount, pose_compose(odo, pose_inverse(mount)))
+        Ad = _adjoint(mount)
+        C_base = Ad @ C @ Ad.T
+        e = pose_log(pose_between(rel.poses[k], to_base))
+        eo = pose_log(pose_between(rel.poses[k], odo_base))
+        err_m.append(float(np.hypot(e[0], e[1])))
+        err_rad.append(abs(float(e[2])))
+        odo_m.append(float(np.hypot(eo[0], eo[1])))
+        odo_rad.append(abs(float(eo[2])))
+        nees.append(float(e @ np.linalg.solve(C_base, e)))
+    n = len(nees)
+    print(
+        f"{source.name}: {len(stamps)} scans, {n_used} of {len(steps)} matches used, "
+        f"{n_slips} slips"
+    )
+    print(f"relations shorter than {args.max_gap_s:g} s: {n}")
+    if n == 0:
+        return
+    print(
+        f"chained matches: {np.mean(err_m):.4f} m, {np.degrees(np.mean(err_rad)):.3f} deg; "
+        f"odometry: {np.mean(odo_m):.4f} m, {np.degrees(np.mean(odo_rad)):.3f} deg"
+    )
+    print(
+        f"NEES of the chained matches: mean {np.mean(nees):.2f} (3 if honest), "
+        f"median {np.median(nees):.2f} (2.37), inside the 95 % ellipsoid "
+        f"{np.mean(np.asarray(nees) <= 7.815):.3f}"
+    )
+
+
+if __name__ == "__main__":
+    main()
