@@ -4,10 +4,10 @@ For each log: ``lineslam slam`` with the default configuration (the reference tr
 loop closing on) and with ``[slam.loop_closure] enabled = false`` (the front end alone:
 scan matching, registration, relocalisation, fusion), then the translation error of the
 relative pose over every stretch of W metres of path (:func:`slam.evaluation.rpe_errors`, all
-pairs: overlapping windows), as the median, 99th percentile and largest value.  The loop-closure search window
-(``LoopClosureConfig.window_sigmas`` standard deviations of the drift that
-:mod:`slam.line_slam.drift` predicts) should cover the drift a loop can have accumulated, and
-not much more: a wider window admits aliases in repeating buildings.
+pairs: overlapping windows), as the median, 99th percentile and largest value.  The
+loop-closure search window (``LoopClosureConfig.window_sigmas`` standard deviations of the
+drift that :mod:`slam.line_slam.drift` predicts) should cover the drift a loop can have
+accumulated, and not much more: a wider window admits aliases in repeating buildings.
 
     LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/front_end_drift.py
     .venv/bin/python scripts/front_end_drift.py --logs fr079 --windows 10 50 100
