@@ -223,13 +223,14 @@ class LineSlam:
         self.track.begin_keyframe(step, scan_no)
         points = None
         if self.config.frontend.scan_matching.enabled:
-            points = scan_points(
-                scan.ranges,
-                scan.bearings,
-                scan.max_range_m,
-                self.linefit_config.noise,
-                self.config.frontend.scan_matching,
-            )
+            with self.clock("frontend"):
+                points = scan_points(
+                    scan.ranges,
+                    scan.bearings,
+                    scan.max_range_m,
+                    self.linefit_config.noise,
+                    self.config.frontend.scan_matching,
+                )
         report = self._keyframe(scan_no, step, lines, points)
         self.track.end_keyframe(step)
         self._record(scan, report.pose_index, np.zeros(3), True, t_start)
