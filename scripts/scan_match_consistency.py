@@ -31,17 +31,10 @@ from tqdm import tqdm
 from slam.config import RunConfig
 from slam.evaluation.timestamps import match_timestamps
 from slam.frontend.scan_match import match_scans, scan_points
-from slam.geometry import pose_between, pose_compose, pose_inverse, pose_log
+from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse, pose_log
 from slam.inputs import open_log
 from slam.io.relations import read_relations
 from slam.lines.transform import compose_chain
-
-
-def _adjoint(pose: np.ndarray) -> np.ndarray:
-    """SE(2) adjoint of ``pose`` (maps a tangent vector at the identity through ``pose``)."""
-    x, y, th = pose
-    c, s = np.cos(th), np.sin(th)
-    return np.array([[c, -s, y], [s, c, -x], [0.0, 0.0, 1.0]])
 
 
 def main() -> None:
@@ -93,7 +86,7 @@ def main() -> None:
         mount = mounts[a]
         to_base = pose_compose(mount, pose_compose(chain, pose_inverse(mount)))
         odo_base = pose_compose(mount, pose_compose(odo, pose_inverse(mount)))
-        Ad = _adjoint(mount)
+        Ad = adjoint_pose2(mount)
         C_base = Ad @ C @ Ad.T
         e = pose_log(pose_between(rel.poses[k], to_base))
         eo = pose_log(pose_between(rel.poses[k], odo_base))
