@@ -115,8 +115,9 @@ class FrontendConfig:
         Fallback search when the registration pairs too few lines.
     scan_matching : ScanMatchConfig
         Dense matching of each keyframe's points against the previous keyframe's
-        (:mod:`slam.frontend.scan_match`): fused with the odometry into the prediction, and a
-        relative-pose factor between the two keyframes.
+        (:mod:`slam.frontend.scan_match`): an accepted match is the keyframe's prediction,
+        and where it finds the odometry's heading slipped it replaces that step's odometry
+        factor.
     prior_sigma_xy_m, prior_sigma_theta_rad : float
         Added (in quadrature) to the odometry covariance of the prediction used as the
         registration's prior, so that a bad odometry step (wheel slip) can be corrected.

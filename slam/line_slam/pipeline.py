@@ -274,8 +274,8 @@ class LineSlam:
         # 4. front end: the scan's points matched against the previous keyframe's with the
         # odometry as the prior (a slip the points see is corrected before the lines are
         # paired); then the lines registered against the local map = initial guess +
-        # association.  The match moves the prediction only: its covariance stays the
-        # odometry's, and it is no factor of the graph (the lines carry the laser's evidence)
+        # association.  The match moves the prediction (its covariance stays the odometry's);
+        # it enters the graph only where it finds a slip, as that step's odometry factor (5.)
         with self.clock("frontend"):
             if points is not None and self._points is not None and not step.first:
                 match = match_scans(self._points, points, step.delta, Q, cfg.frontend.scan_matching)
