@@ -34,14 +34,16 @@ Usage::
     .venv/bin/python scripts/robustness.py --config new.toml --baseline before.json
     .venv/bin/python scripts/robustness.py --list                        # rows and bars
 
-Options: ``--only NAME...`` runs a subset; ``--workers N`` runs N rows at once (1 by default;
-the times are only comparable between runs on an equally loaded machine); ``--config
-FILE.toml`` is passed to every run; ``--keep DIR`` keeps the results folders (``DIR/NAME``,
-with the run's output in ``DIR/NAME.log``); ``--work DIR`` is the variant cache (default
-``~/.cache/lineslam/variants``); ``--catalogued-names`` (see above); ``--json FILE`` writes
-every number; ``--baseline FILE.json`` (a previous ``--json``) also prints a before/after
-table: the baseline's mean translation error, this run's, and the change, for every row in
-both.
+Options: ``--only NAME...`` runs a subset; ``--extra`` also runs the extra rows
+(:data:`slam.experiments.robustness.EXTRA_VARIANTS`: the same transforms on Intel, and chains
+of two transforms on ACES and fr079; ``--list`` shows them); ``--workers N`` runs N rows at
+once (1 by default; the times are only comparable between runs on an equally loaded machine);
+``--config FILE.toml`` is passed to every run; ``--keep DIR`` keeps the results folders
+(``DIR/NAME``, with the run's output in ``DIR/NAME.log``); ``--work DIR`` is the variant cache
+(default ``~/.cache/lineslam/variants``); ``--catalogued-names`` (see above); ``--json FILE``
+writes every number; ``--baseline FILE.json`` (a previous ``--json``) also prints a
+before/after table: the baseline's mean translation error, this run's, and the change, for
+every row in both.
 
 The data root is ``$LINESLAM_DATA`` or ``../shared/datasets`` beside the repository.
 """
@@ -62,6 +64,7 @@ from typing import Any
 
 import slam
 from slam.experiments.robustness import (
+    EXTRA_VARIANTS,
     VARIANTS,
     VariantFiles,
     default_cache_dir,
@@ -222,7 +225,13 @@ def baseline_table(records: list[dict[str, Any]], baseline: dict[str, Any]) -> s
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     names = [v.name for v in VARIANTS]
-    parser.add_argument("--only", nargs="+", choices=names, metavar="NAME", help="rows to run")
+    extra = [v.name for v in EXTRA_VARIANTS]
+    parser.add_argument(
+        "--only", nargs="+", choices=names + extra, metavar="NAME", help="rows to run"
+    )
+    parser.add_argument(
+        "--extra", action="store_true", help="also the extra rows (Intel's variants, chains)"
+    )
     parser.add_argument("--workers", type=int, default=1, help="rows run at once (default 1)")
     parser.add_argument("--config", type=Path, default=None, help="TOML run configuration")
     parser.add_argument("--keep", type=Path, default=None, help="keep results folders here")
@@ -243,8 +252,8 @@ def main() -> None:
     parser.add_argument("--list", action="store_true", help="list the rows and exit")
     args = parser.parse_args()
     if args.list:
-        for v in VARIANTS:
-            print(f"{v.name:<20} {v.dataset:<6} bar {v.bar_m:.3f} m  {v.description}")
+        for v in VARIANTS + EXTRA_VARIANTS:
+            print(f"{v.name:<22} {v.dataset:<6} bar {v.bar_m:.3f} m  {v.description}")
         return
     if args.workers < 1:
         parser.error("--workers must be >= 1")
@@ -254,7 +263,7 @@ def main() -> None:
     baseline = None
     if args.baseline is not None:
         baseline = json.loads(args.baseline.read_text(encoding="utf-8"))
-    variants = [variant_by_name(n) for n in (args.only or names)]
+    variants = [variant_by_name(n) for n in (args.only or names + (extra if args.extra else []))]
     cache = args.work if args.work is not None else default_cache_dir()
     print(f"variants in {cache}", file=sys.stderr, flush=True)
     files = [make_variant(v, cache, catalogued_name=args.catalogued_names) for v in variants]
