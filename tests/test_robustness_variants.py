@@ -11,8 +11,10 @@ from carmen_lines import flaser, odom
 
 from slam.errors import ConfigError, EvaluationError, LogFormatError
 from slam.experiments.robustness import (
+    EXTRA_VARIANTS,
     VARIANTS,
     BiasOdometry,
+    Chain,
     ClipRanges,
     DecimateBeams,
     DecimateScans,
@@ -256,6 +258,52 @@ def test_beam_decimation_reads_back_with_its_geometry(tmp_path, every, n_kept):
 
 
 # --------------------------------------------------------------------------------------------
+# chains of transforms
+# --------------------------------------------------------------------------------------------
+def test_chain_of_two_decimations_is_one_with_the_product_period():
+    src = _log(23)
+    chained = rewrite_lines(Chain((DecimateScans(2, 1), DecimateScans(3, 2))), src)
+    # kept laser lines 1, 3, 5, ...; of those every 3rd from the third: 5, 11, 17
+    assert chained == rewrite_lines(DecimateScans(6, 5), src)
+    assert _laser_stamps(chained) == [15.0, 21.0, 27.0]
+
+
+def test_chain_applies_each_step_to_the_previous_output(tmp_path):
+    laser = _wavy_poses(9)
+    ranges = [1.0 + 0.01 * i for i in range(360)]
+    src = _log(9, laser, ranges=ranges)
+    mount = MoveOdometryToCentre((-0.22, 0.0, 0.0))
+    beams = DecimateBeams(2, -math.pi / 2, math.radians(0.5), 81.91)
+    chain = Chain((DecimateScans(4), mount, beams))
+    by_hand = rewrite_lines(beams, rewrite_lines(mount, rewrite_lines(DecimateScans(4), src)))
+    assert rewrite_lines(chain, src) == by_hand
+    scans = list(iter_scans(_write(tmp_path / "chain.clf", by_hand)))
+    assert [s.timestamp for s in scans] == [10.0, 14.0, 18.0]
+    assert scans[0].n_beams == 180
+    # the relations go through the mount, and the odometry baseline is read in its frame
+    assert chain.relations_frame == "base"
+    assert Chain((DecimateScans(4), beams)).relations_frame == "laser"
+    stamps = 10.0 + np.arange(9)
+    rel = relations_from_trajectory(stamps, laser, [(0, 4), (2, 7)])
+    np.testing.assert_array_equal(chain.relations(rel).poses, mount.relations(rel).poses)
+
+
+def test_chain_refuses_robotlaser_output_before_its_last_step():
+    beams = DecimateBeams(2, -math.pi / 2, math.radians(0.5), 81.91)
+    with pytest.raises(ConfigError, match="only the last step"):
+        Chain((beams, DecimateScans(2)))
+    with pytest.raises(ConfigError, match="at least two"):
+        Chain((DecimateScans(2),))
+
+
+def test_chain_parameters_key_the_cache_in_order():
+    a = Chain((DecimateScans(2), MoveOdometryToCentre((-0.2, 0.0, 0.0))))
+    b = Chain((MoveOdometryToCentre((-0.2, 0.0, 0.0)), DecimateScans(2)))
+    assert a.params()["steps"][0]["kind"] == "decimate-scans"
+    assert a.params() != b.params()
+
+
+# --------------------------------------------------------------------------------------------
 # scoring: dropped scans filled in by odometry
 # --------------------------------------------------------------------------------------------
 def test_fill_in_reproduces_the_trajectory_when_odometry_is_perfect():
@@ -373,11 +421,12 @@ def test_unmodified_rows_use_the_source_log(fake_root, tmp_path):
 # --------------------------------------------------------------------------------------------
 def test_table_parameters_match_the_catalogue():
     catalog = load_catalog()
-    names = [v.name for v in VARIANTS]
+    names = [v.name for v in VARIANTS + EXTRA_VARIANTS]
     assert len(set(names)) == len(names)
-    for v in VARIANTS:
+    rows = [(v, v.transform) for v in VARIANTS + EXTRA_VARIANTS]
+    steps = [(v, s) for v, t in rows if isinstance(t, Chain) for s in t.steps]
+    for v, t in rows + steps:
         laser = catalog[v.dataset].laser
-        t = v.transform
         if isinstance(t, ClipRanges):
             assert t.no_return_m == laser.max_range_m
             assert t.limit_m == 8.0
