@@ -576,10 +576,10 @@ VARIANTS: tuple[Variant, ...] = (
 
 
 #: More rows, never used to choose a default before they were added: the same transforms on
-#: Intel, and chains of two on ACES and fr079 (lower scan rate with a mounted laser, shorter
-#: range or fewer beams).  Intel's bar is its own plus 0.02 m; a chain's is its log's bar for
-#: the variants.  ``aces-every4-mount-0.22`` is about 1.35 scans/s with the laser 0.22 m ahead
-#: of the robot centre.
+#: Intel, and chains of two or three transforms on the three logs (a lower scan rate together
+#: with a mounted laser, a shorter range, fewer beams or biased odometry).  Intel's bar is its
+#: own plus 0.02 m; a chain's is its log's bar for the variants.  ``aces-every4-mount-0.22``
+#: is about 1.35 scans/s with the laser 0.22 m ahead of the robot centre.
 EXTRA_VARIANTS: tuple[Variant, ...] = (
     Variant("intel-every4", "intel", 0.05, DecimateScans(4), "every 4th FLASER line"),
     Variant(
@@ -647,6 +647,55 @@ EXTRA_VARIANTS: tuple[Variant, ...] = (
             )
         ),
         "every 2nd FLASER line, every 2nd beam (180 beams, 1°), ROBOTLASER1",
+    ),
+    Variant(
+        "intel-every4-max8m",
+        "intel",
+        0.05,
+        Chain((DecimateScans(4), ClipRanges(8.0, _INTEL_NO_RETURN_M, -_HALF_PI, _ONE_DEG_RAD))),
+        "every 4th FLASER line, readings > 8 m set to no return, ROBOTLASER1",
+    ),
+    Variant(
+        "aces-every4-max8m",
+        "aces",
+        0.08,
+        Chain((DecimateScans(4), ClipRanges(8.0, _ACES_NO_RETURN_M, -_HALF_PI, _ONE_DEG_RAD))),
+        "every 4th FLASER line, readings > 8 m set to no return, ROBOTLASER1",
+    ),
+    Variant(
+        "aces-every4-bias-mount-0.22",
+        "aces",
+        0.08,
+        Chain(
+            (DecimateScans(4), BiasOdometry(1.02, 0.02), MoveOdometryToCentre((-0.22, 0.0, 0.0)))
+        ),
+        "every 4th FLASER line, biased odometry, laser 0.22 m ahead of the odometry centre",
+    ),
+    Variant(
+        "fr079-every3-max8m",
+        "fr079",
+        0.10,
+        Chain((DecimateScans(3), ClipRanges(8.0, _FR079_NO_RETURN_M, -_HALF_PI, _FR079_STEP_RAD))),
+        "every 3rd FLASER line, readings > 8 m set to no return, ROBOTLASER1",
+    ),
+    Variant(
+        "fr079-every4-odom-bias",
+        "fr079",
+        0.10,
+        Chain((DecimateScans(4), BiasOdometry(1.02, 0.02))),
+        "every 4th FLASER line, biased odometry",
+    ),
+    Variant(
+        "fr079-every4-beams90",
+        "fr079",
+        0.10,
+        Chain(
+            (
+                DecimateScans(4),
+                DecimateBeams(4, -_HALF_PI, _FR079_STEP_RAD, _FR079_NO_RETURN_M),
+            )
+        ),
+        "every 4th FLASER line, every 4th beam (90 beams, 2°), ROBOTLASER1",
     ),
 )
 
