@@ -59,6 +59,7 @@ __all__ = [
     "match_scans",
     "normal_half_window",
     "scan_points",
+    "visible_points",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -101,8 +102,9 @@ class ScanMatchConfig:
     coarse_iterations, max_iterations : int
         Iterations from each start; iterations of the refinement of the best start.
     min_overlap : float
-        A match is used only when at least this fraction of the current scan's points lie
-        within ``inlier_m`` of a reference line.
+        A match is used only when at least this fraction of the current scan's points that
+        the reference scan could see (:func:`visible_points`: within its field of view and
+        range, at the match) lie within ``inlier_m`` of a reference line.
     slip_probability : float
         Prior probability that a step's odometry heading is a slip (0: the odometry's
         Gaussian alone).
@@ -277,7 +279,8 @@ class ScanMatch:
     cov : ndarray, shape (3, 3)
         Its covariance.
     overlap : float
-        Fraction of the current scan's points within ``inlier_m`` of a reference line.
+        Fraction of the current scan's points visible from the reference
+        (:func:`visible_points`) within ``inlier_m`` of a reference line.
     inliers : int
         Their number.
     start_offset_rad : float
@@ -716,6 +719,30 @@ def _symmetric_inverse(c: FloatArray) -> FloatArray:
     return np.asarray(0.5 * (inv + inv.T), dtype=np.float64)
 
 
+def visible_points(reference: ScanPoints, current: ScanPoints, delta: FloatArray) -> int:
+    """How many of ``current``'s points the reference scan could have seen, at ``delta``.
+
+    A current point (moved into the reference laser's frame by ``delta``) is visible when its
+    bearing lies within the reference's field of view (from its first to its last valid
+    point, in beam order, counter-clockwise) and it is no farther than the reference's
+    farthest valid point: the part of the current scan that the motion leaves in the
+    reference's view.
+    """
+    if len(reference) == 0 or len(current) == 0:
+        return 0
+    ref = reference.xy
+    bearings = np.unwrap(np.arctan2(ref[:, 1], ref[:, 0]))
+    first, span = float(bearings[0]), float(bearings[-1] - bearings[0])
+    if span < 0.0:  # clockwise beam order
+        first, span = float(bearings[-1]), -span
+    c, s = math.cos(float(delta[2])), math.sin(float(delta[2]))
+    qx = c * current.xy[:, 0] - s * current.xy[:, 1] + float(delta[0])
+    qy = s * current.xy[:, 0] + c * current.xy[:, 1] + float(delta[1])
+    within_fov = np.mod(np.arctan2(qy, qx) - first, 2.0 * math.pi) <= span
+    within_range = np.hypot(qx, qy) <= float(np.max(np.hypot(ref[:, 0], ref[:, 1])))
+    return int(np.count_nonzero(within_fov & within_range))
+
+
 def match_scans(
     reference: ScanPoints,
     current: ScanPoints,
@@ -785,7 +812,7 @@ def match_scans(
         x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
     x[2] = math.remainder(float(x[2]), 2.0 * math.pi)
     cov_points, inl = matcher.covariance(x)
-    overlap = inl / max(len(current), 1)
+    overlap = inl / max(visible_points(reference, current, x), inl, 1)
     ok = bool(np.all(np.isfinite(cov_points)))
     cov: FloatArray = np.asarray(used_cov, dtype=np.float64).copy()
     if ok:
