@@ -32,6 +32,7 @@ from slam.frontend.scan_match import (
     match_scans,
     normal_half_window,
     scan_points,
+    visible_points,
 )
 from slam.geometry import pose_between, pose_compose
 from slam.io import read_tum
@@ -205,11 +206,55 @@ def test_noise_free_match_returns_the_true_relative_pose(bearings, swap):
         m = match_scans(ref, cur, delta0, widen * prior, cfg)
         err_m, err_rad = _pose_error(m, truth)
         assert err_m < tol_m and err_rad < tol_rad, (m.delta - truth, cfg, widen)
-        assert m.accepted and m.overlap > 0.6 and m.inliers == round(m.overlap * len(cur))
+        visible = visible_points(ref, cur, m.delta)
+        assert m.accepted and m.overlap > 0.6 and m.inliers == round(m.overlap * visible)
         # (a rotated start may win the search when it converges to the same pose)
         assert np.all(np.isfinite(m.cov)) and np.all(np.linalg.eigvalsh(m.cov) > 0.0)
         assert np.all(np.diag(m.cov) < np.diag(widen * prior))
         assert m.cov[2, 2] < 0.05 * prior[2, 2]  # the walls fix the rotation
+
+
+# --------------------------------------------------------------------------------------------
+# 1b. the overlap counts the points the reference could see
+
+
+def test_visible_points_of_a_half_scanner_turned_by_a_right_angle():
+    """A 180° scanner: unmoved, every point is visible; turned by +90°, the points whose
+    bearing was at most 0 (the half that stays in the reference's view); a 360° scanner
+    sees every point whatever the turn; beam order (clockwise) does not matter."""
+    cfg = ScanMatchConfig()
+    ref, cur = _pair(ROOM, HALF, cfg, delta=np.zeros(3))
+    assert visible_points(ref, cur, np.zeros(3)) == len(cur)
+    turned = np.array([0.0, 0.0, math.pi / 2])
+    bearing = np.arctan2(cur.xy[:, 1], cur.xy[:, 0])
+    assert visible_points(ref, cur, turned) == np.count_nonzero(bearing <= 1e-9)
+    flipped = ScanPoints(ref.xy[::-1], ref.q11, ref.q12, ref.q22, ref.normals, ref.has_normal,
+                         ref.segment)  # fmt: skip
+    assert visible_points(flipped, cur, turned) == visible_points(ref, cur, turned)
+    ref360, cur360 = _pair(ROOM, FULL, cfg, delta=np.zeros(3))
+    for theta in (0.0, 1.0, 2.5, -3.0):
+        assert visible_points(ref360, cur360, np.array([0.0, 0.0, theta])) == len(cur360)
+    # farther than the reference's farthest point: not visible
+    far = np.array([np.max(np.hypot(ref360.xy[:, 0], ref360.xy[:, 1])) + 1.0, 0.0, 0.0])
+    assert visible_points(ref360, cur360, far) < len(cur360)
+    empty = scan_points(np.zeros(0), np.zeros(0), MAX_RANGE_M, NOISE, cfg)
+    assert visible_points(ref360, empty, np.zeros(3)) == 0
+    assert visible_points(empty, cur360, np.zeros(3)) == 0
+
+
+def test_a_sharp_turn_is_matched_though_half_the_scan_left_the_view():
+    """A 180° scanner turning 86° (the odometry 12° off): fewer than half of the current
+    points can pair at all, but nearly all that the reference could see do; the match is
+    used and right."""
+    truth = np.array([0.1, 0.05, 1.5])
+    cfg = ScanMatchConfig()
+    ref, cur = _pair(ROOM, HALF, cfg, delta=truth)
+    delta0 = truth + np.array([0.0, 0.0, math.radians(12.0)])
+    m = match_scans(ref, cur, delta0, _odometry_cov(delta0), cfg)
+    err_m, err_rad = _pose_error(m, truth)
+    assert err_m < 1e-3 and err_rad < 1e-3
+    assert m.inliers / len(cur) < cfg.min_overlap  # of all points: too few
+    assert m.accepted and m.overlap > 0.8
 
 
 # --------------------------------------------------------------------------------------------

@@ -724,9 +724,9 @@ def visible_points(reference: ScanPoints, current: ScanPoints, delta: FloatArray
 
     A current point (moved into the reference laser's frame by ``delta``) is visible when its
     bearing lies within the reference's field of view (from its first to its last valid
-    point, in beam order, counter-clockwise) and it is no farther than the reference's
-    farthest valid point: the part of the current scan that the motion leaves in the
-    reference's view.
+    point, widened by half the median step between them on either side) and it is no
+    farther than the reference's farthest valid point: the part of the current scan that the
+    motion leaves in the reference's view.
     """
     if len(reference) == 0 or len(current) == 0:
         return 0
@@ -735,6 +735,10 @@ def visible_points(reference: ScanPoints, current: ScanPoints, delta: FloatArray
     first, span = float(bearings[0]), float(bearings[-1] - bearings[0])
     if span < 0.0:  # clockwise beam order
         first, span = float(bearings[-1]), -span
+    # each beam covers half a step on either side
+    steps = np.abs(np.diff(bearings))
+    half_step = 0.5 * float(np.median(steps)) if steps.size else 0.0
+    first, span = first - half_step, span + 2.0 * half_step
     c, s = math.cos(float(delta[2])), math.sin(float(delta[2]))
     qx = c * current.xy[:, 0] - s * current.xy[:, 1] + float(delta[0])
     qy = s * current.xy[:, 0] + c * current.xy[:, 1] + float(delta[1])
