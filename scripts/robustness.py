@@ -36,7 +36,7 @@ Usage::
 
 Options: ``--only NAME...`` runs a subset; ``--extra`` also runs the extra rows
 (:data:`slam.experiments.robustness.EXTRA_VARIANTS`: the same transforms on Intel, and chains
-of two transforms on ACES and fr079; ``--list`` shows them); ``--workers N`` runs N rows at
+of two or three transforms on the three logs; ``--list`` shows them); ``--workers N`` runs N rows at
 once (1 by default; the times are only comparable between runs on an equally loaded machine);
 ``--config FILE.toml`` is passed to every run; ``--keep DIR`` keeps the results folders
 (``DIR/NAME``, with the run's output in ``DIR/NAME.log``); ``--work DIR`` is the variant cache

@@ -3,6 +3,7 @@
 Main entry points::
 
     VARIANTS                                   # the table: name, dataset, bar (m), transform
+    EXTRA_VARIANTS                             # more rows: Intel's variants, chains
     make_variant(variant, cache_dir) -> VariantFiles      # log + relations, generated once
     score_run(trajectory, frame, files) -> RunScore       # relations metric on every relation
     fill_dropped_scans(trajectory, odometry) -> Trajectory
@@ -38,6 +39,9 @@ relations still apply (rewritten only by :class:`MoveOdometryToCentre`):
     Every ``every``-th beam from the first; the scans are written as ``ROBOTLASER1`` lines,
     which state their geometry (start angle, field of view ``= step·(n − 1)``, angular
     resolution, maximum range); laser and robot pose are the ``FLASER`` line's two poses.
+:class:`Chain`
+    Several of the above, each applied to the previous one's output (only the last may write
+    ``ROBOTLASER1`` lines); the relations go through every step.
 
 A variant log is a log the dataset catalogue does not know: it is named after the variant
 (``<cache>/<variant>-<key>/aces-every3.clf``), so none of the catalogue's facts about the source's
@@ -433,7 +437,8 @@ class Chain(LogTransform):
     """``steps`` applied one after the other (each to the previous one's output).
 
     Only the last step may write ``ROBOTLASER1`` lines (the others rewrite ``FLASER`` logs);
-    the relations go through every step, and their frame is the last step's that moves it.
+    the relations go through every step, and refer to the robot centre if a step moves them
+    there.
     """
 
     steps: tuple[LogTransform, ...]
