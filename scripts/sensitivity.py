@@ -10,10 +10,16 @@ spread (mean, worst).
     LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/sensitivity.py fr079
     .venv/bin/python scripts/sensitivity.py aces --variants default keyframe-0.19 sigma-range+2%
     .venv/bin/python scripts/sensitivity.py fr079 --config my.toml   # perturb another setting
+    .venv/bin/python scripts/sensitivity.py --variant fr079-every2-max8m  # a robustness row
 
 The perturbations are changes no user would call a different configuration: the keyframe
 distance by ±5 %, the range noise of the line fits by ±2 %, the fusion and loop-closing
 intervals by one keyframe.
+
+``--variant NAME`` runs a row of ``scripts/robustness.py`` (its log made, or taken from the
+cache ``--work``, as that script does) and scores it as that script does: on every relation,
+a scan the variant dropped carried on by the source's odometry
+(:func:`slam.experiments.robustness.score_run`).
 """
 
 from __future__ import annotations
@@ -89,9 +95,31 @@ def relations_error(out: Path, log: str, relations_path: Path | None = None) -> 
     return metric.abs_trans_m.mean, metric.abs_rot_deg.mean
 
 
+class _VariantScore:
+    """Relations error of a run on a robustness row, scored as ``scripts/robustness.py`` does."""
+
+    def __init__(self, name: str, work: Path | None) -> None:
+        from slam.experiments.robustness import default_cache_dir, make_variant, variant_by_name
+
+        cache = work if work is not None else default_cache_dir()
+        self.files = make_variant(variant_by_name(name), cache)
+
+    def __call__(self, out: Path) -> tuple[float, float]:
+        import json
+
+        from slam.experiments.robustness import score_run
+        from slam.io.tum import read_tum
+
+        frame = json.loads((out / "summary.json").read_text(encoding="utf-8"))["frame"]
+        lineslam = score_run(read_tum(out / "trajectory.tum"), frame, self.files).lineslam
+        return lineslam.abs_trans_m.mean, lineslam.abs_rot_deg.mean
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("log", help="dataset name or log file")
+    parser.add_argument("log", nargs="?", help="dataset name or log file")
+    parser.add_argument("--variant", default=None, help="a row of scripts/robustness.py instead")
+    parser.add_argument("--work", type=Path, default=None, help="variant cache (with --variant)")
     parser.add_argument(
         "--relations", type=Path, default=None, help="relations file (default: the catalogue's)"
     )
@@ -103,6 +131,10 @@ def main() -> None:
         "--config", type=Path, default=None, help="TOML to perturb instead of the defaults"
     )
     args = parser.parse_args()
+    if (args.log is None) == (args.variant is None):
+        parser.error("give a log or --variant NAME")
+    score = _VariantScore(args.variant, args.work) if args.variant is not None else None
+    log = str(score.files.log) if score is not None else args.log
     base = RunConfig() if args.config is None else RunConfig.from_toml(args.config)
     trans, rot = [], []
     print(f"{'variant':<18}{'trans (m)':>11}{'rot (deg)':>11}{'time (s)':>10}", flush=True)
@@ -111,9 +143,12 @@ def main() -> None:
             out = Path(tmp) / name
             config = VARIANTS[name](base)
             t0 = time.perf_counter()
-            run_slam(args.log, out, config, max_scans=args.max_scans)
+            run_slam(log, out, config, max_scans=args.max_scans)
             dt = time.perf_counter() - t0
-            t, r = relations_error(out, args.log, args.relations)
+            if score is not None:
+                t, r = score(out)
+            else:
+                t, r = relations_error(out, args.log, args.relations)
             trans.append(t)
             rot.append(r)
             print(f"{name:<18}{t:>11.4f}{r:>11.3f}{dt:>10.1f}", flush=True)
