@@ -10,13 +10,13 @@ spread (mean, worst).
     LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/sensitivity.py fr079
     .venv/bin/python scripts/sensitivity.py aces --variants default keyframe-0.19 sigma-range+2%
     .venv/bin/python scripts/sensitivity.py fr079 --config my.toml   # perturb another setting
-    .venv/bin/python scripts/sensitivity.py --variant fr079-every2-max8m  # a robustness row
+    .venv/bin/python scripts/sensitivity.py --row fr079-every2-max8m  # a robustness row
 
 The perturbations are changes no user would call a different configuration: the keyframe
 distance by ±5 %, the range noise of the line fits by ±2 %, the fusion and loop-closing
 intervals by one keyframe.
 
-``--variant NAME`` runs a row of ``scripts/robustness.py`` (its log made, or taken from the
+``--row NAME`` runs a row of ``scripts/robustness.py`` (its log made, or taken from the
 cache ``--work``, as that script does) and scores it as that script does: on every relation,
 a scan the variant dropped carried on by the source's odometry
 (:func:`slam.experiments.robustness.score_run`).
@@ -118,8 +118,8 @@ class _VariantScore:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("log", nargs="?", help="dataset name or log file")
-    parser.add_argument("--variant", default=None, help="a row of scripts/robustness.py instead")
-    parser.add_argument("--work", type=Path, default=None, help="variant cache (with --variant)")
+    parser.add_argument("--row", default=None, help="a row of scripts/robustness.py instead")
+    parser.add_argument("--work", type=Path, default=None, help="variant cache (with --row)")
     parser.add_argument(
         "--relations", type=Path, default=None, help="relations file (default: the catalogue's)"
     )
@@ -131,9 +131,11 @@ def main() -> None:
         "--config", type=Path, default=None, help="TOML to perturb instead of the defaults"
     )
     args = parser.parse_args()
-    if (args.log is None) == (args.variant is None):
-        parser.error("give a log or --variant NAME")
-    score = _VariantScore(args.variant, args.work) if args.variant is not None else None
+    if (args.log is None) == (args.row is None):
+        parser.error("give a log or --row NAME")
+    if args.row is not None and args.relations is not None:
+        parser.error("--row takes the row's own relations; drop --relations")
+    score = _VariantScore(args.row, args.work) if args.row is not None else None
     log = str(score.files.log) if score is not None else args.log
     base = RunConfig() if args.config is None else RunConfig.from_toml(args.config)
     trans, rot = [], []
