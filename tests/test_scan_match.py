@@ -32,6 +32,7 @@ from slam.frontend.scan_match import (
     match_scans,
     normal_half_window,
     scan_points,
+    slip_covariance,
     visible_points,
 )
 from slam.geometry import pose_between, pose_compose
@@ -332,6 +333,32 @@ def test_slip_mixture_flags_no_slip_under_the_motion_model(rng):
         err_m, err_rad = _pose_error(m, TRUE_DELTA)
         assert m.accepted and err_m < 0.01 and err_rad < np.deg2rad(0.2)
     assert flagged == 0
+
+
+@pytest.mark.parametrize("slip_deg", [-25.0, 28.0])
+def test_a_rejected_match_that_finds_a_slip_contradicts_the_odometry(slip_deg):
+    """A match that is not used (here: ``min_overlap = 1``, above these overlaps) but
+    whose best solution lies in the slip component is flagged ``contradicted``: the points
+    say the odometry's heading slipped, without being trusted to say by how much.  The same
+    step without the slip is not flagged, and neither is an accepted slip."""
+    cfg = ScanMatchConfig(slip_probability=0.01, min_overlap=1.0)
+    ref, cur = _pair(ROOM, FULL, cfg)
+    delta0 = TRUE_DELTA + np.array([0.0, 0.0, np.deg2rad(slip_deg)])
+    m = match_scans(ref, cur, delta0, _odometry_cov(delta0), cfg)
+    assert not m.accepted and not m.slip and m.contradicted
+    delta1 = TRUE_DELTA + np.array([0.01, -0.01, np.deg2rad(1.0)])
+    m1 = match_scans(ref, cur, delta1, _odometry_cov(delta1), cfg)
+    assert not m1.accepted and not m1.contradicted
+    used = match_scans(ref, cur, delta0, _odometry_cov(delta0), replace(cfg, min_overlap=0.5))
+    assert used.accepted and used.slip and not used.contradicted
+
+
+def test_slip_covariance_widens_the_heading_only():
+    Q = _odometry_cov(TRUE_DELTA)
+    cfg = ScanMatchConfig()
+    wide = slip_covariance(Q, cfg)
+    np.testing.assert_array_equal(wide - Q, np.diag([0.0, 0.0, cfg.slip_sigma_rad**2]))
+    assert Q[2, 2] == _odometry_cov(TRUE_DELTA)[2, 2]  # the argument is not modified
 
 
 def test_overconfidence_of_the_summed_cost():
@@ -666,6 +693,33 @@ def test_scan_matching_corrects_a_heading_slip_in_the_demo_log(tmp_path):
     with_sm = _final_heading_error_rad(tmp_path / "with")
     assert without > np.deg2rad(10.0)
     assert with_sm < np.deg2rad(0.2)
+
+
+def test_a_slip_the_points_cannot_settle_is_left_to_the_loop_closure(tmp_path):
+    """The demo's 20° slip at scan 200 with no match trusted (``min_overlap = 0.99``: 359 of
+    382 matches rejected).  The slip's step is the only one whose rejected match finds a
+    slip; its odometry factor gets the slip component's covariance, so the loop closure can
+    bend the trajectory there: the run ends within 0.2° of the truth's heading, where
+    without the slip mixture (``slip_probability = 0``: nothing is flagged, the step keeps
+    the odometry's covariance) it ends 20° off."""
+    log = tmp_path / "slip.clf"
+    _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(20.0))
+    cfg = RunConfig()
+    sm = replace(cfg.slam.frontend.scan_matching, min_overlap=0.99)
+    cfg = replace(
+        cfg, slam=replace(cfg.slam, frontend=replace(cfg.slam.frontend, scan_matching=sm))
+    )
+    summary = run_slam(log, tmp_path / "doubted", cfg)
+    assert summary["scan_matches_rejected"] > 0.9 * summary["scan_matches"]
+    assert summary["scan_match_slips"] == 0
+    assert summary["scan_match_contradictions"] == 1
+    assert _final_heading_error_rad(tmp_path / "doubted") < np.deg2rad(0.2)
+    no_slip = replace(sm, slip_probability=0.0)
+    cfg0 = replace(
+        cfg, slam=replace(cfg.slam, frontend=replace(cfg.slam.frontend, scan_matching=no_slip))
+    )
+    assert run_slam(log, tmp_path / "trusted", cfg0)["scan_match_contradictions"] == 0
+    assert _final_heading_error_rad(tmp_path / "trusted") > np.deg2rad(10.0)
 
 
 # fr079: three relations over which the wheel odometry misreports a turn (t1, t2)

@@ -291,6 +291,10 @@ class ScanMatch:
         Accepted, and the odometry's heading slipped (the slip component of the prior is the
         more probable at the match; :class:`ScanMatchConfig` ``slip_probability``): ``cov``
         then holds the odometry's translation with the slip's rotation spread and the points.
+    contradicted : bool
+        Not accepted, yet the slip component is the more probable at the match: the points
+        contradict the odometry's heading without settling it.  The step's prior is then the
+        slip component's (:func:`slip_covariance`), not the odometry's Gaussian.
     """
 
     delta: FloatArray
@@ -300,6 +304,7 @@ class ScanMatch:
     start_offset_rad: float
     accepted: bool
     slip: bool = False
+    contradicted: bool = False
 
 
 jit = njit(cache=True, error_model="numpy", nogil=True)
@@ -680,8 +685,7 @@ class _OdometryPrior:
         self.x0 = x0
         self.slip_probability = eps = config.slip_probability
         self.cov = Q
-        self.cov_slip = Q.copy()
-        self.cov_slip[2, 2] += config.slip_sigma_rad**2
+        self.cov_slip = slip_covariance(Q, config)
         self.info = _symmetric_inverse(Q)
         self.info_slip = _symmetric_inverse(self.cov_slip)
         self.info_search = self.info_slip if eps > 0.0 else self.info
@@ -712,6 +716,13 @@ class _OdometryPrior:
         """Whether the slip component is the more probable at ``x``."""
         l0, l1 = self._components(x)
         return l1 > l0
+
+
+def slip_covariance(Q: FloatArray, config: ScanMatchConfig) -> FloatArray:
+    """The slip component's covariance: ``Q + diag(0, 0, σ_slip²)`` (``slip_sigma_rad``)."""
+    cov = np.array(Q, dtype=np.float64)
+    cov[2, 2] += config.slip_sigma_rad**2
+    return cov
 
 
 def _symmetric_inverse(c: FloatArray) -> FloatArray:
@@ -830,4 +841,7 @@ def match_scans(
         except np.linalg.LinAlgError:
             ok = False
     accepted = ok and overlap >= cfg.min_overlap
-    return ScanMatch(x, cov, float(overlap), inl, float(offset), accepted, slip and accepted)
+    contradicted = slip and not accepted
+    return ScanMatch(
+        x, cov, float(overlap), inl, float(offset), accepted, slip and accepted, contradicted
+    )

@@ -55,7 +55,13 @@ from linefit.config import LineFitConfig
 from linefit.line import Line
 from slam import interrupts
 from slam.extraction import extract_lines_of_scans, extract_scan_lines
-from slam.frontend.scan_match import ScanMatch, ScanPoints, match_scans, scan_points
+from slam.frontend.scan_match import (
+    ScanMatch,
+    ScanPoints,
+    match_scans,
+    scan_points,
+    slip_covariance,
+)
 from slam.geometry import pose_between, pose_compose, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
 from slam.graph.problem import LineGraph
@@ -271,6 +277,7 @@ class LineSlam:
         Q = self.odometry_noise.model.covariance(step.delta)
         x_odo = x_pred
         slip: ScanMatch | None = None
+        contradicted = False
         # 4. front end: the scan's points matched against the previous keyframe's with the
         # odometry as the prior (a slip the points see is corrected before the lines are
         # paired); then the lines registered against the local map = initial guess +
@@ -287,6 +294,12 @@ class LineSlam:
                         self.counters["scan_match_slips"] += 1
                 else:
                     self.counters["scan_matches_rejected"] += 1
+                    if match.contradicted:
+                        # the points say the odometry's heading slipped but not by how much:
+                        # the step keeps the odometry with the slip component's covariance
+                        Q = slip_covariance(Q, cfg.frontend.scan_matching)
+                        contradicted = True
+                        self.counters["scan_match_contradictions"] += 1
             self._points = points
             local = LocalMap.empty()
             if K and not step.first:
@@ -302,7 +315,7 @@ class LineSlam:
             self.track.path_m,
             None if step.first else pose_between(g.poses[prev], reg.pose_world_laser),
         )
-        if reg.cov is not None and slip is None:
+        if reg.cov is not None and slip is None and not contradicted:
             # the odometry's own error, as the registration sees it
             c_odo = (
                 reg.correction

@@ -47,6 +47,7 @@ COUNTERS = (
     "scan_matches",
     "scan_matches_rejected",
     "scan_match_slips",
+    "scan_match_contradictions",
     "loop_closure_attempts",
     "loop_closure_candidates",
     "loop_closures",
