@@ -3,7 +3,9 @@
 Every scan of a log is matched against the one before it (:func:`slam.frontend.scan_match.
 match_scans`, the run configuration's ``[slam.frontend.scan_matching]``, the configured motion
 model as the odometry's prior, the odometry the estimators read); a match that is not accepted
-leaves the odometry step with its prior covariance.  The matches are chained
+leaves the odometry step with its prior covariance, or with the slip component's where the
+match contradicts it (:attr:`~slam.frontend.scan_match.ScanMatch.contradicted`, as the
+pipeline does).  The matches are chained
 (:func:`slam.lines.transform.compose_chain`, independent steps) and, for every relation
 shorter than ``--max-gap-s`` seconds, the chain's relative pose between the relation's two
 scans is compared with the relation in the relation's frame (the base, through the log's
@@ -30,7 +32,7 @@ from tqdm import tqdm
 
 from slam.config import RunConfig
 from slam.evaluation.timestamps import match_timestamps
-from slam.frontend.scan_match import match_scans, scan_points
+from slam.frontend.scan_match import match_scans, scan_points, slip_covariance
 from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse, pose_log
 from slam.inputs import open_log
 from slam.io.relations import read_relations
@@ -55,7 +57,7 @@ def main() -> None:
     noise = config.linefit.noise
     stamps, steps, covs, odo_steps, mounts = [], [], [], [], []
     prev = prev_points = None
-    n_used = n_slips = 0
+    n_used = n_slips = n_contradicted = 0
     for scan in tqdm(source.scans(args.max_scans), desc="matching", unit="scan"):
         points = scan_points(scan.ranges, scan.bearings, scan.max_range_m, noise, sm)
         if prev is not None and prev_points is not None:
@@ -64,8 +66,9 @@ def main() -> None:
             m = match_scans(prev_points, points, delta, Q, sm)
             n_used += int(m.accepted)
             n_slips += int(m.slip)
+            n_contradicted += int(m.contradicted)
             steps.append(m.delta if m.accepted else delta)
-            covs.append(m.cov if m.accepted else Q)
+            covs.append(m.cov if m.accepted else slip_covariance(Q, sm) if m.contradicted else Q)
             odo_steps.append(delta)
         stamps.append(scan.timestamp)
         mounts.append(pose_between(scan.pose_odom_base, scan.pose_odom_laser))
@@ -98,7 +101,7 @@ def main() -> None:
     n = len(nees)
     print(
         f"{source.name}: {len(stamps)} scans, {n_used} of {len(steps)} matches used, "
-        f"{n_slips} slips"
+        f"{n_slips} slips, {n_contradicted} not used that contradict the odometry"
     )
     print(f"relations shorter than {args.max_gap_s:g} s: {n}")
     if n == 0:
