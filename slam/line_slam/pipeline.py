@@ -282,7 +282,8 @@ class LineSlam:
         # odometry as the prior (a slip the points see is corrected before the lines are
         # paired); then the lines registered against the local map = initial guess +
         # association.  The match moves the prediction (its covariance stays the odometry's);
-        # it enters the graph only where it finds a slip, as that step's odometry factor (5.)
+        # it enters the graph only where it finds a slip, as that step's odometry factor (5.);
+        # a match not used that finds a slip leaves the step the slip component's covariance
         with self.clock("frontend"):
             if points is not None and self._points is not None and not step.first:
                 match = match_scans(self._points, points, step.delta, Q, cfg.frontend.scan_matching)
