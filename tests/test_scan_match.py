@@ -596,6 +596,15 @@ def test_bad_scan_matching_table_in_a_config_file_raises_config_error(tmp_path):
 # 6. pipeline
 
 
+def _with_scan_matching(**changes: float) -> RunConfig:
+    """The defaults with ``[slam.frontend.scan_matching]`` values changed."""
+    cfg = RunConfig()
+    sm = replace(cfg.slam.frontend.scan_matching, **changes)
+    return replace(
+        cfg, slam=replace(cfg.slam, frontend=replace(cfg.slam.frontend, scan_matching=sm))
+    )
+
+
 def _without_scan_matching(tmp_path: Path) -> RunConfig:
     """The defaults with scan matching off, read from a file as a user writes it."""
     path = tmp_path / "no_scan_matching.toml"
@@ -704,20 +713,12 @@ def test_a_slip_the_points_cannot_settle_is_left_to_the_loop_closure(tmp_path):
     the odometry's covariance) it ends 20° off."""
     log = tmp_path / "slip.clf"
     _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(20.0))
-    cfg = RunConfig()
-    sm = replace(cfg.slam.frontend.scan_matching, min_overlap=0.99)
-    cfg = replace(
-        cfg, slam=replace(cfg.slam, frontend=replace(cfg.slam.frontend, scan_matching=sm))
-    )
-    summary = run_slam(log, tmp_path / "doubted", cfg)
+    summary = run_slam(log, tmp_path / "doubted", _with_scan_matching(min_overlap=0.99))
     assert summary["scan_matches_rejected"] > 0.9 * summary["scan_matches"]
     assert summary["scan_match_slips"] == 0
     assert summary["scan_match_contradictions"] == 1
     assert _final_heading_error_rad(tmp_path / "doubted") < np.deg2rad(0.2)
-    no_slip = replace(sm, slip_probability=0.0)
-    cfg0 = replace(
-        cfg, slam=replace(cfg.slam, frontend=replace(cfg.slam.frontend, scan_matching=no_slip))
-    )
+    cfg0 = _with_scan_matching(min_overlap=0.99, slip_probability=0.0)
     assert run_slam(log, tmp_path / "trusted", cfg0)["scan_match_contradictions"] == 0
     assert _final_heading_error_rad(tmp_path / "trusted") > np.deg2rad(10.0)
 
