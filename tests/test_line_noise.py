@@ -13,9 +13,10 @@ from slam.models.anchored import model_error_covariance
 FIT_COV = np.array([[4e-6, 0.0], [0.0, 1e-6]])  # the fit's (r, α) covariance at the foot point
 
 
-def _graph(rng, sigma_o, sigma_a, n_landmarks=40, per_landmark=12, outliers=0.0):
+def _graph(rng, sigma_o, sigma_a, n_landmarks=40, per_landmark=12, outliers=0.0, laplace=False):
     """Walls seen from exact poses; each measured line perturbed by the fit's noise plus a model
-    error (σ_o along the normal at the segment's mid-point, σ_a about it).  The estimate is the
+    error (σ_o along the normal at the segment's mid-point, σ_a about it); ``laplace``: the
+    noise Laplace-distributed with that covariance (heavier tails).  The estimate is the
     truth, so each factor's residual is its measurement noise.  Returns (graph, fit_cov)."""
     g = LineGraph()
     alpha = rng.uniform(-np.pi, np.pi, n_landmarks)
@@ -39,6 +40,8 @@ def _graph(rng, sigma_o, sigma_a, n_landmarks=40, per_landmark=12, outliers=0.0)
             ep = np.stack([z_true[0] * n + (s_m - half) * t, z_true[0] * n + (s_m + half) * t])
             cov = FIT_COV + model_error_covariance(z_true[None], ep[None], sigma_o, sigma_a)[0]
             noise = rng.multivariate_normal(np.zeros(2), cov)
+            if laplace:
+                noise = np.linalg.cholesky(cov) @ rng.laplace(0.0, np.sqrt(0.5), 2)
             if rng.random() < outliers:
                 noise = noise + rng.normal(0.0, [0.3, 0.1])
             z = np.array([z_true[0] + noise[0], wrap_angle(z_true[1] + noise[1])])
@@ -70,6 +73,17 @@ def test_a_few_wrong_associations_do_not_move_the_estimate():
     assert est.update(g, fit_cov)
     assert est.sigmas[0] == pytest.approx(0.02, rel=0.2)
     assert est.sigmas[1] == pytest.approx(0.01, rel=0.2)
+
+
+def test_heavy_tailed_residuals_give_their_variance():
+    """Laplace-distributed residuals (variance σ², tails heavier than Gaussian): the estimate is
+    their standard deviation, not the 0.73 σ that matching the median of χ²₁ would give."""
+    rng = np.random.default_rng(14)
+    g, fit_cov = _graph(rng, 0.02, 0.01, n_landmarks=60, laplace=True)
+    est = LineModelErrorEstimator(0.1, 0.1)
+    assert est.update(g, fit_cov)
+    assert est.sigmas[0] == pytest.approx(0.02, rel=0.12)
+    assert est.sigmas[1] == pytest.approx(0.01, rel=0.12)
 
 
 def test_midpoint_residuals_are_the_offset_and_angle_at_the_segment_midpoint():

@@ -9,16 +9,21 @@ Simulated walls have none; real walls have what their residuals show.
 Every graph landmark seen many times is an estimate of one wall; the residuals of its line
 factors at the current estimate, taken at each segment's mid-point (offset along the normal
 there, and angle), are the fit's error plus the model error.  For each component separately,
-``σ²`` is chosen so that the median of ``e² / (fit variance + σ²)`` is the median of χ²₁
-(0.455): a moment estimate that the factors of a wrong association (a few, with large
-residuals) do not move.  Factors of landmarks with fewer than ``min_observations`` factors are
-left out (their residuals are shrunk by the landmark's own fit to them).
+``σ²`` is Huber's scale estimate ("Proposal 2", Huber 1981, Sec. 6.4): the mean of
+``min(e² / (fit variance + σ²), c)`` equals its value for a χ²₁ variable, with ``c`` the
+χ²₁ quantile :data:`WINSOR_PROBABILITY`.  It is the variance the line factors must carry for
+their covariances to describe the residuals' spread (a second moment, so the heavier-than-
+Gaussian tails of real walls count), while a wrong association (a residual of metres) counts
+no more than ``c``.  For Gaussian residuals it is the variance itself (simulated walls:
+about zero).  Factors of landmarks with fewer than ``min_observations`` factors are left out
+(their residuals are shrunk by the landmark's own fit to them).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import gammainc
 
 from slam.graph.factors import line_factor_residuals
 from slam.graph.problem import LineGraph
@@ -40,7 +45,14 @@ REWEIGHT_CHANGE = 0.2
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
-_MEDIAN_CHI2_1 = chi2_ppf(0.5, 1)
+WINSOR_PROBABILITY = 0.99
+"""Residual ratios ``e² / (fit variance + σ²)`` beyond this χ²₁ quantile count as the quantile."""
+
+_WINSOR_C = chi2_ppf(WINSOR_PROBABILITY, 1)
+# E[min(X, c)] for X ~ χ²₁: E[X; X < c] = P(χ²₃ < c), plus c · P(X > c)
+_WINSOR_MEAN = float(
+    gammainc(1.5, _WINSOR_C / 2) + _WINSOR_C * (1.0 - gammainc(0.5, _WINSOR_C / 2))
+)
 
 
 def midpoint_residuals(
@@ -72,17 +84,24 @@ def midpoint_residuals(
     return em, np.stack([C[:, 0, 0], C[:, 1, 1]], axis=-1)
 
 
-def _sigma2_for_median(e2: FloatArray, var: FloatArray) -> float:
-    """``σ² ≥ 0`` with median of ``e² / (var + σ²)`` equal to the median of χ²₁."""
-    ratio = lambda s2: float(np.median(e2 / (var + s2)))  # noqa: E731
-    if ratio(0.0) <= _MEDIAN_CHI2_1:
+def _winsorized_mean(e2: FloatArray, var: FloatArray, s2: float) -> float:
+    return float(np.mean(np.minimum(e2 / (var + s2), _WINSOR_C)))
+
+
+def _sigma2_for_moment(e2: FloatArray, var: FloatArray) -> float:
+    """``σ² ≥ 0`` with the mean of ``min(e² / (var + σ²), c)`` equal to its χ²₁ value.
+
+    The mean falls as ``σ²`` grows, so bisection finds the one root (``0`` when the fit's
+    variances alone already explain the residuals).
+    """
+    if _winsorized_mean(e2, var, 0.0) <= _WINSOR_MEAN:
         return 0.0
-    lo, hi = 0.0, max(float(np.median(e2)), 1e-12)
-    while ratio(hi) > _MEDIAN_CHI2_1:
+    lo, hi = 0.0, max(float(np.mean(e2)), 1e-12)
+    while _winsorized_mean(e2, var, hi) > _WINSOR_MEAN:
         hi *= 4.0
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        if ratio(mid) > _MEDIAN_CHI2_1:
+        if _winsorized_mean(e2, var, mid) > _WINSOR_MEAN:
             lo = mid
         else:
             hi = mid
@@ -134,8 +153,8 @@ class LineModelErrorEstimator:
         if f.size < self.min_samples:
             return False
         e, var = midpoint_residuals(g, f, fit_cov)
-        self.sigma_offset_m = float(np.sqrt(_sigma2_for_median(e[:, 0] ** 2, var[:, 0])))
-        self.sigma_angle_rad = float(np.sqrt(_sigma2_for_median(e[:, 1] ** 2, var[:, 1])))
+        self.sigma_offset_m = float(np.sqrt(_sigma2_for_moment(e[:, 0] ** 2, var[:, 0])))
+        self.sigma_angle_rad = float(np.sqrt(_sigma2_for_moment(e[:, 1] ** 2, var[:, 1])))
         self.samples = int(f.size)
         self.updates += 1
         return True
