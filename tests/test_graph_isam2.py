@@ -333,3 +333,60 @@ def test_rebuilt_blocks_from_templates_equal_blocks_stacked_by_gtsam():
         assert list(a.keys()) == list(b.keys())
         ja, jb = a.toJacobian(), b.toJacobian()
         np.testing.assert_array_equal(ja.augmentedJacobian(), jb.augmentedJacobian())
+
+
+class _Indeterminate:
+    """An ``ISAM2`` whose next ``update`` fails as GTSAM's Cholesky does on a stiff system."""
+
+    def __init__(self, isam: gtsam.ISAM2, message: str) -> None:
+        self._isam = isam
+        self._message = message
+
+    def update(self, *args, **kwargs):
+        raise RuntimeError(self._message)
+
+    def __getattr__(self, name):
+        return getattr(self._isam, name)
+
+
+class _FailsOnce(Isam2Solver):
+    """Its ``at``-th update meets an ``_Indeterminate`` iSAM2."""
+
+    def __init__(self, at: int, message: str) -> None:
+        super().__init__(solver=GAUSSIAN)
+        self.at = at
+        self.message = message
+        self.calls = 0
+
+    def update(self, graph, force_relinearize=False):
+        self.calls += 1
+        if self.calls == self.at:
+            self.isam = _Indeterminate(self.isam, self.message)
+        return super().update(graph, force_relinearize)
+
+
+INDETERMINATE = "\nIndeterminate linear system detected while working near variable 7 (Symbol: x7)."
+
+
+def test_indeterminate_cholesky_falls_back_to_qr(incremental):
+    """An update that GTSAM's Cholesky finds indeterminate rebuilds iSAM2 with QR from the graph
+    (once, for the rest of the run): the run goes on and ends at the batch solution."""
+    _, _, batch = incremental
+    src = synthetic_problem(150, seed=11).graph
+    solver = _FailsOnce(at=60, message=INDETERMINATE)
+    g = feed(src, solver)
+    solver.optimize(g)
+    assert solver.stats.qr_fallbacks == 1
+    assert solver.isam.params().getFactorization() == "QR"
+    np.testing.assert_allclose(g.poses[:, :2], batch.poses[:, :2], atol=2e-3)
+    np.testing.assert_allclose(wrap_angle(g.poses[:, 2] - batch.poses[:, 2]), 0.0, atol=3e-4)
+
+
+@pytest.mark.parametrize("message", [INDETERMINATE, "\nsome other GTSAM failure"])
+def test_other_or_repeated_isam2_failures_are_estimation_errors(message):
+    src = synthetic_problem(40, seed=12).graph
+    solver = _FailsOnce(at=10, message=message)
+    if message == INDETERMINATE:
+        solver.stats.qr_fallbacks = 1  # already on QR: no second fallback
+    with pytest.raises(EstimationError, match="iSAM2 update failed"):
+        feed(src, solver)

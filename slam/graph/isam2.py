@@ -86,6 +86,9 @@ class Isam2Stats:
         Whole-estimate read-backs.
     final_relinearizations : int
         Rebuilds of iSAM2 at the estimate by ``optimize(exact=True)``.
+    qr_fallbacks : int
+        Times an update hit a system too poorly conditioned for the Cholesky factorisation
+        (GTSAM's ``IndeterminateLinearSystemException``) and iSAM2 was rebuilt with QR.
     final_step : float
         The largest component of the last such rebuild's step (nan before any).
     time_s : dict
@@ -99,6 +102,7 @@ class Isam2Stats:
     variables_relinearized: int = 0
     full_refreshes: int = 0
     final_relinearizations: int = 0
+    qr_fallbacks: int = 0
     final_step: float = float("nan")
     time_s: dict[str, float] = field(
         default_factory=lambda: {"build": 0.0, "update": 0.0, "readback": 0.0}
@@ -277,6 +281,7 @@ class Isam2Solver:
         params.setRelinearizeThreshold(thresholds)
         params.relinearizeSkip = self.config.relinearize_skip
         params.enablePartialRelinearizationCheck = self.config.partial_relinearization_check
+        params.setFactorization("QR" if self.stats.qr_fallbacks else "CHOLESKY")
         self.isam = gtsam.ISAM2(params)
         self._n_poses = 0
         self._n_landmarks = 0
@@ -526,7 +531,14 @@ class Isam2Solver:
         try:
             result = self.isam.update(nfg, values, remove, force_relinearize=force_relinearize)
         except RuntimeError as exc:
-            raise EstimationError(f"iSAM2 update failed: {exc}") from exc
+            if "Indeterminate" not in str(exc) or self.stats.qr_fallbacks:
+                raise EstimationError(f"iSAM2 update failed: {exc}") from exc
+            # lines known to a fraction of a millimetre beside metres of odometry: too stiff
+            # for Cholesky's pivots; QR factors the same system without forming its normal
+            # equations (slower), from here on
+            self.stats.qr_fallbacks += 1
+            self._start()
+            return self.update(graph, force_relinearize)
         self.stats.time_s["update"] += time.perf_counter() - t0
         slots = list(result.getNewFactorsIndices())
         for p, slot in zip(rebuild, slots[n_before_blocks:], strict=True):
