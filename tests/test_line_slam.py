@@ -416,16 +416,17 @@ def test_right_closure_passes_the_f_test():
 
 def test_estimated_model_error_finds_the_line_worlds_exact_lines():
     """The line world's lines carry their exact covariances: started from the default model error
-    (2 cm, 0.01 rad), the estimate falls to a fraction of it and the factors are re-weighted."""
+    (2 cm, 0.01 rad), the estimate (the default) falls to a fraction of it and the factors are
+    re-weighted."""
     world = corridor_loop(length=10.0, width=6.0, piece=3.0, door=1.0)
     path = loop_path(10, 6, 0.5, laps=1.0)
     run = simulate_run(world, path, seed=201, motion=MOTION)
-    cfg = SlamConfig(motion=MOTION, line_model_error="estimated")
-    _, res, _ = run_slam(run, cfg)
+    assert SlamConfig().line_model_error == "estimated"
+    _, res, _ = run_slam(run, SlamConfig(motion=MOTION))
     est = res.stats["line_model_error"]
     assert est["updates"] >= 1 and est["samples"] >= 50
     assert est["sigma_offset_m"] < 0.005 and est["sigma_angle_rad"] < 0.003
-    _, fixed, _ = run_slam(run, SlamConfig(motion=MOTION))
+    _, fixed, _ = run_slam(run, SlamConfig(motion=MOTION, line_model_error="fixed"))
     assert "line_model_error" not in fixed.stats
     # re-weighted with the smaller model error, the poses are more certain than with the default
     assert np.median(res.pose_covariances[:, 2, 2]) < np.median(fixed.pose_covariances[:, 2, 2])

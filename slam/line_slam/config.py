@@ -137,18 +137,19 @@ class SlamConfig:
         frame: the first laser pose).
     frontend, tentative, loop_closure
         Registration front end, tentative landmarks, loop closing.
-    line_model_error : {"fixed", "estimated"}
-        ``"fixed"`` (default): the configured values below.  ``"estimated"``: the model error
-        added to every measured line's covariance is estimated during the run from the
-        residuals of the landmarks seen many times (:mod:`slam.line_slam.line_noise`; first
-        after 20 keyframes, then every 50 and at the end; the line factors are re-weighted,
-        and the back-end restarted, when an estimate moves by more than 20 %).  The estimate
-        is in ``summary.json`` (``line_model_error``).
+    line_model_error : {"estimated", "fixed"}
+        ``"estimated"`` (default): the model error added to every measured line's covariance
+        is estimated during the run from the residuals of the landmarks seen many times
+        (:mod:`slam.line_slam.line_noise`; first after 20 keyframes, then every 50 and at the
+        end; the line factors are re-weighted, and the back-end restarted, when an estimate
+        moves by more than 20 %): simulated walls get about zero, real walls what their
+        residuals show.  The estimate is in ``summary.json`` (``line_model_error``).
+        ``"fixed"``: the configured values below throughout.
     line_model_sigma_r_m, line_model_sigma_alpha_rad : float
         Model error (m, rad) added to every measured line's covariance, at the segment's
         mid-point (:func:`slam.models.anchored.model_error_covariance`): real walls are not
-        the fit's straight lines.  With ``line_model_error = "estimated"`` the values used until
-        the first estimate.
+        the fit's straight lines.  With ``line_model_error = "estimated"`` (the default) the
+        values used until the first estimate.
     min_line_points : int
         Lines with fewer supporting points are ignored (neither matched nor new landmarks).
         Default 3, the fewest with a residual: how much wall a usable line covers is
@@ -178,7 +179,7 @@ class SlamConfig:
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     prior_sigma_xy_m: float = 1e-4
     prior_sigma_theta_rad: float = 1e-5
-    line_model_error: Literal["estimated", "fixed"] = "fixed"
+    line_model_error: Literal["estimated", "fixed"] = "estimated"
     line_model_sigma_r_m: float = 0.02
     line_model_sigma_alpha_rad: float = 0.01
     min_line_points: int = 3
