@@ -77,7 +77,7 @@ def test_a_few_wrong_associations_do_not_move_the_estimate():
 
 def test_heavy_tailed_residuals_give_their_variance():
     """Laplace-distributed residuals (variance σ², tails heavier than Gaussian): the estimate is
-    their standard deviation, not the 0.73 σ that matching the median of χ²₁ would give."""
+    their standard deviation, where matching the median of χ²₁ gives about 0.8 σ."""
     rng = np.random.default_rng(14)
     g, fit_cov = _graph(rng, 0.02, 0.01, n_landmarks=60, laplace=True)
     est = LineModelErrorEstimator(0.1, 0.1)
