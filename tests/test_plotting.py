@@ -70,6 +70,18 @@ def test_bands_follow_the_segments_given_by_end_points():
     np.testing.assert_allclose(polys[2][:5, 0], np.linspace(-3.0, -4.0, 5), atol=1e-12)
 
 
+def test_nees_axis_leaves_out_the_gauge_poses_near_zero():
+    """The anchored first pose's NEES (~1e-30) does not set the log axis: the range covers the
+    χ² band and the curves from their 1st percentile up."""
+    from slam.plotting.compare import nees_axis_limits
+
+    curve = np.r_[1e-30, np.linspace(0.5, 8.0, 99)]
+    lo, hi = nees_axis_limits({"a": curve}, (2.0, 4.0))
+    assert 0.2 < lo < 0.5 and hi == 16.0
+    lo, hi = nees_axis_limits({"a": np.r_[0.0, np.full(20, 3.0)]}, (2.0, 4.0))
+    assert (lo, hi) == (1.0, 8.0)
+
+
 def test_comparison_figures_are_written(tmp_path):
     from slam.plotting.compare import (
         plot_errors_over_time,

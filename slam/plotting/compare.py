@@ -66,16 +66,36 @@ def plot_nees_over_time(
             part = values[a:b]
             ok = np.isfinite(part)
             means.append(float(np.mean(part[ok])) if np.any(ok) else np.nan)
-        ax.stairs(means, edges, color=line.get_color(), lw=2.2, label=f"{name} (mean per loop)")
+        ax.stairs(
+            means, edges, baseline=None, color=line.get_color(), lw=2.2, zorder=3,
+            label=f"{name} (mean per loop)",
+        )  # fmt: skip
     if segments > 1:
         for e in edges[1:-1]:
             ax.axvline(e, color="0.6", lw=0.6, ls=":")
     lo, hi = bounds
     ax.fill_between([0, n - 1], lo, hi, color="0.85", label=f"95% bounds ({dof} dof)")
     ax.axhline(dof, color="0.4", lw=0.8, ls="--")
+    ax.set_ylim(*nees_axis_limits(anees, bounds))
     runs = f", {n_runs} runs" if n_runs else ""
     title = title or f"Pose NEES over time{runs}"
     return _finish_log_scale(fig, ax, path, "scan", "average pose NEES", title, "upper left")
+
+
+def nees_axis_limits(
+    anees: Mapping[str, FloatArray], bounds: tuple[float, float]
+) -> tuple[float, float]:
+    """Log-axis range of :func:`plot_nees_over_time`: the band and the bulk of the curves.
+
+    The first pose's NEES (the gauge: its covariance is the prior's, its error ~0) and other
+    values below the curves' 1st percentile do not stretch the axis down by 30 decades.
+    """
+    values = np.concatenate([np.asarray(v, dtype=float)[1:] for v in anees.values()])
+    values = values[np.isfinite(values) & (values > 0.0)]
+    lo, hi = bounds
+    if values.size == 0:
+        return lo / 2.0, hi * 2.0
+    return min(lo, float(np.percentile(values, 1.0))) / 2.0, max(hi, float(values.max())) * 2.0
 
 
 def plot_trajectories(
