@@ -9,7 +9,7 @@ Simulated walls have none; real walls have what their residuals show.
 Every graph landmark seen many times is an estimate of one wall; the residuals of its line
 factors at the current estimate, taken at each segment's mid-point (offset along the normal
 there, and angle), are the fit's error plus the model error.  For each component separately,
-``σ²`` is Huber's scale estimate ("Proposal 2", Huber 1981, Sec. 6.4): the mean of
+``σ²`` is Huber's scale estimate ("Proposal 2", Huber 1964): the mean of
 ``min(e² / (fit variance + σ²), c)`` equals its value for a χ²₁ variable, with ``c`` the
 χ²₁ quantile :data:`WINSOR_PROBABILITY`.  It is the variance the line factors must carry for
 their covariances to describe the residuals' spread (a second moment, so the heavier-than-
