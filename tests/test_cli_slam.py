@@ -112,3 +112,33 @@ def test_raw_points_are_placed_by_the_estimated_poses():
     poses = np.array([[1.0, 1.0, np.pi / 2], [0.0, 0.0, np.pi], [0.0, 0.0, 0.0]])
     points = raw_points_world(scans, poses, np.array([True, True, False]))
     np.testing.assert_allclose(points, [[1.0, 3.0], [0.0, 1.0], [-3.0, 0.0]], atol=1e-12)
+
+
+def _demo_metrics(tmp_path, capsys, name, extra=()):
+    out = tmp_path / name
+    code, _, _ = run(["slam", str(DEMO / "log.clf"), "--out", str(out), "--quiet", *extra], capsys)
+    assert code == 0
+    args = ["evaluate", str(out), "--relations", str(DEMO / "relations.txt"), "--quiet"]
+    assert run(args, capsys)[0] == 0
+    summary = json.loads((out / "summary.json").read_text())
+    return summary, json.loads((out / "metrics.json").read_text())
+
+
+def test_default_demo_run_is_consistent_with_the_estimated_model_error(tmp_path, capsys):
+    """The whole demo log with the defaults: the lines' model error estimated from the run is
+    about zero (simulated walls), and the relations NEES lies inside its 95 % bounds.  With the
+    fixed model error of real walls the same run is far under-confident and less accurate."""
+    summary, metrics = _demo_metrics(tmp_path, capsys, "estimated")
+    est = summary["line_model_error"]
+    assert est["updates"] >= 1 and est["sigma_offset_m"] < 1e-3 and est["sigma_angle_rad"] < 5e-4
+    nees = metrics["relations_nees"]
+    lo, hi = nees["bounds_95"]
+    assert lo <= nees["mean"] <= hi
+    error = metrics["relations"]["abs_trans_m"]["mean"]
+    assert error < 0.003
+    fixed = tmp_path / "fixed.toml"
+    fixed.write_text('[slam]\nline_model_error = "fixed"\n')
+    summary, metrics = _demo_metrics(tmp_path, capsys, "fixed", ["--config", str(fixed)])
+    assert "line_model_error" not in summary
+    assert metrics["relations_nees"]["mean"] < 1.0
+    assert metrics["relations"]["abs_trans_m"]["mean"] > 2.0 * error
