@@ -119,6 +119,7 @@ def _demo_metrics(tmp_path, capsys, name, extra=()):
     code, _, _ = run(["slam", str(DEMO / "log.clf"), "--out", str(out), "--quiet", *extra], capsys)
     assert code == 0
     args = ["evaluate", str(out), "--relations", str(DEMO / "relations.txt"), "--quiet"]
+    args += ["--ground-truth", str(DEMO / "ground_truth.tum")]
     assert run(args, capsys)[0] == 0
     summary = json.loads((out / "summary.json").read_text())
     return summary, json.loads((out / "metrics.json").read_text())
@@ -126,14 +127,19 @@ def _demo_metrics(tmp_path, capsys, name, extra=()):
 
 def test_default_demo_run_is_consistent_with_the_estimated_model_error(tmp_path, capsys):
     """The whole demo log with the defaults: the lines' model error estimated from the run is
-    about zero (simulated walls), and the relations NEES lies inside its 95 % bounds.  With the
-    fixed model error of real walls the same run is far under-confident and less accurate."""
+    about zero (simulated walls), and the relations NEES lies inside its 95 % bounds, the pose
+    NEES inside the interval of one run (its poses correlated).  With the fixed model error of
+    real walls the same run is far under-confident and less accurate."""
     summary, metrics = _demo_metrics(tmp_path, capsys, "estimated")
     est = summary["line_model_error"]
     assert est["updates"] >= 1 and est["sigma_offset_m"] < 1e-3 and est["sigma_angle_rad"] < 5e-4
     nees = metrics["relations_nees"]
     lo, hi = nees["bounds_95"]
     assert lo <= nees["mean"] <= hi
+    pose = metrics["nees"]
+    lo, hi = pose["one_run"]["bounds"]
+    assert pose["consistent"] and lo <= pose["one_run"]["mean"] <= hi
+    assert pose["one_run"]["effective_dof"] < 0.1 * 3 * pose["n"]  # far from independent
     error = metrics["relations"]["abs_trans_m"]["mean"]
     assert error < 0.003
     fixed = tmp_path / "fixed.toml"
@@ -141,4 +147,5 @@ def test_default_demo_run_is_consistent_with_the_estimated_model_error(tmp_path,
     summary, metrics = _demo_metrics(tmp_path, capsys, "fixed", ["--config", str(fixed)])
     assert "line_model_error" not in summary
     assert metrics["relations_nees"]["mean"] < 1.0
+    assert metrics["nees"]["one_run"]["mean"] < metrics["nees"]["one_run"]["bounds"][0]
     assert metrics["relations"]["abs_trans_m"]["mean"] > 2.0 * error

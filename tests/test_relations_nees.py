@@ -265,3 +265,33 @@ def test_lineslam_evaluate_reports_the_relations_nees(tmp_path, capsys):
     assert _cli(["evaluate", str(out), "--relations", str(sim / "relations.txt")]) == 0
     assert "no relations NEES" in capsys.readouterr().err
     assert "relations_nees" not in json.loads((out / "metrics.json").read_text())
+
+
+@pytest.mark.parametrize("mount", [None, (0.2, -0.05, 0.1)])
+def test_joint_scan_covariance_holds_every_relative_covariance(tmp_path, mount):
+    """The joint covariance of all scans (keyframes and the scans hanging from them) gives,
+    for every kind of pair, the relative covariance RunCovariances computes pair by pair, and
+    its diagonal blocks are each scan's own covariance."""
+    traj, _, _, path = _synthetic_run(3, tmp_path, n_kf=12)
+    cov = RunCovariances.from_file(path, pose_base_laser=mount)
+    poses = traj.poses
+    if mount is not None:
+        poses = pose_compose(poses, np.broadcast_to(pose_inverse(np.array(mount)), poses.shape))
+    S = cov.joint_scan_covariance(traj.timestamps)
+    n = traj.timestamps.shape[0]
+    assert S.shape == (3 * n, 3 * n)
+    np.testing.assert_allclose(S, S.T, atol=0.0)
+    for pairs in _pairs(12).values():
+        t1, t2 = traj.timestamps[pairs[:, 0]], traj.timestamps[pairs[:, 1]]
+        expected = cov.relative_covariances(t1, t2)
+        for (a, b), want in zip(pairs.tolist(), expected, strict=True):
+            rho = pose_between(poses[a], poses[b])
+            A = np.zeros((3, 3 * n))
+            A[:, 3 * a : 3 * a + 3] = -adjoint_pose2(pose_inverse(rho))
+            A[:, 3 * b : 3 * b + 3] += np.eye(3)
+            np.testing.assert_allclose(A @ S @ A.T, want, rtol=1e-6, atol=1e-14)
+    # a keyframe's block is its marginal; a scan on it adds its odometry noise
+    kf_blocks = cov.keyframe_covariances(np.arange(12))
+    F = np.eye(3) if mount is None else adjoint_pose2(np.array(mount))
+    np.testing.assert_allclose(S[:3, :3], F @ kf_blocks[0] @ F.T, rtol=1e-9, atol=1e-16)
+    assert np.trace(S[3:6, 3:6]) > np.trace(S[:3, :3])

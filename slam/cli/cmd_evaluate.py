@@ -109,23 +109,30 @@ def evaluate(
         rel_path = relations_path(relations)
         rel = read_relations(rel_path)
         sources["relations_file"] = str(rel_path)
-    covariances = None
+    covariances = joint = None
     odometry = keyframe_timestamps = None
     graph_file = results_dir / "graph.g2o"
-    if rel is not None and relations_nees and graph_file.is_file():
+    want_relations_nees = rel is not None and relations_nees
+    if graph_file.is_file() and (want_relations_nees or ground_truth is not None):
         from slam.graph.relative import RunCovariances
 
         try:
             run_cov = RunCovariances.from_results(results_dir, results.summary)
         except EvaluationError as exc:  # a graph.g2o of an older lineslam: the rest still runs
-            typer.echo(f"lineslam: warning: {graph_file}: no relations NEES: {exc}", err=True)
+            typer.echo(
+                f"lineslam: warning: {graph_file}: no relations NEES and no one-run interval "
+                f"of the pose NEES: {exc}",
+                err=True,
+            )
         else:
-            covariances = bind(run_cov.relative_covariances, tolerance_s=tolerance)
             sources["graph_file"] = str(graph_file)
-            odometry = _log_odometry(results.summary, results.frame)
-            keyframe_timestamps = run_cov.graph_file.timestamps
-            if odometry is not None:
-                sources["odometry_log"] = str(results.summary["log"])
+            joint = bind(run_cov.joint_scan_covariance, tolerance_s=tolerance)
+            if want_relations_nees:
+                covariances = bind(run_cov.relative_covariances, tolerance_s=tolerance)
+                odometry = _log_odometry(results.summary, results.frame)
+                keyframe_timestamps = run_cov.graph_file.timestamps
+                if odometry is not None:
+                    sources["odometry_log"] = str(results.summary["log"])
     gt = None
     if ground_truth is not None:
         gt = read_tum(ground_truth)
@@ -142,6 +149,7 @@ def evaluate(
         relative_covariances=covariances,
         odometry=odometry,
         keyframe_timestamps=keyframe_timestamps,
+        joint_covariance=joint if ground_truth is not None else None,
     )
     path = write_metrics(results_dir, report.to_dict())  # whole or not at all
     if not quiet:

@@ -12,7 +12,15 @@ Every result has ``to_dict()`` for ``metrics.json``.
 """
 
 from slam.evaluation.ate import AteResult, align_se2, ate
-from slam.evaluation.nees import NeesResult, nees_bounds, nees_values, pose_nees, pose_nees_values
+from slam.evaluation.nees import (
+    CorrelatedBounds,
+    NeesResult,
+    correlated_nees_bounds,
+    nees_bounds,
+    nees_values,
+    pose_nees,
+    pose_nees_values,
+)
 from slam.evaluation.relations_metric import (
     MeanStd,
     RelationsMetric,
@@ -28,6 +36,7 @@ from slam.evaluation.timestamps import associate, match_timestamps
 
 __all__ = [
     "AteResult",
+    "CorrelatedBounds",
     "ErrorStats",
     "EvaluationReport",
     "MeanStd",
@@ -38,6 +47,7 @@ __all__ = [
     "align_se2",
     "associate",
     "ate",
+    "correlated_nees_bounds",
     "distance_pairs",
     "evaluate_results",
     "match_timestamps",

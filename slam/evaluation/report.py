@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from slam.errors import EvaluationError
 from slam.evaluation.ate import AteResult, ate
-from slam.evaluation.nees import NeesResult, pose_nees
+from slam.evaluation.nees import JointCovariance, NeesResult, pose_nees
 from slam.evaluation.reference_noise import RelationNoise, relation_noise
 from slam.evaluation.relations_metric import RelationsMetric, relations_metric, relations_within
 from slam.evaluation.relations_nees import RelationCovariances, RelationsNees, relations_nees
@@ -110,9 +110,29 @@ class EvaluationReport:
         if self.nees is not None:
             s = self.nees
             verdict = "consistent" if s.consistent else "NOT consistent"
-            rows.append(
-                ("pose NEES mean", f"{s.mean:.3f} in [{s.lower:.3f}, {s.upper:.3f}]: {verdict}")
-            )
+            if s.one_run is None or s.one_run_mean is None:
+                rows.append(
+                    (
+                        "pose NEES mean",
+                        f"{s.mean:.3f} in [{s.lower:.3f}, {s.upper:.3f}] (poses taken as "
+                        f"independent): {verdict}",
+                    )
+                )
+            else:
+                b = s.one_run
+                of = "" if b.n == s.n else f" (over {b.n} of the {s.n} poses)"
+                rows += [
+                    (
+                        "pose NEES mean",
+                        f"{s.one_run_mean:.3f} in [{b.lower:.3f}, {b.upper:.3f}] for one run"
+                        f"{of}: {verdict}",
+                    ),
+                    (
+                        "  poses correlated",
+                        f"{b.effective_dof:.1f} effective dof (independent poses: {3 * b.n}, "
+                        f"mean in [{s.lower:.3f}, {s.upper:.3f}])",
+                    ),
+                ]
         if self.relations_nees is not None:
             q = self.relations_nees
             verdict = "consistent" if q.consistent else "NOT consistent"
@@ -199,6 +219,7 @@ def evaluate_results(
     relative_covariances: RelationCovariances | None = None,
     odometry: Trajectory | None = None,
     keyframe_timestamps: FloatArray | None = None,
+    joint_covariance: JointCovariance | None = None,
 ) -> EvaluationReport:
     """Relations metric (with ``relations``), ATE, RPE and NEES (with ``ground_truth``).
 
@@ -207,7 +228,10 @@ def evaluate_results(
     ``relative_covariances`` (covariances of relative poses between time stamps) are given;
     with the log's ``odometry`` too (in the relations' frame), the relations' own scatter
     (:mod:`slam.evaluation.reference_noise`, on the relations between two of
-    ``keyframe_timestamps`` when given) and the relations NEES with it added.
+    ``keyframe_timestamps`` when given) and the relations NEES with it added.  With
+    ``joint_covariance`` (the joint covariance of poses at given time stamps) the pose NEES
+    is also tested against the interval of one run's mean
+    (:func:`slam.evaluation.nees.correlated_nees_bounds`).
 
     A run over part of a log (``partial``; default: what the results' ``summary.json`` says,
     ``"partial": true`` for ``--max-scans`` runs) is scored on the relations whose two time
@@ -271,7 +295,12 @@ def evaluate_results(
         )
         if cov is not None:
             nees_result = pose_nees(
-                trajectory, cov, ground_truth, tolerance_s=tol, max_unmatched_fraction=frac
+                trajectory,
+                cov,
+                ground_truth,
+                tolerance_s=tol,
+                max_unmatched_fraction=frac,
+                joint_covariance=joint_covariance,
             )
     return EvaluationReport(
         n_poses=len(trajectory),

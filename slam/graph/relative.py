@@ -218,6 +218,63 @@ class RunCovariances:
             out = F @ out @ F.T
         return 0.5 * (out + np.swapaxes(out, 1, 2))
 
+    def joint_scan_covariance(self, timestamps: ArrayLike, tolerance_s: float = 1e-5) -> FloatArray:
+        """Joint covariance ``(3m, 3m)`` of the errors of the scans at ``m`` time stamps.
+
+        Block ``(i, j)`` is ``Cov(ξᵢ, ξⱼ)``, each scan's error in its own right tangent space
+        in the reported frame: the keyframes' joint marginal (``jointMarginalCovariance``),
+        each other scan ``ξ_s = Ad(δ_s⁻¹) ξ_k + w_s`` with its odometry noise ``w_s``
+        independent of the keyframes and of other keyframes' scans (module docstring); two
+        scans on one keyframe get the cross-covariance of ``w`` that makes the covariance of
+        their relative pose the odometry's between them, as in :meth:`relative_covariances`.
+        Its diagonal blocks are the per-scan covariances of ``trajectory_covariance.txt``.
+        Dense: meant for a few thousand scans at most
+        (:data:`slam.evaluation.nees.MAX_BOUND_POSES`).
+        """
+        s = self.scans_of(timestamps, tolerance_s)
+        kfs, column = np.unique(self.scan_keyframe[s], return_inverse=True)
+        keys = gtsam.KeyVector(keys_of("x", kfs.astype(np.intp)))
+        try:
+            K = np.asarray(self.marginals.jointMarginalCovariance(keys).fullMatrix(), float)
+        except RuntimeError as exc:
+            raise EstimationError(f"joint marginal of {kfs.size} keyframes: {exc}") from exc
+        m = s.shape[0]
+        A = np.zeros((3 * m, 3 * kfs.size))
+        noise = np.zeros((3 * m, 3 * m))
+        scans = s.tolist()
+        for i, (scan, c) in enumerate(zip(scans, column.tolist(), strict=True)):
+            d = self.scan_offset[scan]
+            A[3 * i : 3 * i + 3, 3 * c : 3 * c + 3] = adjoint_pose2(pose_inverse(d))
+            if not self._is_kf(scan):
+                noise[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = self.motion.covariance(d)
+        # two scans on one keyframe share its stretch of odometry: their cross-covariance
+        # C = Cov(w_a, w_b) makes their relative covariance the odometry between them, as
+        # relative_covariances has it: F Q_a Fᵀ + Q_b − F C − (F C)ᵀ = Q_ab, F = Ad(ρ⁻¹),
+        # with F C symmetric
+        on_keyframe: dict[int, list[int]] = {}
+        for i, (scan, c) in enumerate(zip(scans, column.tolist(), strict=True)):
+            if not self._is_kf(scan):
+                on_keyframe.setdefault(c, []).append(i)
+        pairs = [(i, j) for rows in on_keyframe.values() for i in rows for j in rows if i < j]
+        for i, j in pairs:
+            ia, ib = (i, j) if self._earlier(scans[i], scans[j]) else (j, i)
+            da, db = self.scan_offset[scans[ia]], self.scan_offset[scans[ib]]
+            rho = pose_between(da, db)
+            F = adjoint_pose2(pose_inverse(rho))
+            FC = 0.5 * (
+                F @ self.motion.covariance(da) @ F.T
+                + self.motion.covariance(db)
+                - self.motion.covariance(rho)
+            )
+            C = np.linalg.solve(F, FC)  # Cov(w_a, w_b)
+            noise[3 * ia : 3 * ia + 3, 3 * ib : 3 * ib + 3] = C
+            noise[3 * ib : 3 * ib + 3, 3 * ia : 3 * ia + 3] = C.T
+        out = A @ K @ A.T + noise
+        if self.mount is not None:
+            mount = np.kron(np.eye(m), adjoint_pose2(self.mount))
+            out = mount @ out @ mount.T
+        return np.asarray(0.5 * (out + out.T))
+
     def _relative(self, a: int, b: int, joint: dict[tuple[int, int], FloatArray]) -> FloatArray:
         """Covariance of ``scan_a⁻¹ scan_b`` in the laser frame (module docstring)."""
         ka, kb = int(self.scan_keyframe[a]), int(self.scan_keyframe[b])
