@@ -56,10 +56,12 @@ Laser odometry and output frame
 -------------------------------
 ``laser_odometry = "auto"`` takes the logged laser pose where the mounting came from the log
 itself, and ``base odometry ∘ mounting`` where it was stated, catalogued (and not applied in
-the log's laser poses) or read from tf.  Poses are estimated for the laser and reported for
-the robot base (``output_frame = "base"``, the frame of the public relations:
-``pose_world_base = pose_world_laser ∘ pose_base_laser⁻¹``) unless ``output_frame = "laser"``
-or no mounting is known; ``summary.json``'s ``"frame"`` says which.  ``odometry_sign =
+the log's laser poses) or read from tf.  Poses are estimated for the laser and reported in
+the frame ``output_frame`` names: ``"base"``, the robot base (``pose_world_base =
+pose_world_laser ∘ pose_base_laser⁻¹``; the laser when no mounting is known), ``"laser"``, or
+``"auto"`` (the default): for a catalogued log the frame of its reference relations (the
+catalogue's ``relations_frame``, so that ``trajectory.tum`` and the relations compare like with
+like), for any other log the base.  ``summary.json``'s ``"frame"`` says which.  ``odometry_sign =
 "velocity"`` repairs CARMEN odometry that logs reversing as forward motion
 (:func:`slam.io.carmen.velocity_signed_scans`).
 """
@@ -144,8 +146,9 @@ class ScannerConfig:
     laser_odometry : {"auto", "logged", "base"}
         ``"logged"``: the logged laser pose, else base odometry ∘ mounting; ``"base"``: always
         base odometry ∘ mounting; ``"auto"``: module docstring.
-    output_frame : {"base", "laser"}
-        Frame of the reported trajectory (``"base"`` needs a known mounting).
+    output_frame : {"auto", "base", "laser"}
+        Frame of the reported trajectory (``"base"`` needs a known mounting); ``"auto"``: a
+        catalogued log's relations frame, else ``"base"`` (module docstring).
     odometry_sign : {"velocity", "logged"}
         CARMEN odometry as logged, or with reversing repaired from the logged speed.
     scan_topic, odom_topic : str, optional
@@ -165,7 +168,7 @@ class ScannerConfig:
     pose_base_laser: tuple[float, float, float] | None = None
     mount_source: Literal["auto", "config"] = "auto"
     laser_odometry: Literal["auto", "logged", "base"] = "auto"
-    output_frame: Literal["base", "laser"] = "base"
+    output_frame: Literal["auto", "base", "laser"] = "auto"
     odometry_sign: Literal["velocity", "logged"] = "velocity"
     scan_topic: str | None = None
     odom_topic: str | None = None
@@ -202,7 +205,10 @@ class ScannerConfig:
             self.laser_odometry in ("auto", "logged", "base"),
             "laser_odometry must be auto, logged or base",
         )
-        require(self.output_frame in ("base", "laser"), "output_frame must be base or laser")
+        require(
+            self.output_frame in ("auto", "base", "laser"),
+            "output_frame must be auto, base or laser",
+        )
         require(
             self.odometry_sign in ("velocity", "logged"),
             "odometry_sign must be velocity or logged",
@@ -318,16 +324,18 @@ class InputPolicy:
         """The policy of an object holding the settings; missing or unresolved ones default.
 
         Unresolved values of a :class:`ScannerConfig` (``pose_base_laser = None``,
-        ``laser_odometry = "auto"``) take the policy's defaults; :func:`open_log` resolves
-        them for a log.
+        ``laser_odometry = "auto"``) take the policy's defaults, ``output_frame = "auto"`` the
+        base (as for a log the catalogue does not know); :func:`open_log` resolves them for a
+        log.
         """
         default = cls()
         mount = getattr(settings, "pose_base_laser", None)
         laser_odometry = getattr(settings, "laser_odometry", default.laser_odometry)
+        frame = getattr(settings, "output_frame", default.output_frame)
         return cls(
             default.pose_base_laser if mount is None else tuple(float(v) for v in mount),  # type: ignore[arg-type]
             default.laser_odometry if laser_odometry == "auto" else laser_odometry,
-            getattr(settings, "output_frame", default.output_frame),
+            "base" if frame == "auto" else frame,
             getattr(settings, "odometry_sign", default.odometry_sign),
         )
 
@@ -699,13 +707,18 @@ def _policy(
     mount_source: str,
     logged_has_mount: bool,
     where: str,
+    manifest: DatasetManifest | None = None,
 ) -> InputPolicy:
-    """The resolved policy (module docstring)."""
+    """The resolved policy (module docstring); ``manifest``: the log's catalogue entry."""
     if scanner.laser_odometry != "auto":
         laser_odometry = scanner.laser_odometry
     else:
         laser_odometry = "logged" if logged_has_mount else "base"
-    frame = scanner.output_frame
+    frame: Literal["laser", "base"]
+    if scanner.output_frame == "auto":
+        frame = manifest.relations_frame if manifest is not None else "base"
+    else:
+        frame = scanner.output_frame
     if frame == "base" and mount is None:
         warnings.warn(
             f"{where}: the laser's mounting on the robot is not known (not stated, not "
@@ -783,7 +796,7 @@ def _open_bag(path: Path, scanner: ScannerConfig) -> LogInput:
             InputWarning,
             stacklevel=3,
         )
-    policy = _policy(scanner, mount, source, False, where)
+    policy = _policy(scanner, mount, source, False, where, manifest)
     geometry = _Geometry(source="config" if scanner.states_geometry else "log")
     return LogInput(
         log=path,
@@ -874,7 +887,7 @@ def _open_carmen(resolved: ResolvedLog, scanner: ScannerConfig, max_scans: int |
                 InputWarning,
                 stacklevel=3,
             )
-    policy = _policy(scanner, mount, source, logged_has_mount, where)
+    policy = _policy(scanner, mount, source, logged_has_mount, where, manifest)
     return LogInput(
         log=resolved.log,
         name=resolved.name,
@@ -899,8 +912,9 @@ def policy_for_log(policy: InputPolicy, log: str | Path, mount_source: str) -> I
 
     With ``mount_source`` ``"catalog"`` or ``"auto"`` and a log whose catalogue entry records
     a mounting that the log's laser poses do not contain (``mount_applied_in_log = false``),
-    the laser odometry becomes ``base odometry ∘ mounting`` and the trajectory is reported for
-    the base.  Otherwise ``policy`` is returned unchanged.  :func:`open_log` resolves the
+    the laser odometry becomes ``base odometry ∘ mounting`` and the trajectory is reported in
+    the frame of the log's relations (``relations_frame``).  Otherwise ``policy`` is returned
+    unchanged.  :func:`open_log` resolves the
     whole policy of any log.
     """
     from slam.io.catalog import resolve_log
@@ -914,7 +928,12 @@ def policy_for_log(policy: InputPolicy, log: str | Path, mount_source: str) -> I
     mount = (laser.mount_x_m, laser.mount_y_m, math.radians(laser.mount_theta_deg))
     if laser.mount_applied_in_log or not any(mount):
         return policy
-    return replace(policy, pose_base_laser=mount, laser_odometry="base", output_frame="base")
+    return replace(
+        policy,
+        pose_base_laser=mount,
+        laser_odometry="base",
+        output_frame=manifest.relations_frame,
+    )
 
 
 def read_log_scans(

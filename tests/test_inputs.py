@@ -152,7 +152,7 @@ def test_an_older_config_with_input_keys_in_slam_is_migrated(tmp_path):
     assert scanner.pose_base_laser == (0.04, 0.0, 0.0) and scanner.mount_source == "config"
     assert scanner.odometry_sign == "logged"
     # the old defaults give the new defaults
-    assert scanner.laser_odometry == "auto" and scanner.output_frame == "base"
+    assert scanner.laser_odometry == "auto" and scanner.output_frame == "auto"
     both = old + '\n[scanner]\nodometry_sign = "velocity"\n'
     (tmp_path / "both.toml").write_text(both)
     with pytest.raises(ConfigError, match="odometry_sign is given in \\[slam\\]"):

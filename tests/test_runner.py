@@ -27,6 +27,7 @@ title = "the demo log, catalogued with a laser mounting missing from its laser p
 log = "mounted/mounted.clf"
 log_bytes = {size}
 log_sha256 = "{sha}"
+relations_frame = "{frame}"
 
 [datasets.mounted.laser]
 beams = 180
@@ -40,9 +41,9 @@ mount_applied_in_log = false
 """
 
 
-@pytest.fixture
-def mounted_log(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """A copy of the demo log, catalogued (by its content) with :data:`MOUNT`."""
+def _catalogued_copy(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, frame: str) -> Path:
+    """A copy of the demo log, catalogued (by its content) with :data:`MOUNT` and relations in
+    ``frame``."""
     from slam.io.catalog import sha256_file
 
     catalogue = tmp_path / "catalog.toml"
@@ -53,6 +54,7 @@ def mounted_log(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
             theta_deg=np.degrees(MOUNT[2]),
             size=DEMO_LOG.stat().st_size,
             sha=sha256_file(DEMO_LOG),
+            frame=frame,
         ),
         "utf-8",
     )
@@ -60,6 +62,30 @@ def mounted_log(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     log = tmp_path / "mounted.clf"
     shutil.copyfile(DEMO_LOG, log)
     return log
+
+
+@pytest.fixture
+def mounted_log(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """The demo log catalogued with :data:`MOUNT`, its relations relating base poses."""
+    return _catalogued_copy(tmp_path, monkeypatch, "base")
+
+
+def test_a_catalogued_log_is_reported_in_the_frame_of_its_relations(tmp_path, monkeypatch):
+    """With relations of laser poses (``relations_frame = "laser"``) the default run still
+    reads the odometry through the catalogued mounting but reports the laser: its poses are
+    those of ``--frame base`` composed with the mounting."""
+    log = _catalogued_copy(tmp_path, monkeypatch, "laser")
+    n = 40
+    runs = {}
+    for name, extra in (("auto", []), ("base", ["--frame", "base"])):
+        out = tmp_path / name
+        main(["ekf", str(log), "--out", str(out), "--max-scans", str(n), "--quiet", *extra])
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["input"]["pose_base_laser"] == pytest.approx(list(MOUNT))
+        runs[name] = (summary["frame"], read_tum(out / "trajectory.tum").poses)
+    assert runs["auto"][0] == "laser" and runs["base"][0] == "base"
+    laser = pose_compose(runs["base"][1], np.broadcast_to(MOUNT, runs["base"][1].shape))
+    np.testing.assert_allclose(runs["auto"][1], laser, atol=1e-9)
 
 
 def test_ekf_command_applies_the_catalogued_mounting(tmp_path, mounted_log):

@@ -85,7 +85,8 @@ FrameOpt = Annotated[
     str | None,
     typer.Option(
         "--frame",
-        help="Report the trajectory for the robot 'base' (default) or the 'laser'.",
+        help="Report the trajectory for the robot 'base' or the 'laser' (default: a catalogued "
+        "log's relations frame, else the base).",
         rich_help_panel=_PANEL,
     ),
 ]

@@ -29,7 +29,7 @@ import tomllib
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from linefit.errors import ConfigError
 from linefit.tomlconfig import config_from_dict
@@ -77,7 +77,13 @@ class LaserFacts:
 
 @dataclass(frozen=True)
 class DatasetManifest:
-    """One catalogue entry: files (relative to the data root), checksums and sensor facts."""
+    """One catalogue entry: files (relative to the data root), checksums and sensor facts.
+
+    ``relations_frame`` is the frame whose poses the relations relate: ``"laser"`` (the laser
+    scans' poses, the convention of the public relations) or ``"base"`` (the robot base, the
+    laser composed with the inverse of the mounting).  A run on the log reports its trajectory
+    in that frame by default (:class:`slam.inputs.ScannerConfig` ``output_frame = "auto"``).
+    """
 
     name: str
     title: str
@@ -99,6 +105,13 @@ class DatasetManifest:
     backward_steps: int = 0
     authors: str = ""
     notes: str = ""
+    relations_frame: Literal["laser", "base"] = "laser"
+
+    def __post_init__(self) -> None:
+        if self.relations_frame not in ("laser", "base"):
+            raise ConfigError(
+                f"relations_frame must be laser or base, got {self.relations_frame!r}"
+            )
 
     def laser_geometry(self) -> LaserGeometry:
         """The beam layout of the log's ``FLASER`` lines, for :func:`slam.io.carmen.iter_scans`."""
