@@ -134,8 +134,9 @@ def test_default_demo_run_is_consistent_with_the_estimated_model_error(tmp_path,
     est = summary["line_model_error"]
     assert est["updates"] >= 1 and est["sigma_offset_m"] < 1e-3 and est["sigma_angle_rad"] < 5e-4
     nees = metrics["relations_nees"]
-    lo, hi = nees["bounds_95"]
-    assert lo <= nees["mean"] <= hi
+    lo, hi = nees["one_run"]["bounds_95"]
+    assert nees["consistent"] and lo <= nees["mean"] <= hi
+    assert lo <= nees["bounds_95"][0] and nees["bounds_95"][1] <= hi  # wider than independent
     pose = metrics["nees"]
     lo, hi = pose["one_run"]["bounds"]
     assert pose["consistent"] and lo <= pose["one_run"]["mean"] <= hi

@@ -1,4 +1,5 @@
-"""The interval of one run's mean pose NEES with correlated poses (correlated_nees_bounds)."""
+"""The interval of one run's mean NEES with correlated errors: poses (correlated_nees_bounds)
+and relations (joint draws)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,10 @@ from scipy.stats import chi2
 from slam.errors import EvaluationError
 from slam.evaluation import correlated_nees_bounds, nees_bounds, pose_nees
 from slam.evaluation import nees as nees_module
+from slam.evaluation.relations_nees import relations_nees
 from slam.geometry import pose_compose, pose_exp, pose_inverse
 from slam.io import Trajectory
+from slam.io.relations import Relations
 
 
 def _drift_covariance(rng: np.random.Generator, n: int, shared: float) -> np.ndarray:
@@ -117,3 +120,50 @@ def test_pose_nees_tests_the_one_run_interval_over_evenly_spaced_poses(monkeypat
     assert scaled.one_run.upper == pytest.approx(sub.one_run.upper, rel=1e-9)
     assert scaled.one_run_mean == pytest.approx(sub.one_run_mean / 0.05)
     assert scaled.one_run_mean > scaled.one_run.upper and not scaled.consistent
+
+
+def _relations(n: int) -> tuple[Trajectory, Relations]:
+    stamps = np.arange(2.0 * n)
+    poses = np.zeros((2 * n, 3))
+    poses[:, 0] = stamps
+    rel = Relations(
+        stamps[:n],
+        stamps[n:],
+        np.tile([float(n), 0.0, 0.0], (n, 1)),
+        np.zeros(n),
+        np.zeros(n),
+        np.zeros(n),
+        np.arange(n, dtype=np.int64),
+    )
+    return Trajectory(stamps, poses), rel
+
+
+@pytest.mark.parametrize("shared", [False, True])
+def test_relations_one_run_interval_from_joint_draws(shared):
+    """Independent draws give the χ² interval of the mean of n relations; one error shared by
+    every relation (in its own whitened frame) gives the interval of a single χ²₃."""
+    n = 200
+    traj, rel = _relations(n)
+    cov = np.tile(np.diag([0.01, 0.02, 0.003]), (n, 1, 1))
+    L = np.linalg.cholesky(cov[0])
+
+    def draws(t1, t2, k, seed):
+        rng = np.random.default_rng(seed)
+        for start in range(0, k, 500):
+            size = min(500, k - start)
+            z = rng.standard_normal((size, 1 if shared else n, 3))
+            yield np.broadcast_to(z @ L.T, (size, n, 3))
+
+    res = relations_nees(traj, rel, lambda a, b: cov, error_draws=draws)
+    assert res.one_run is not None
+    # 2,000 draws: quantiles to a few per cent, the lower one of a single χ²₃ to ~10 %
+    if shared:
+        (lower, upper), tolerance = chi2.ppf([0.025, 0.975], 3), (0.3, 0.08)
+        assert res.one_run.effective_dof == pytest.approx(3.0, rel=0.1)
+    else:
+        (lower, upper), tolerance = nees_bounds(3, n), (0.03, 0.03)
+        assert res.one_run.effective_dof == pytest.approx(3 * n, rel=0.1)
+    assert res.one_run.lower == pytest.approx(lower, rel=tolerance[0])
+    assert res.one_run.upper == pytest.approx(upper, rel=tolerance[1])
+    assert res.consistent == (res.one_run.lower <= res.mean <= res.one_run.upper)
+    assert res.to_dict()["one_run"]["bounds_95"] == [res.one_run.lower, res.one_run.upper]

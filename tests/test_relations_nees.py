@@ -295,3 +295,38 @@ def test_joint_scan_covariance_holds_every_relative_covariance(tmp_path, mount):
     F = np.eye(3) if mount is None else adjoint_pose2(np.array(mount))
     np.testing.assert_allclose(S[:3, :3], F @ kf_blocks[0] @ F.T, rtol=1e-9, atol=1e-16)
     assert np.trace(S[3:6, 3:6]) > np.trace(S[:3, :3])
+
+
+def test_relation_error_draws_have_the_runs_joint_covariance(tmp_path):
+    """Joint draws of the relations' errors (keyframes from the information matrix, the other
+    scans by their odometry) have, relation by relation and between relations sharing scans,
+    the covariance the joint scan covariance gives; the draws repeat for a seed."""
+    traj, _, _, path = _synthetic_run(5, tmp_path, n_kf=10)
+    mount = np.array([0.2, -0.05, 0.1])
+    cov = RunCovariances.from_file(path, pose_base_laser=mount)
+    pairs = np.concatenate([p[:4] for p in _pairs(10).values()])
+    t1, t2 = traj.timestamps[pairs[:, 0]], traj.timestamps[pairs[:, 1]]
+    eta = np.concatenate(list(cov.relation_error_draws(t1, t2, 6000, seed=3, chunk=700)))
+    assert eta.shape == (6000, pairs.shape[0], 3)
+    again = next(iter(cov.relation_error_draws(t1, t2, 700, seed=3, chunk=700)))
+    np.testing.assert_array_equal(again, eta[:700])
+    # the analytic joint covariance of the stacked relation errors, in the reported frame
+    S = cov.joint_scan_covariance(traj.timestamps)
+    poses = pose_compose(traj.poses, np.broadcast_to(pose_inverse(mount), traj.poses.shape))
+    n, m = traj.timestamps.shape[0], pairs.shape[0]
+    J = np.zeros((3 * m, 3 * n))
+    for r, (a, b) in enumerate(pairs.tolist()):
+        J[3 * r : 3 * r + 3, 3 * a : 3 * a + 3] -= adjoint_pose2(
+            pose_inverse(pose_between(poses[a], poses[b]))
+        )
+        J[3 * r : 3 * r + 3, 3 * b : 3 * b + 3] += np.eye(3)
+    want = J @ S @ J.T
+    flat = eta.reshape(eta.shape[0], -1)
+    got = flat.T @ flat / flat.shape[0]
+    scale = np.sqrt(np.outer(np.diag(want), np.diag(want)))
+    assert np.max(np.abs(got - want) / scale) < 0.07  # correlations to 1/sqrt(6000) ≈ 0.013
+    np.testing.assert_allclose(
+        np.diag(want).reshape(m, 3),
+        np.einsum("mii->mi", cov.relative_covariances(t1, t2)),
+        rtol=1e-6,
+    )

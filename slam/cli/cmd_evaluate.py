@@ -109,7 +109,7 @@ def evaluate(
         rel_path = relations_path(relations)
         rel = read_relations(rel_path)
         sources["relations_file"] = str(rel_path)
-    covariances = joint = None
+    covariances = joint = draws = None
     odometry = keyframe_timestamps = None
     graph_file = results_dir / "graph.g2o"
     want_relations_nees = rel is not None and relations_nees
@@ -129,6 +129,7 @@ def evaluate(
             joint = bind(run_cov.joint_scan_covariance, tolerance_s=tolerance)
             if want_relations_nees:
                 covariances = bind(run_cov.relative_covariances, tolerance_s=tolerance)
+                draws = bind(run_cov.relation_error_draws, tolerance_s=tolerance)
                 odometry = _log_odometry(results.summary, results.frame)
                 keyframe_timestamps = run_cov.graph_file.timestamps
                 if odometry is not None:
@@ -150,6 +151,7 @@ def evaluate(
         odometry=odometry,
         keyframe_timestamps=keyframe_timestamps,
         joint_covariance=joint if ground_truth is not None else None,
+        relation_error_draws=draws,
     )
     path = write_metrics(results_dir, report.to_dict())  # whole or not at all
     if not quiet:

@@ -21,7 +21,12 @@ from slam.evaluation.ate import AteResult, ate
 from slam.evaluation.nees import JointCovariance, NeesResult, pose_nees
 from slam.evaluation.reference_noise import RelationNoise, relation_noise
 from slam.evaluation.relations_metric import RelationsMetric, relations_metric, relations_within
-from slam.evaluation.relations_nees import RelationCovariances, RelationsNees, relations_nees
+from slam.evaluation.relations_nees import (
+    RelationCovariances,
+    RelationErrorDraws,
+    RelationsNees,
+    relations_nees,
+)
 from slam.evaluation.rpe import RpeResult, rpe
 from slam.io.relations import Relations
 from slam.io.results import Results
@@ -139,7 +144,7 @@ class EvaluationReport:
             rows += [
                 (
                     "relations NEES mean",
-                    f"{q.mean:.3f} in [{q.lower:.3f}, {q.upper:.3f}]: {verdict} (n={q.n})",
+                    f"{q.mean:.3f} in {_interval_text(q)}: {verdict} (n={q.n})",
                 ),
                 (
                     "relations NEES median",
@@ -182,7 +187,7 @@ class EvaluationReport:
             rows += [
                 (
                     "relations NEES + relations' own",
-                    f"{q.mean:.3f} in [{q.lower:.3f}, {q.upper:.3f}]: {verdict}; inside 95% "
+                    f"{q.mean:.3f} in {_interval_text(q)}: {verdict}; inside 95% "
                     f"{q.fraction_inside_95:.3f}",
                 ),
                 (
@@ -192,6 +197,17 @@ class EvaluationReport:
             ]
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def _interval_text(q: RelationsNees) -> str:
+    """The interval the verdict uses: one run's (with its effective dof) or independent ones'."""
+    if q.one_run is None:
+        return f"[{q.lower:.3f}, {q.upper:.3f}] (relations taken as independent)"
+    b = q.one_run
+    return (
+        f"[{b.lower:.3f}, {b.upper:.3f}] for one run ({b.effective_dof:.0f} effective dof; "
+        f"independent: [{q.lower:.3f}, {q.upper:.3f}])"
+    )
 
 
 def _by_gap_text(q: RelationsNees) -> str:
@@ -220,6 +236,7 @@ def evaluate_results(
     odometry: Trajectory | None = None,
     keyframe_timestamps: FloatArray | None = None,
     joint_covariance: JointCovariance | None = None,
+    relation_error_draws: RelationErrorDraws | None = None,
 ) -> EvaluationReport:
     """Relations metric (with ``relations``), ATE, RPE and NEES (with ``ground_truth``).
 
@@ -231,7 +248,9 @@ def evaluate_results(
     ``keyframe_timestamps`` when given) and the relations NEES with it added.  With
     ``joint_covariance`` (the joint covariance of poses at given time stamps) the pose NEES
     is also tested against the interval of one run's mean
-    (:func:`slam.evaluation.nees.correlated_nees_bounds`).
+    (:func:`slam.evaluation.nees.correlated_nees_bounds`), and with ``relation_error_draws``
+    (joint draws of the relations' errors under the run's model) the relations NEES too
+    (:mod:`slam.evaluation.relations_nees`).
 
     A run over part of a log (``partial``; default: what the results' ``summary.json`` says,
     ``"partial": true`` for ``--max-scans`` runs) is scored on the relations whose two time
@@ -265,7 +284,13 @@ def evaluate_results(
     if relations is not None:
         rel = relations_metric(trajectory, relations, tolerance_s=tol, max_unmatched_fraction=frac)
         if relative_covariances is not None:
-            rel_nees = relations_nees(trajectory, relations, relative_covariances, tolerance_s=tol)
+            rel_nees = relations_nees(
+                trajectory,
+                relations,
+                relative_covariances,
+                tolerance_s=tol,
+                error_draws=relation_error_draws,
+            )
             if odometry is not None:
                 try:
                     rel_noise = relation_noise(
@@ -283,6 +308,7 @@ def evaluate_results(
                     relations,
                     relative_covariances,
                     tolerance_s=tol,
+                    error_draws=relation_error_draws,
                     relations_cov=rel_noise.covariance,
                 )
     ate_result = nees_result = None

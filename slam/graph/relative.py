@@ -35,6 +35,7 @@ Main entry point::
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -240,25 +241,41 @@ class RunCovariances:
             raise EstimationError(f"joint marginal of {kfs.size} keyframes: {exc}") from exc
         m = s.shape[0]
         A = np.zeros((3 * m, 3 * kfs.size))
-        noise = np.zeros((3 * m, 3 * m))
         scans = s.tolist()
         for i, (scan, c) in enumerate(zip(scans, column.tolist(), strict=True)):
-            d = self.scan_offset[scan]
-            A[3 * i : 3 * i + 3, 3 * c : 3 * c + 3] = adjoint_pose2(pose_inverse(d))
-            if not self._is_kf(scan):
-                noise[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = self.motion.covariance(d)
-        # two scans on one keyframe share its stretch of odometry: their cross-covariance
-        # C = Cov(w_a, w_b) makes their relative covariance the odometry between them, as
-        # relative_covariances has it: F Q_a Fᵀ + Q_b − F C − (F C)ᵀ = Q_ab, F = Ad(ρ⁻¹),
-        # with F C symmetric
-        on_keyframe: dict[int, list[int]] = {}
-        for i, (scan, c) in enumerate(zip(scans, column.tolist(), strict=True)):
-            if not self._is_kf(scan):
-                on_keyframe.setdefault(c, []).append(i)
-        pairs = [(i, j) for rows in on_keyframe.values() for i in rows for j in rows if i < j]
-        for i, j in pairs:
-            ia, ib = (i, j) if self._earlier(scans[i], scans[j]) else (j, i)
-            da, db = self.scan_offset[scans[ia]], self.scan_offset[scans[ib]]
+            A[3 * i : 3 * i + 3, 3 * c : 3 * c + 3] = adjoint_pose2(
+                pose_inverse(self.scan_offset[scan])
+            )
+        noise = np.zeros((3 * m, 3 * m))
+        for rows in _groups(column):
+            idx = (3 * rows[:, None] + np.arange(3)).reshape(-1)
+            noise[np.ix_(idx, idx)] = self.odometry_noise(s[rows])
+        out = A @ K @ A.T + noise
+        if self.mount is not None:
+            mount = np.kron(np.eye(m), adjoint_pose2(self.mount))
+            out = mount @ out @ mount.T
+        return np.asarray(0.5 * (out + out.T))
+
+    def odometry_noise(self, scans: IntArray) -> FloatArray:
+        """Joint covariance ``(3n, 3n)`` of the odometry noise ``w_s`` of scans on one keyframe.
+
+        A keyframe has none; another scan ``Q(δ_s)``, the motion model at its offset; two scans
+        ``a`` before ``b`` share the stretch of odometry between the keyframe and ``a``: their
+        cross-covariance ``C`` makes the covariance of their relative pose the odometry's
+        between them, as :meth:`relative_covariances` has it:
+        ``F Q_a Fᵀ + Q_b − F C − (F C)ᵀ = Q_ab`` with ``F = Ad(ρ⁻¹)`` and ``F C`` symmetric.
+        """
+        rows = [int(x) for x in np.asarray(scans).reshape(-1)]
+        n = len(rows)
+        out = np.zeros((3 * n, 3 * n))
+        moving = [i for i in range(n) if not self._is_kf(rows[i])]
+        for i in moving:
+            out[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = self.motion.covariance(
+                self.scan_offset[rows[i]]
+            )
+        for i, j in ((i, j) for i in moving for j in moving if i < j):
+            ia, ib = (i, j) if self._earlier(rows[i], rows[j]) else (j, i)
+            da, db = self.scan_offset[rows[ia]], self.scan_offset[rows[ib]]
             rho = pose_between(da, db)
             F = adjoint_pose2(pose_inverse(rho))
             FC = 0.5 * (
@@ -267,13 +284,86 @@ class RunCovariances:
                 - self.motion.covariance(rho)
             )
             C = np.linalg.solve(F, FC)  # Cov(w_a, w_b)
-            noise[3 * ia : 3 * ia + 3, 3 * ib : 3 * ib + 3] = C
-            noise[3 * ib : 3 * ib + 3, 3 * ia : 3 * ia + 3] = C.T
-        out = A @ K @ A.T + noise
-        if self.mount is not None:
-            mount = np.kron(np.eye(m), adjoint_pose2(self.mount))
-            out = mount @ out @ mount.T
-        return np.asarray(0.5 * (out + out.T))
+            out[3 * ia : 3 * ia + 3, 3 * ib : 3 * ib + 3] = C
+            out[3 * ib : 3 * ib + 3, 3 * ia : 3 * ia + 3] = C.T
+        return out
+
+    def relation_error_draws(
+        self,
+        t1: ArrayLike,
+        t2: ArrayLike,
+        draws: int,
+        seed: int,
+        tolerance_s: float = 1e-5,
+        chunk: int = 100,
+    ) -> Iterator[FloatArray]:
+        """Draws of the errors of ``pose(t1)⁻¹ pose(t2)`` under the run's own model, jointly.
+
+        The keyframes' errors are drawn from ``N(0, H⁻¹)``, ``H = AᵀA`` the information of the
+        graph linearised at its estimate as :attr:`marginals` has it (``A`` the whitened
+        Jacobian, GTSAM's ``sparseJacobian_``; a draw is ``H⁻¹ Aᵀ z``, ``z ~ N(0, I)``, solved
+        with SciPy's sparse LU), each other scan's by its odometry from its keyframe
+        (:meth:`odometry_noise`, drawn per keyframe), and each relation's error is
+        ``η = −Ad(ρ⁻¹) ξ₁ + ξ₂`` as in :meth:`relative_covariances`, whose covariances the
+        draws have.  Yields arrays ``(k, m, 3)`` (``k ≤ chunk`` draws of the ``m`` relations)
+        in the reported frame, ``draws`` in all, reproducibly for a ``seed``.
+        """
+        from scipy.sparse import csc_matrix
+        from scipy.sparse.linalg import splu
+
+        s1 = self.scans_of(t1, tolerance_s)
+        s2 = self.scans_of(t2, tolerance_s)
+        gfg = self.solver.linearize(self.graph)
+        rows, cols, vals = gfg.sparseJacobian_()
+        key_set = gfg.keys()  # kept alive while it is iterated (pybind11 iterators do not)
+        keys = sorted(int(k) for k in key_set)
+        dims = [2 if chr(gtsam.Symbol(k).chr()) == "l" else 3 for k in keys]
+        offset = dict(zip(keys, np.cumsum([0, *dims[:-1]]).tolist(), strict=True))
+        n = int(sum(dims))
+        a_part = cols <= n  # the last column is the right-hand side
+        A = csc_matrix(
+            (vals[a_part], (rows[a_part].astype(np.intp) - 1, cols[a_part].astype(np.intp) - 1)),
+            shape=(int(rows.max()), n),
+        )
+        try:
+            # symmetric positive definite: a symmetric fill-reducing order and diagonal pivots
+            lu = splu(
+                csc_matrix(A.T @ A),
+                permc_spec="MMD_AT_PLUS_A",
+                diag_pivot_thresh=0.0,
+                options={"SymmetricMode": True},
+            )
+        except RuntimeError as exc:
+            raise EstimationError(f"information matrix of graph.g2o is singular: {exc}") from exc
+        # the scans of the relations, their keyframes and the keyframes' columns
+        scans, where = np.unique(np.concatenate([s1, s2]), return_inverse=True)
+        w1, w2 = where[: s1.shape[0]], where[s1.shape[0] :]
+        kfs, kf_col = np.unique(self.scan_keyframe[scans], return_inverse=True)
+        pose_cols = np.array([offset[k] for k in keys_of("x", kfs.astype(np.intp))], dtype=np.intp)[
+            :, None
+        ] + np.arange(3)
+        to_scan = np.array([adjoint_pose2(pose_inverse(self.scan_offset[x])) for x in scans])
+        groups = [scans_idx for scans_idx in _groups(kf_col) if scans_idx.size]
+        noise_factors = [_psd_factor(self.odometry_noise(scans[g])) for g in groups]
+        graph_poses = self.graph.poses
+        scan_pose = pose_compose(graph_poses[self.scan_keyframe[scans]], self.scan_offset[scans])
+        rho = pose_between(scan_pose[w1], scan_pose[w2])
+        back = -np.array([adjoint_pose2(pose_inverse(r)) for r in rho])  # (m, 3, 3)
+        mount = None if self.mount is None else adjoint_pose2(self.mount)
+        rng = np.random.default_rng(seed)
+        for start in range(0, draws, chunk):
+            k = min(chunk, draws - start)
+            z = rng.standard_normal((A.shape[0], k))
+            x = lu.solve(np.asarray(A.T @ z))  # (n, k)
+            xi_kf = np.moveaxis(x[pose_cols], 2, 0)  # (k, kfs, 3)
+            xi = np.einsum("sij,ksj->ksi", to_scan, xi_kf[:, kf_col])
+            for g, L in zip(groups, noise_factors, strict=True):
+                w = rng.standard_normal((k, L.shape[1])) @ L.T
+                xi[:, g] += w.reshape(k, g.size, 3)
+            eta = np.einsum("mij,kmj->kmi", back, xi[:, w1]) + xi[:, w2]
+            if mount is not None:
+                eta = eta @ mount.T
+            yield eta
 
     def _relative(self, a: int, b: int, joint: dict[tuple[int, int], FloatArray]) -> FloatArray:
         """Covariance of ``scan_a⁻¹ scan_b`` in the laser frame (module docstring)."""
@@ -322,3 +412,17 @@ class RunCovariances:
         if self._is_kf(b):
             return False
         return a <= b
+
+
+def _groups(labels: IntArray) -> list[IntArray]:
+    """Indices of each value of ``labels`` (in order of the values)."""
+    labels = np.asarray(labels)
+    order = np.argsort(labels, kind="stable")
+    bounds = np.flatnonzero(np.diff(labels[order])) + 1
+    return [np.asarray(g, dtype=np.intp) for g in np.split(order, bounds)] if labels.size else []
+
+
+def _psd_factor(cov: FloatArray) -> FloatArray:
+    """``L`` with ``L Lᵀ = cov`` (eigen-decomposition, negative eigenvalues taken as zero)."""
+    eig, vec = np.linalg.eigh(0.5 * (cov + cov.T))
+    return np.asarray(vec * np.sqrt(np.clip(eig, 0.0, None)))
