@@ -24,6 +24,18 @@ def test_catalogue_has_the_three_logs_with_their_laser_facts():
     assert not catalog["intel"].stamps_monotonic and catalog["intel"].backward_steps == 631
     for manifest in catalog.values():
         assert len(manifest.log_sha256) == 64 and len(manifest.relations_sha256) == 64
+        assert manifest.relations_frame == "laser"  # the relations relate laser scans' poses
+
+
+def test_a_relations_frame_other_than_laser_or_base_is_named(tmp_path):
+    entry = tmp_path / "catalog.toml"
+    entry.write_text(
+        'schema = 1\n[datasets.x]\ntitle = "x"\nlog = "x.clf"\nlog_sha256 = ""\n'
+        'relations_frame = "robot"\n[datasets.x.laser]\nbeams = 180\nfirst_angle_deg = -90.0\n'
+        "step_deg = 1.0\nmax_range_m = 80.0\n"
+    )
+    with pytest.raises(DatasetError, match=r"\[datasets.x\]: relations_frame: 'robot' is not"):
+        load_catalog(entry)
 
 
 def fake_root(tmp_path):
