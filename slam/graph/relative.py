@@ -27,10 +27,18 @@ The small interpolation by which a reported non-keyframe pose shares the correct
 its two keyframes (:func:`slam.line_slam.assembly.scan_poses`) is not in the covariance model,
 as it is not in the per-pose covariances.
 
+For the consistency of a whole run (the interval of one run's mean NEES,
+:mod:`slam.evaluation.nees`, :mod:`slam.evaluation.relations_nees`) the same model gives the
+joint covariance of many scans' errors (:meth:`RunCovariances.joint_scan_covariance`, dense)
+and joint draws of many relations' errors (:meth:`RunCovariances.relation_error_draws`, from
+the sparse information matrix).
+
 Main entry point::
 
     cov = RunCovariances.from_file("out/graph.g2o", pose_base_laser=None)
     cov.relative_covariances(t1, t2)    # (m, 3, 3) in the reported frame
+    cov.joint_scan_covariance(t)        # (3n, 3n), the scans' errors jointly
+    cov.relation_error_draws(t1, t2, draws, seed)   # chunks (k, m, 3) of joint draws
 """
 
 from __future__ import annotations
