@@ -914,8 +914,7 @@ def policy_for_log(policy: InputPolicy, log: str | Path, mount_source: str) -> I
     a mounting that the log's laser poses do not contain (``mount_applied_in_log = false``),
     the laser odometry becomes ``base odometry ∘ mounting`` and the trajectory is reported in
     the frame of the log's relations (``relations_frame``).  Otherwise ``policy`` is returned
-    unchanged.  :func:`open_log` resolves the
-    whole policy of any log.
+    unchanged.  :func:`open_log` resolves the whole policy of any log.
     """
     from slam.io.catalog import resolve_log
 

@@ -52,6 +52,7 @@ __all__ = [
     "nees_values",
     "pose_nees",
     "pose_nees_values",
+    "psd_factor",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -97,6 +98,17 @@ def nees_values(errors: ArrayLike, covariances: ArrayLike) -> FloatArray:
         ) from None
     z = np.linalg.solve(L, e[..., None])[..., 0]
     return np.sum(z**2, axis=-1)
+
+
+def psd_factor(cov: ArrayLike) -> FloatArray:
+    """``L`` with ``L Lᵀ = cov``, for drawing ``N(0, cov)``.
+
+    Eigen-decomposition of the symmetric part; a negative eigenvalue (an estimated covariance
+    can have one) is taken as zero.
+    """
+    c = np.asarray(cov, dtype=np.float64)
+    eig, vec = np.linalg.eigh(0.5 * (c + c.T))
+    return np.asarray(vec * np.sqrt(np.clip(eig, 0.0, None)))
 
 
 def nees_bounds(dof: int, n: int, confidence: float = 0.95) -> tuple[float, float]:

@@ -17,14 +17,14 @@ the relations' errors jointly under the run's own model (``error_draws``, e.g.
 mean spreads wider than for independent ones.  It is the 2.5 % / 97.5 % quantiles of the
 mean NEES over :data:`ONE_RUN_DRAWS` seeded joint draws (with the relations' own covariance,
 each draw gets an independent relation error of that covariance too, a negative variance of
-it drawn as zero); the effective degrees
-of freedom ``2 E² / Var`` of those means say how many independent ``χ²₁`` terms would spread
-as much.  The one-run interval decides ``consistent`` when it is there.  Also the median
-(``χ²₃``: 2.37), the fraction of relations whose error lies inside its own 95 % ellipsoid
-(NEES ≤ ``χ²₃(95 %)`` = 7.81; 0.95 expected), and the means of the translation part
-(``e_xyᵀ C_xy⁻¹ e_xy``, 2 expected) and of the heading part (``e_θ² / C_θθ``, 1 expected),
-which say which part of the covariance is off, and the same per time gap between the two
-scans (< 10 s: the local covariances; ≥ 60 s: across loop closures).
+it drawn as zero); the effective degrees of freedom ``2 E² / Var`` of those means say how
+many independent ``χ²₁`` terms would spread as much.  The one-run interval decides
+``consistent`` when it is there.  Also the median (``χ²₃``: 2.37), the fraction of
+relations whose error lies inside its own 95 % ellipsoid (NEES ≤ ``χ²₃(95 %)`` = 7.81; 0.95
+expected), and the means of the translation part (``e_xyᵀ C_xy⁻¹ e_xy``, 2 expected) and of
+the heading part (``e_θ² / C_θθ``, 1 expected), which say which part of the covariance is
+off, and the same per time gap between the two scans (< 10 s: the local covariances; ≥ 60 s:
+across loop closures).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import EvaluationError
-from slam.evaluation.nees import CorrelatedBounds, nees_bounds, nees_values
+from slam.evaluation.nees import CorrelatedBounds, nees_bounds, nees_values, psd_factor
 from slam.evaluation.timestamps import match_timestamps
 from slam.geometry import pose_between, pose_log
 from slam.io.relations import Relations
@@ -188,8 +188,8 @@ def relations_nees(
     one_run = None
     if error_draws is not None:
         t1, t2 = trajectory.timestamps[i1[used]], trajectory.timestamps[i2[used]]
-        one_run = _one_run_interval(error_draws(t1, t2, ONE_RUN_DRAWS, ONE_RUN_SEED), cov,
-                                    relations_cov)  # fmt: skip
+        draws = error_draws(t1, t2, ONE_RUN_DRAWS, ONE_RUN_SEED)
+        one_run = _one_run_interval(draws, cov, relations_cov)
     return RelationsNees(
         n=n,
         mean=float(values.mean()),
@@ -212,11 +212,8 @@ def _one_run_interval(
     """Quantiles of the mean NEES over joint draws of the errors (module docstring)."""
     L = np.linalg.cholesky(cov)
     rng = np.random.default_rng(ONE_RUN_SEED + 1)
-    R = None
-    if relations_cov is not None:
-        # the three-cornered hat can estimate a variance below zero: drawn as zero
-        eig, vec = np.linalg.eigh(np.asarray(relations_cov, float))
-        R = vec * np.sqrt(np.clip(eig, 0.0, None))
+    # the three-cornered hat can estimate a variance below zero: drawn as zero
+    R = None if relations_cov is None else psd_factor(relations_cov)
     means = []
     for eta in draws:
         if R is not None:

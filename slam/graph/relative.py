@@ -52,6 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from slam.errors import EstimationError, EvaluationError, LogFormatError
+from slam.evaluation.nees import psd_factor
 from slam.evaluation.timestamps import match_timestamps
 from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse
 from slam.graph.batch import BatchSolver
@@ -164,6 +165,7 @@ class RunCovariances:
         self.scan_offset = np.concatenate([np.zeros((n_kf, 3)), f.offsets])
         self.mount = None if pose_base_laser is None else np.asarray(pose_base_laser, float)
         self._marginals: gtsam.Marginals | None = None
+        self._information_lu: tuple[Any, Any, dict[int, int]] | None = None
 
     @classmethod
     def from_file(
@@ -316,33 +318,9 @@ class RunCovariances:
         draws have.  Yields arrays ``(k, m, 3)`` (``k ≤ chunk`` draws of the ``m`` relations)
         in the reported frame, ``draws`` in all, reproducibly for a ``seed``.
         """
-        from scipy.sparse import csc_matrix
-        from scipy.sparse.linalg import splu
-
         s1 = self.scans_of(t1, tolerance_s)
         s2 = self.scans_of(t2, tolerance_s)
-        gfg = self.solver.linearize(self.graph)
-        rows, cols, vals = gfg.sparseJacobian_()
-        key_set = gfg.keys()  # kept alive while it is iterated (pybind11 iterators do not)
-        keys = sorted(int(k) for k in key_set)
-        dims = [2 if chr(gtsam.Symbol(k).chr()) == "l" else 3 for k in keys]
-        offset = dict(zip(keys, np.cumsum([0, *dims[:-1]]).tolist(), strict=True))
-        n = int(sum(dims))
-        a_part = cols <= n  # the last column is the right-hand side
-        A = csc_matrix(
-            (vals[a_part], (rows[a_part].astype(np.intp) - 1, cols[a_part].astype(np.intp) - 1)),
-            shape=(int(rows.max()), n),
-        )
-        try:
-            # symmetric positive definite: a symmetric fill-reducing order and diagonal pivots
-            lu = splu(
-                csc_matrix(A.T @ A),
-                permc_spec="MMD_AT_PLUS_A",
-                diag_pivot_thresh=0.0,
-                options={"SymmetricMode": True},
-            )
-        except RuntimeError as exc:
-            raise EstimationError(f"information matrix of graph.g2o is singular: {exc}") from exc
+        A, lu, offset = self._information()
         # the scans of the relations, their keyframes and the keyframes' columns
         scans, where = np.unique(np.concatenate([s1, s2]), return_inverse=True)
         w1, w2 = where[: s1.shape[0]], where[s1.shape[0] :]
@@ -352,7 +330,7 @@ class RunCovariances:
         ] + np.arange(3)
         to_scan = np.array([adjoint_pose2(pose_inverse(self.scan_offset[x])) for x in scans])
         groups = [scans_idx for scans_idx in _groups(kf_col) if scans_idx.size]
-        noise_factors = [_psd_factor(self.odometry_noise(scans[g])) for g in groups]
+        noise_factors = [psd_factor(self.odometry_noise(scans[g])) for g in groups]
         graph_poses = self.graph.poses
         scan_pose = pose_compose(graph_poses[self.scan_keyframe[scans]], self.scan_offset[scans])
         rho = pose_between(scan_pose[w1], scan_pose[w2])
@@ -372,6 +350,41 @@ class RunCovariances:
             if mount is not None:
                 eta = eta @ mount.T
             yield eta
+
+    def _information(self) -> tuple[Any, Any, dict[int, int]]:
+        """``A``, the sparse LU of ``H = AᵀA`` and each key's first column, built once.
+
+        ``A`` is the whitened Jacobian of the graph linearised at its estimate
+        (:meth:`relation_error_draws`).
+        """
+        if self._information_lu is None:
+            from scipy.sparse import csc_matrix
+            from scipy.sparse.linalg import splu
+
+            gfg = self.solver.linearize(self.graph)
+            rows, cols, vals = gfg.sparseJacobian_()
+            key_set = gfg.keys()  # kept alive while it is iterated (pybind11 iterators do not)
+            keys = sorted(int(k) for k in key_set)
+            dims = [2 if chr(gtsam.Symbol(k).chr()) == "l" else 3 for k in keys]
+            offset = dict(zip(keys, np.cumsum([0, *dims[:-1]]).tolist(), strict=True))
+            n = int(sum(dims))
+            a_part = cols <= n  # the last column is the right-hand side
+            rc = (rows[a_part].astype(np.intp) - 1, cols[a_part].astype(np.intp) - 1)
+            A = csc_matrix((vals[a_part], rc), shape=(int(rows.max()), n))
+            try:
+                # symmetric positive definite: a symmetric fill-reducing order, diagonal pivots
+                lu = splu(
+                    csc_matrix(A.T @ A),
+                    permc_spec="MMD_AT_PLUS_A",
+                    diag_pivot_thresh=0.0,
+                    options={"SymmetricMode": True},
+                )
+            except RuntimeError as exc:
+                raise EstimationError(
+                    f"information matrix of graph.g2o is singular: {exc}"
+                ) from exc
+            self._information_lu = (A, lu, offset)
+        return self._information_lu
 
     def _relative(self, a: int, b: int, joint: dict[tuple[int, int], FloatArray]) -> FloatArray:
         """Covariance of ``scan_a⁻¹ scan_b`` in the laser frame (module docstring)."""
@@ -428,9 +441,3 @@ def _groups(labels: IntArray) -> list[IntArray]:
     order = np.argsort(labels, kind="stable")
     bounds = np.flatnonzero(np.diff(labels[order])) + 1
     return [np.asarray(g, dtype=np.intp) for g in np.split(order, bounds)] if labels.size else []
-
-
-def _psd_factor(cov: FloatArray) -> FloatArray:
-    """``L`` with ``L Lᵀ = cov`` (eigen-decomposition, negative eigenvalues taken as zero)."""
-    eig, vec = np.linalg.eigh(0.5 * (cov + cov.T))
-    return np.asarray(vec * np.sqrt(np.clip(eig, 0.0, None)))
