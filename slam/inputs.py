@@ -33,7 +33,9 @@ Geometry and range limits (first match wins)
 2. The dataset catalogue, for its own logs, recognised by content (size and SHA-256, not the
    file name: :func:`slam.io.catalog.manifest_for_path`).
 3. What the log states: ``ROBOTLASER1``/``RAWLASER`` fields, a bag's ``angle_min``,
-   ``angle_increment``, ``range_min``, ``range_max``.
+   ``angle_increment``, ``range_min``, ``range_max``; for ``FLASER``/``RLASER`` lines its
+   ``PARAM`` lines (``laser_front_laser_resolution``, ``laser_front_laser_fov``,
+   ``robot_front_laser_max``; :class:`slam.io.carmen.LogParams`).
 4. For ``FLASER``/``RLASER`` lines, which carry only ranges: CARMEN's rule
    (:func:`slam.io.laser.guess_laser_geometry`), with an :class:`InputWarning` that says so.
 
@@ -44,13 +46,17 @@ Laser mounting ``pose_base_laser`` (first match wins)
 ----------------------------------------------------
 1. ``[scanner] pose_base_laser`` when stated (or ``mount_source = "config"``: it, else zero).
 2. The catalogue's recorded mounting, for its own logs (``datasets/catalog.toml``).
-3. The log: a CARMEN log whose laser lines state both the laser pose and the odometry pose
-   (``FLASER x y θ`` and ``odom_x odom_y odom_θ``; ``ROBOTLASER1`` laser and robot pose) gives
-   ``pose_odom_base⁻¹ ∘ pose_odom_laser``, which must be the same for every scan (within
+3. The log's ``PARAM`` lines (``robot_frontlaser_offset``, ``robot_frontlaser_side_offset``,
+   ``robot_frontlaser_angular_offset``; ``rear`` for ``RLASER``): the laser odometry is the
+   logged laser pose where that pose already holds the stated mounting, else the odometry
+   pose composed with it (an :class:`InputWarning` when the logged poses hold another offset).
+4. The log's poses: a CARMEN log whose laser lines state both the laser pose and the odometry
+   pose (``FLASER x y θ`` and ``odom_x odom_y odom_θ``; ``ROBOTLASER1`` laser and robot pose)
+   gives ``pose_odom_base⁻¹ ∘ pose_odom_laser``, which must be the same for every scan (within
    :data:`MOUNT_TOLERANCE_M` and :data:`MOUNT_TOLERANCE_RAD`; otherwise an
    :class:`InputWarning` and no mounting); a bag gives its ``/tf_static`` chain from the base
    frame to the scan's frame.
-4. None known: the laser odometry is the base's, and the trajectory is reported for the laser.
+5. None known: the laser odometry is the base's, and the trajectory is reported for the laser.
 
 Laser odometry and output frame
 -------------------------------
@@ -508,7 +514,8 @@ class LogInput:
     n_scans : int or None
         Laser scans in the log, where known without reading it.
     mount_source : str
-        ``"config"``, ``"catalogue"``, ``"log"``, ``"tf"`` or ``"none"``.
+        ``"config"``, ``"catalogue"``, ``"param"`` (the log's ``PARAM`` lines), ``"log"`` (its
+        poses), ``"tf"`` or ``"none"``.
     details : dict
         More about the input for ``summary.json``.
     """
@@ -701,6 +708,48 @@ def _stated_mount(scanner: ScannerConfig) -> tuple[float, float, float] | None:
     return None
 
 
+def _logged_poses_hold(
+    estimate: MountEstimate, param_mount: tuple[float, float, float], where: str, kind: str
+) -> bool:
+    """Whether a log's laser poses already hold the mounting its ``PARAM`` lines state.
+
+    ``True`` when the offset of the laser pose from the odometry pose is that mounting, for
+    every scan (the laser odometry is then the logged laser pose); ``False`` when the two
+    poses coincide (the logger did not apply it: the laser odometry is the base's composed with
+    the stated mounting).  Otherwise an :class:`InputWarning` (the stated mounting is used with
+    the base odometry) and ``False``.
+    """
+    offset = estimate.pose_base_laser
+    if offset is None:
+        return False
+    stated = np.asarray(param_mount, dtype=float)
+    found = np.asarray(offset, dtype=float)
+    close = (
+        estimate.consistent
+        and float(np.hypot(*(found[:2] - stated[:2]))) <= MOUNT_TOLERANCE_M
+        and abs(math.remainder(float(found[2] - stated[2]), math.tau)) <= MOUNT_TOLERANCE_RAD
+    )
+    if close and any(param_mount):
+        return True
+    zero = (
+        estimate.consistent
+        and float(np.hypot(found[0], found[1])) <= MOUNT_TOLERANCE_M
+        and abs(math.remainder(float(found[2]), math.tau)) <= MOUNT_TOLERANCE_RAD
+    )
+    if close or zero:
+        return False
+    warnings.warn(
+        f"{where}: its PARAM lines mount the laser at ({stated[0]:g} m, {stated[1]:g} m, "
+        f"{math.degrees(stated[2]):g} deg), but the {kind} laser poses differ from the "
+        f"odometry poses by ({found[0]:.3f} m, {found[1]:.3f} m, {math.degrees(found[2]):.2f} "
+        "deg; the median over the scans): the PARAM mounting is used with the odometry pose "
+        "(state another with --mount X,Y,THETA_DEG)",
+        InputWarning,
+        stacklevel=4,
+    )
+    return False
+
+
 def _policy(
     scanner: ScannerConfig,
     mount: tuple[float, float, float] | None,
@@ -815,7 +864,7 @@ def _open_bag(path: Path, scanner: ScannerConfig) -> LogInput:
 
 
 def _open_carmen(resolved: ResolvedLog, scanner: ScannerConfig, max_scans: int | None) -> LogInput:
-    from slam.io.carmen import CarmenReader, _sniff_laser_type
+    from slam.io.carmen import CarmenReader, _sniff_laser_type, read_params
     from slam.io.laser import guess_laser_geometry
 
     where = str(resolved.log)
@@ -823,19 +872,35 @@ def _open_carmen(resolved: ResolvedLog, scanner: ScannerConfig, max_scans: int |
     laser_type = _sniff_laser_type(resolved.log)
     old_format = laser_type in ("FLASER", "RLASER")
     reader_geometry = manifest.laser_geometry() if manifest is not None else None
+    # the log's own PARAM lines (the catalogue's facts win for its own logs)
+    params = read_params(resolved.log) if manifest is None and laser_type else None
+    details: dict[str, Any] = {"laser_message": laser_type}
+    if params is not None and laser_type:
+        stated_params = params.stated(laser_type)
+        if stated_params:
+            details["params"] = stated_params
+    param_geometry = None
+    if params is not None and old_format and laser_type:
+        param_geometry, problem = params.laser_geometry(laser_type)
+        if problem is not None:
+            warnings.warn(f"{where}: {problem}", InputWarning, stacklevel=3)
+        if param_geometry is not None:
+            reader_geometry = param_geometry
     if scanner.states_geometry:
         geometry_source = "config"
     elif manifest is not None:
         geometry_source = "catalogue"
+    elif param_geometry is not None:
+        geometry_source = "param"
     elif old_format:
         geometry_source = "carmen-rule"
     else:
         geometry_source = "log"
-    details: dict[str, Any] = {"laser_message": laser_type}
     n_scans = manifest.scans if manifest is not None else None
     stated = _stated_mount(scanner)
     mount: tuple[float, float, float] | None = None
     logged_has_mount = False
+    param_mount = params.mount(laser_type) if params is not None and laser_type else None
     if stated is not None:
         mount, source = stated, "config"
     elif manifest is not None:
@@ -843,6 +908,8 @@ def _open_carmen(resolved: ResolvedLog, scanner: ScannerConfig, max_scans: int |
         mount = (facts.mount_x_m, facts.mount_y_m, math.radians(facts.mount_theta_deg))
         source = "catalogue"
         logged_has_mount = facts.mount_applied_in_log or not any(mount)
+    elif param_mount is not None:
+        mount, source = param_mount, "param"
     else:
         source = "none"
     needs_pass = manifest is None and (stated is None or n_scans is None)
@@ -865,7 +932,11 @@ def _open_carmen(resolved: ResolvedLog, scanner: ScannerConfig, max_scans: int |
                     "spread_m": estimate.spread_m,
                     "spread_rad": estimate.spread_rad,
                 }
-                if estimate.consistent:
+                if param_mount is not None:
+                    logged_has_mount = _logged_poses_hold(
+                        estimate, param_mount, where, laser_type or ""
+                    )
+                elif estimate.consistent:
                     mount, source, logged_has_mount = estimate.pose_base_laser, "log", True
                 else:
                     warnings.warn(

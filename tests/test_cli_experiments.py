@@ -181,3 +181,23 @@ def test_compare_report_says_where_the_ekf_stopped(tmp_path):
     assert graph["stopped_at_scan"] is not None and 0 < graph["scans_processed"] < 150
     assert f"* graph: **stopped at scan {graph['stopped_at_scan']} of 150**" in md
     assert "time budget of 0.05 s" in md
+
+
+def test_compare_reports_the_logs_warnings_once_as_every_command_does(tmp_path, capsys):
+    """An input warning (here: a log that does not state its beam layout) comes out as one
+    ``lineslam: warning: N x ...`` line, not as Python's warning with its source line."""
+    log = tmp_path / "plain.clf"
+    log.write_text(
+        "".join(
+            line
+            for line in (DEMO / "log.clf").read_text().splitlines(keepends=True)
+            if not line.startswith("PARAM")
+        )
+    )
+    main(
+        ["compare", str(log), "--out", str(tmp_path / "cmp"), "--quiet", "--max-scans", "30"]
+        + ["--variants", "odometry", "--relations", str(DEMO / "relations.txt")]
+    )
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "CARMEN's rule" in line]
+    assert len(lines) == 1 and lines[0].startswith("lineslam: warning: 1 x InputWarning: ")

@@ -46,6 +46,7 @@ from slam.cli.scanner_opts import (
     OdomTopicOpt,
     ScanTopicOpt,
     StepOpt,
+    echo_warnings,
     with_scanner_options,
 )
 
@@ -116,6 +117,7 @@ def compare(
     from dataclasses import replace
 
     from slam.cli.cmd_evaluate import relations_path
+    from slam.diagnostics import tally_warnings
     from slam.errors import ConfigError
     from slam.experiments.compare import run_compare
     from slam.experiments.report import write_report
@@ -161,6 +163,7 @@ def compare(
 
         inputs = [Path(data.name) if is_rosbag(data.name) else resolve_log(data.name).log]
     with (
+        tally_warnings() as tally,
         results_dir(out, run_config, inputs, reuse=(".cache",)) as work,
         task_progress(len(selected), "variants", "variant", quiet) as progress,
     ):
@@ -175,6 +178,7 @@ def compare(
             max_scans=max_scans,
         )
         write_report(report, work, figures=figures)
+    echo_warnings(tally)
     if not quiet:
         typer.echo(report.markdown_table())
 

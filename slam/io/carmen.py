@@ -28,8 +28,10 @@ Messages
 ``ODOM``
     ``x y theta tv rv accel ipc_timestamp [hostname [logger_timestamp]]`` →
     :class:`Odometry`.
-``#`` lines are comments; blank lines are ignored; any other message type (``PARAM``,
-``TRUEPOS``, ``NMEAGGA``, …) is skipped and counted per type in :class:`CarmenStats`.
+``PARAM name value …``
+    A parameter of the logging robot; the laser's are read (:func:`read_params`, below).
+``#`` lines are comments; blank lines are ignored; any other message type (``TRUEPOS``,
+``NMEAGGA``, …) is skipped and counted per type in :class:`CarmenStats`.
 
 Which laser
 -----------
@@ -44,11 +46,32 @@ Geometry and range limit
 ------------------------
 ``geometry=None`` looks the file up in the dataset catalogue by its content
 (``datasets/catalog.toml``, :func:`slam.io.catalog.manifest_for_path`) and uses its laser
-facts, else CARMEN's
-``carmen_laser_guess_fov`` rule with a range limit of 80 m (:mod:`slam.io.laser`).  A
+facts, else what the log's ``PARAM`` lines state (:meth:`LogParams.laser_geometry`), else
+CARMEN's ``carmen_laser_guess_fov`` rule with a range limit of 80 m (:mod:`slam.io.laser`).  A
 :class:`~slam.io.laser.LaserGeometry` passed in is used for ``FLASER``/``RLASER`` lines; its
 ``n_beams``, when set, must match every line.  ``ROBOTLASER1``/``RAWLASER`` lines always use
 their own start angle, resolution and maximum range.
+
+The log's own parameters
+------------------------
+CARMEN's logger writes the robot's parameters as ``PARAM`` lines, usually at the top of the
+log.  :func:`read_params` reads those among the first lines (every ``PARAM`` line before the
+first 2000 other lines; the first value of each name).  The laser's (``front`` for
+``FLASER``, ``ROBOTLASER1``, ``RAWLASER1``; ``rear`` for ``RLASER``, ``RAWLASER2``), as the
+CARMEN laser and robot modules define them:
+
+* ``laser_front_laser_resolution`` (deg): the angle between beams; ``laser_front_laser_fov``
+  (deg, default 180): the first beam is at ``−fov/2``.  Used for ``FLASER``/``RLASER`` lines
+  when the resolution is stated and the line's beams fit in the field of view
+  (``(n − 1)·resolution ≤ fov``); ``ROBOTLASER1`` lines state their own.
+* ``robot_front_laser_max`` (m): readings at or above it are "no return".
+* ``robot_frontlaser_offset``, ``robot_frontlaser_side_offset`` (m) and
+  ``robot_frontlaser_angular_offset`` (rad): the laser's mounting on the robot
+  (:meth:`LogParams.mount`; :mod:`slam.inputs` decides how it is used).
+
+A value that is not a finite number, a resolution or range that is not positive, or an angular
+offset beyond ±π (degrees written for radians) raises :class:`~slam.errors.LogFormatError`
+naming the ``PARAM`` line.
 
 Bad input
 ---------
@@ -62,6 +85,7 @@ with no CARMEN message in it, is an error in both modes.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field, fields
@@ -83,10 +107,12 @@ __all__ = [
     "LASER_MESSAGES",
     "CarmenReader",
     "CarmenStats",
+    "LogParams",
     "Odometry",
     "iter_log_scans",
     "iter_odometry",
     "iter_scans",
+    "read_params",
     "scan_trajectory",
     "velocity_signed_scans",
 ]
@@ -402,6 +428,190 @@ def _sniff_laser_type(path: str | Path) -> str | None:
     return None
 
 
+#: Which laser's parameters a laser message type reads (CARMEN's front / rear laser).
+_PARAM_SIDE = {
+    "FLASER": "front",
+    "RLASER": "rear",
+    "ROBOTLASER1": "front",
+    "RAWLASER1": "front",
+    "RAWLASER2": "rear",
+}
+
+
+@dataclass(frozen=True)
+class LogParams:
+    """The ``PARAM`` lines of a CARMEN log (module docstring, "The log's own parameters").
+
+    Attributes
+    ----------
+    path : str
+        The log.
+    values : dict of str to (str, int)
+        ``name -> (value, line number)``, the first ``PARAM`` line of each name.
+    first_beams : dict of str to int
+        Beam count of the first line of each laser message type met while reading them.
+    """
+
+    path: str
+    values: dict[str, tuple[str, int]] = field(default_factory=dict)
+    first_beams: dict[str, int] = field(default_factory=dict)
+
+    def number(self, name: str) -> float | None:
+        """The value of ``name`` as a finite number, ``None`` when the log does not state it.
+
+        Raises
+        ------
+        LogFormatError
+            The value is not a finite number (the ``PARAM`` line named).
+        """
+        if name not in self.values:
+            return None
+        text, line_number = self.values[name]
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise LogFormatError(
+                f"PARAM {name} {text!r}: not a finite number", self.path, line_number
+            )
+        return value
+
+    def _positive(self, name: str) -> float | None:
+        value = self.number(name)
+        if value is not None and not value > 0.0:
+            raise LogFormatError(
+                f"PARAM {name} {value:g}: must be > 0", self.path, self.values[name][1]
+            )
+        return value
+
+    def stated(self, laser_type: str) -> dict[str, float]:
+        """The laser's parameters the log states (names as in the log, values as numbers)."""
+        side = _PARAM_SIDE.get(laser_type)
+        if side is None:
+            return {}
+        names = (
+            f"laser_{side}_laser_resolution",
+            f"laser_{side}_laser_fov",
+            f"robot_{side}_laser_max",
+            f"robot_{side}laser_offset",
+            f"robot_{side}laser_side_offset",
+            f"robot_{side}laser_angular_offset",
+        )
+        out = {}
+        for name in names:
+            value = self.number(name)
+            if value is not None:
+                out[name] = value
+        return out
+
+    def laser_geometry(self, laser_type: str) -> tuple[LaserGeometry | None, str | None]:
+        """The beam layout and range limit the log states for ``FLASER``/``RLASER`` lines.
+
+        Returns ``(geometry, problem)``.  ``geometry`` is ``None`` when the log states neither a
+        resolution nor a range limit for this laser.  With a resolution ``r`` and a field of
+        view ``F`` (default 180°) the first beam is at ``−F/2`` and the step is ``r``; without a
+        resolution, or when the lines' ``n`` beams do not fit in ``F`` (``(n − 1)·r > F``, then
+        ``problem`` says so), CARMEN's rule for ``n`` beams with the stated range limit.
+        """
+        side = _PARAM_SIDE.get(laser_type)
+        if side is None or laser_type not in ("FLASER", "RLASER"):
+            return None, None
+        resolution = self._positive(f"laser_{side}_laser_resolution")
+        fov = self._positive(f"laser_{side}_laser_fov")
+        max_range = self._positive(f"robot_{side}_laser_max")
+        if resolution is None and max_range is None:
+            return None, None
+        n = self.first_beams.get(laser_type)
+        limit = max_range if max_range is not None else DEFAULT_MAX_RANGE_M
+        problem = None
+        if resolution is not None:
+            span = 180.0 if fov is None else fov
+            if n is None or (n - 1) * resolution <= span + 1e-6 * span:
+                geometry = LaserGeometry(
+                    math.radians(-0.5 * span), math.radians(resolution), None, limit
+                )
+                return geometry, None
+            problem = (
+                f"PARAM laser_{side}_laser_resolution {resolution:g} deg and a field of view of "
+                f"{span:g} deg do not fit the {n} beams of its {laser_type} lines "
+                f"({(n - 1) * resolution:g} deg from the first to the last): CARMEN's rule used"
+            )
+        if n is None:
+            return None, problem
+        guess = guess_laser_geometry(n, limit)
+        return LaserGeometry(guess.first_angle_rad, guess.step_rad, None, limit), problem
+
+    def mount(self, laser_type: str) -> tuple[float, float, float] | None:
+        """The laser's mounting ``(x, y, θ)`` on the robot, if the log states any part of it.
+
+        ``robot_<side>laser_offset`` (forwards, m), ``_side_offset`` (to the left, m) and
+        ``_angular_offset`` (rad); parts not stated are 0.
+
+        Raises
+        ------
+        LogFormatError
+            An angular offset beyond ±π (degrees written where CARMEN expects radians).
+        """
+        side = _PARAM_SIDE.get(laser_type)
+        if side is None:
+            return None
+        parts = [
+            self.number(f"robot_{side}laser_offset"),
+            self.number(f"robot_{side}laser_side_offset"),
+            self.number(f"robot_{side}laser_angular_offset"),
+        ]
+        if all(v is None for v in parts):
+            return None
+        theta = parts[2]
+        if theta is not None and abs(theta) > math.pi:
+            name = f"robot_{side}laser_angular_offset"
+            raise LogFormatError(
+                f"PARAM {name} {theta:g}: radians expected (|angle| <= pi); degrees?",
+                self.path,
+                self.values[name][1],
+            )
+        x, y, t = (0.0 if v is None else float(v) for v in parts)
+        return (x, y, t)
+
+
+def read_params(path: str | Path, max_other_lines: int = _SNIFF_LINES) -> LogParams:
+    """The ``PARAM`` lines of a CARMEN log among its first lines (module docstring).
+
+    Every ``PARAM`` line before the ``max_other_lines``-th line of another kind is read; the
+    first value of each name is kept.  Also notes the beam count of the first line of each
+    laser message type met.  Reads nothing else; a ``PARAM`` line with fewer than three fields
+    is skipped (the log's anomaly checks count it when the log is read).
+    """
+    out = LogParams(str(path))
+    others = 0
+    for line_number, line in iter_text_lines(path):
+        tokens = line.split()
+        if not tokens:
+            continue
+        kind = tokens[0]
+        if kind == "PARAM":
+            if len(tokens) >= 3 and tokens[1] not in out.values:
+                out.values[tokens[1]] = (tokens[2], line_number)
+            continue
+        if kind in ("FLASER", "RLASER") and kind not in out.first_beams and len(tokens) > 1:
+            with contextlib.suppress(ValueError):
+                out.first_beams[kind] = int(tokens[1])
+        others += 1
+        if others >= max_other_lines:
+            break
+    return out
+
+
+def _params_geometry(path: str | Path) -> LaserGeometry | None:
+    """The geometry the log's ``PARAM`` lines state for its old-format laser lines, if any."""
+    kind = _sniff_laser_type(path)
+    if kind not in ("FLASER", "RLASER"):
+        return None
+    geometry, _ = read_params(path).laser_geometry(kind)
+    return geometry
+
+
 def _manifest_geometry(path: str | Path) -> LaserGeometry | None:
     from slam.io.catalog import manifest_for_path  # catalogue reads TOML; imported lazily
 
@@ -459,9 +669,15 @@ class CarmenReader:
 
     @property
     def geometry(self) -> LaserGeometry | None:
-        """The geometry used for ``FLASER``/``RLASER`` (``None``: CARMEN's guess per line)."""
+        """The geometry used for ``FLASER``/``RLASER`` (``None``: CARMEN's guess per line).
+
+        Unless given: the catalogue's for its own logs, else what the log's ``PARAM`` lines
+        state (:meth:`LogParams.laser_geometry`).
+        """
         if not self._geometry_resolved:
             self._geometry = _manifest_geometry(self.path)
+            if self._geometry is None:
+                self._geometry = _params_geometry(self.path)
             self._geometry_resolved = True
         return self._geometry
 

@@ -24,8 +24,12 @@ Lines written (one message per line, as read by :mod:`slam.io.carmen`)::
   (first beam −90°; 180 beams → 1° steps, 360 → 0.5°, otherwise π/(n−1)) and a range limit of
   80 m.  ``message="auto"`` therefore writes ``FLASER`` only when the scans' bearings follow
   that rule and their ``max_range_m`` is 80 m, and ``ROBOTLASER1`` (which carries start angle,
-  resolution and maximum range) otherwise.  ``laser_type``, ``accuracy``, ``remission_mode``, the
-  safety distances and ``turn_axis`` are written 0, with no remissions.
+  resolution and maximum range) otherwise.  A ``FLASER`` log of 180, 181, 360 or 361 beams
+  also states that layout as CARMEN's logger does, in ``PARAM`` lines before its first
+  message (``laser_front_laser_fov 180``, ``laser_front_laser_resolution`` 1 or 0.5,
+  ``robot_front_laser_max 80``; the same bearings to the last bit).  ``laser_type``,
+  ``accuracy``, ``remission_mode``, the safety distances and ``turn_axis`` are written 0,
+  with no remissions.
 * A reading of ``+inf`` (no return) is written as the scan's ``max_range_m``; NaN or negative
   readings, ragged beam counts under ``FLASER``, bearings that are not evenly spaced, or a scan
   without any pose are errors naming the scan.
@@ -94,6 +98,18 @@ def flaser_bearings(n_beams: int) -> FloatArray:
     else:
         step = math.pi
     return -math.pi / 2.0 + step * np.arange(n_beams, dtype=np.float64)
+
+
+def _flaser_params(n_beams: int, max_range_m: float) -> list[tuple[str, str]]:
+    """The ``PARAM`` lines stating a ``FLASER`` layout of CARMEN's rule (module docstring)."""
+    resolution = {180: "1", 181: "1", 360: "0.5", 361: "0.5"}.get(n_beams)
+    if resolution is None or max_range_m != FLASER_MAX_RANGE_M:
+        return []
+    return [
+        ("laser_front_laser_fov", "180"),
+        ("laser_front_laser_resolution", resolution),
+        ("robot_front_laser_max", f"{FLASER_MAX_RANGE_M:g}"),
+    ]
 
 
 def _is_flaser_compatible(scan: Scan) -> bool:
@@ -220,6 +236,9 @@ def write_carmen(
             if not math.isfinite(scan.timestamp):
                 raise InputError(f"{_where(scan)}: non-finite time stamp")
             stamp = f"{scan.timestamp:.6f}"
+            if n_scans == 0 and chosen == "FLASER":
+                for name, value in _flaser_params(ranges.shape[0], scan.max_range_m):
+                    out.write(f"PARAM {name} {value} {stamp} {hostname} {stamp}\n")
             tv, rv = velocity(scan.timestamp, base)
             if odometry:
                 out.write(
