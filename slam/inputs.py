@@ -552,15 +552,16 @@ class LogInput:
         if self.format == "rosbag":
             yield from self._reader.scans()
             return
-        from slam.io.carmen import velocity_signed_scans
+        from slam.io.carmen import velocity_signed_scans, with_odom_poses
 
         reader = self._carmen_reader(strict)
         if stats is not None:
             reader.stats = stats
+        messages = with_odom_poses(reader.messages())  # RAWLASER scans: the ODOM pose
         if self.policy.odometry_sign == "velocity":
-            yield from velocity_signed_scans(reader.messages())
+            yield from velocity_signed_scans(messages)
         else:
-            yield from reader.scans()
+            yield from (m for m in messages if isinstance(m, Scan))
 
     def _carmen_reader(self, strict: bool = False) -> Any:
         from slam.io.carmen import CarmenReader
@@ -577,8 +578,11 @@ class LogInput:
     ) -> Iterator[Scan]:
         """The scans with the stated geometry and range limits applied, in log order.
 
-        A bag's scans outside the odometry's time span (:mod:`slam.io.rosbag`) are left out
-        when ``need_odometry`` (an :class:`InputWarning` counts them); the indices stay
+        A bag's scans outside the odometry's time span (:mod:`slam.io.rosbag`), and a CARMEN
+        log's scans without a pose of their own (``RAWLASER``) more than
+        :data:`slam.io.carmen.MAX_ODOMETRY_GAP_S` from its ``ODOM`` lines
+        (:func:`slam.io.carmen.with_odom_poses`), are left out when ``need_odometry`` (an
+        :class:`InputWarning` counts them); the indices stay
         contiguous.  ``stats`` and ``strict``: the log anomalies of a CARMEN log, counted in
         ``stats.anomalies`` over the part of the log read, or an error at the first one
         (:meth:`raw_scans`; bags are not checked).
@@ -588,15 +592,22 @@ class LogInput:
         skipped = 0
         if max_scans is not None and max_scans <= 0:
             return
+        if self.format == "carmen" and stats is None:
+            from slam.io.carmen import CarmenStats
+
+            stats = CarmenStats()
         for scan in self.raw_scans(stats=stats, strict=strict):
-            if (
-                need_odometry
-                and self.format == "rosbag"
-                and scan.pose_odom_base is None
-                and self._reader.odometry is not None
-            ):
-                skipped += 1
-                continue
+            if need_odometry and scan.pose_odom_base is None and scan.pose_odom_laser is None:
+                # a bag's scan outside its odometry's span; a CARMEN scan without a pose in a
+                # log whose ODOM lines lie more than MAX_ODOMETRY_GAP_S away from it
+                has_odometry = (
+                    self._reader.odometry is not None
+                    if self.format == "rosbag"
+                    else stats is not None and stats.odometry > 0
+                )
+                if has_odometry:
+                    skipped += 1
+                    continue
             scan = _apply_scanner(scan, scanner, k)
             if k == 0:
                 self._note_geometry(scan)
@@ -608,7 +619,7 @@ class LogInput:
             self._skipped_without_odometry = skipped
             warnings.warn(
                 f"{self.log}: {skipped} scan(s) lie more than 1 s outside the odometry's time "
-                "span and were left out",
+                "span (no pose of their own) and were left out",
                 InputWarning,
                 stacklevel=2,
             )

@@ -250,3 +250,93 @@ def _resampled(scan, n_beams: int):
         bearings=np.array(g.bearings(n_beams)),
         max_range_m=80.0,
     )
+
+
+# -- scans without a pose of their own (RAWLASER) ----------------------------------------------
+
+
+def test_rawlaser_scans_take_the_odom_pose_at_their_time_stamp():
+    from slam.io.carmen import Odometry, with_odom_poses
+    from slam.types import Scan
+
+    def scan(t: float) -> Scan:
+        return Scan(0, t, np.full(3, 2.0), np.array([-0.1, 0.0, 0.1]), max_range_m=80.0)
+
+    def odo(t: float, pose) -> Odometry:
+        return Odometry(0, t, np.array(pose, dtype=float), 0.0, 0.0, "")
+
+    a, b = odo(10.0, [0.0, 0.0, 3.0]), odo(11.0, [1.0, 2.0, -3.0])  # the heading crosses ±π
+    messages = [scan(9.5), scan(8.0), a, scan(10.25), scan(10.0), b, scan(11.5), scan(13.0)]
+    out = list(with_odom_poses(iter(messages)))
+    assert [type(m).__name__ for m in out] == [type(m).__name__ for m in messages]  # file order
+    poses = [m.pose_odom_base for m in out if isinstance(m, Scan)]
+    np.testing.assert_allclose(poses[0], [0.0, 0.0, 3.0])  # before the first: within 1 s
+    assert poses[1] is None  # 2 s before it: none
+    dtheta = math.remainder(-3.0 - 3.0, math.tau)  # +0.283 rad, through π
+    expected = [0.25, 0.5, math.remainder(3.0 + 0.25 * dtheta, math.tau)]
+    np.testing.assert_allclose(poses[2], expected, atol=1e-12)
+    np.testing.assert_allclose(poses[3], [0.0, 0.0, 3.0])
+    np.testing.assert_allclose(poses[4], [1.0, 2.0, -3.0])  # after the last: within 1 s
+    assert poses[5] is None
+    # scans with a pose of their own pass unchanged
+    posed = replace_pose(scan(10.5))
+    assert next(iter(with_odom_poses(iter([posed, a])))) is posed
+
+
+def replace_pose(scan):
+    from dataclasses import replace
+
+    return replace(scan, pose_odom_base=np.zeros(3), pose_odom_laser=np.zeros(3))
+
+
+def rawlaser_demo(path: Path, drop_odom_before: float | None = None) -> Path:
+    """The demo log with its FLASER lines as RAWLASER1 lines (no pose; the same bearings to
+    the last bit), its ODOM lines kept (optionally those before a time left out)."""
+    step = repr(math.pi / 180.0)
+    lines = []
+    for line in DEMO_LOG.read_text().splitlines():
+        t = line.split()
+        if not t or t[0] in ("#", "PARAM"):
+            continue
+        if t[0] == "FLASER":
+            n = int(t[1])
+            stamp = t[n + 8]
+            lines.append(
+                f"RAWLASER1 0 {-math.pi / 2!r} {math.pi!r} {step} 80 0.01 0 {n} "
+                f"{' '.join(t[2 : 2 + n])} 0 {stamp} nohost {stamp}"
+            )
+        elif drop_odom_before is None or float(t[7]) >= drop_odom_before:
+            lines.append(line)
+    return write_log(path, lines)
+
+
+def b_first_odom(log: Path) -> np.ndarray:
+    line = next(x for x in log.read_text().splitlines() if x.startswith("ODOM"))
+    return np.array([float(v) for v in line.split()[1:4]])
+
+
+def test_a_rawlaser_log_runs_as_the_flaser_log_it_came_from(tmp_path):
+    from slam.cli import main
+    from slam.io import read_tum
+
+    n = 60
+    raw = rawlaser_demo(tmp_path / "raw.clf")
+    # the FLASER run with its laser odometry as the RAWLASER run gets it, the ODOM pose
+    # composed with the (zero) mounting: the logged laser pose differs from it by 1e-16 rad
+    (tmp_path / "base.toml").write_text('[scanner]\nlaser_odometry = "base"\n')
+    options = ["--max-scans", str(n), "--quiet"]
+    main(["slam", str(DEMO_LOG), "--out", str(tmp_path / "a"), *options]
+         + ["--config", str(tmp_path / "base.toml")])  # fmt: skip
+    main(["slam", str(raw), "--out", str(tmp_path / "b"), *options])
+    a = read_tum(tmp_path / "a" / "trajectory.tum")
+    b = read_tum(tmp_path / "b" / "trajectory.tum")
+    np.testing.assert_array_equal(a.timestamps, b.timestamps)
+    np.testing.assert_array_equal(b.poses, a.poses)
+    # the first ODOM lines left out (scans every 0.75 s): the first scan, 1.5 s before the
+    # first ODOM line kept, is left out and said; the second, 0.75 s before, takes its pose
+    stamps = [float(line.split()[7]) for line in raw.read_text().splitlines()[:6:2]]
+    late = rawlaser_demo(tmp_path / "late.clf", drop_odom_before=stamps[2])
+    with pytest.warns(InputWarning, match="1 scan\\(s\\) lie more than 1 s outside"):
+        kept = list(open_log(late).scans(max_scans=10))
+    assert kept[0].timestamp == stamps[1] and [s.index for s in kept] == list(range(10))
+    np.testing.assert_array_equal(kept[0].pose_odom_base, b_first_odom(late))

@@ -5,6 +5,7 @@ Main entry points (stable, used across the project)::
     iter_scans(path, *, lenient=False, geometry=None, stats=None, laser="auto") -> Iterator[Scan]
     iter_odometry(path, *, lenient=False, stats=None) -> Iterator[Odometry]
     velocity_signed_scans(messages) -> Iterator[Scan]  # odometry re-signed by ODOM tv
+    with_odom_poses(messages) -> Iterator[Scan | Odometry]  # RAWLASER scans get ODOM poses
     iter_log_scans(path, odometry_sign="velocity") -> Iterator[Scan]  # either of the two
     CarmenReader(path, ...).messages()  # scans and odometry interleaved, in file order
 
@@ -24,7 +25,8 @@ Messages
     turn_axis ipc_timestamp [hostname [logger_timestamp]]``; geometry from its own fields.
 ``RAWLASER1`` … ``RAWLASER4``
     as ``ROBOTLASER1`` up to the remissions, then ``ipc_timestamp [hostname [logger_ts]]``; no
-    pose (``pose_odom_base`` and ``pose_odom_laser`` are ``None``).
+    pose (``pose_odom_base`` and ``pose_odom_laser`` are ``None``; :func:`with_odom_poses`
+    gives them the ``ODOM`` pose at their time stamp).
 ``ODOM``
     ``x y theta tv rv accel ipc_timestamp [hostname [logger_timestamp]]`` →
     :class:`Odometry`.
@@ -115,7 +117,12 @@ __all__ = [
     "read_params",
     "scan_trajectory",
     "velocity_signed_scans",
+    "with_odom_poses",
 ]
+
+#: A laser scan without a logged pose takes the ``ODOM`` pose of a message at most this far (s)
+#: from its time stamp when no message lies on its other side (the log's first or last scans).
+MAX_ODOMETRY_GAP_S = 1.0
 
 FloatArray = NDArray[np.float64]
 
@@ -889,6 +896,60 @@ def velocity_signed_scans(messages: Iterator[Scan | Odometry]) -> Iterator[Scan]
         yield replace(message, pose_odom_base=base, pose_odom_laser=laser)
 
 
+def with_odom_poses(
+    messages: Iterator[Scan | Odometry], max_gap_s: float = MAX_ODOMETRY_GAP_S
+) -> Iterator[Scan | Odometry]:
+    """``messages`` in file order, each scan without a logged pose given the ``ODOM`` pose.
+
+    ``RAWLASER`` lines carry no pose; the log's ``ODOM`` lines do.  A scan without
+    ``pose_odom_base`` takes the pose interpolated at its time stamp between the ``ODOM``
+    messages before and after it in the file (linear in x, y and the heading unwrapped between
+    the two; a stamp outside their times takes the nearer one's pose), or, before the first or
+    after the last message, the nearest message's pose when it is at most ``max_gap_s`` away
+    (else the scan stays without one).  ``pose_odom_laser`` stays ``None``: the laser's
+    odometry is the base's composed with the mounting (:class:`slam.inputs.InputPolicy`).
+    Scans with a pose pass unchanged, so a log with poses in its laser lines comes out as it
+    went in.  Scans are held back only until the next ``ODOM`` message.
+    """
+    from dataclasses import replace
+
+    previous: Odometry | None = None
+    pending: list[Scan] = []
+
+    def near(scan: Scan, odom: Odometry) -> Scan:
+        if abs(scan.timestamp - odom.timestamp) > max_gap_s:
+            return scan
+        return replace(scan, pose_odom_base=np.array(odom.pose_odom_base, dtype=float))
+
+    for message in messages:
+        if isinstance(message, Odometry):
+            for scan in pending:
+                if previous is None:
+                    yield near(scan, message)
+                else:
+                    yield replace(scan, pose_odom_base=_between(previous, message, scan.timestamp))
+            pending = []
+            previous = message
+            yield message
+        elif message.pose_odom_base is None and message.pose_odom_laser is None:
+            pending.append(message)
+        else:
+            yield message
+    for scan in pending:
+        yield scan if previous is None else near(scan, previous)
+
+
+def _between(a: Odometry, b: Odometry, stamp: float) -> FloatArray:
+    """The pose at ``stamp`` between two ``ODOM`` messages (clamped to their times)."""
+    pa = np.asarray(a.pose_odom_base, dtype=float)
+    pb = np.asarray(b.pose_odom_base, dtype=float)
+    span = b.timestamp - a.timestamp
+    f = 0.0 if not span > 0.0 else min(max((stamp - a.timestamp) / span, 0.0), 1.0)
+    dtheta = math.remainder(float(pb[2] - pa[2]), math.tau)
+    theta = math.remainder(float(pa[2]) + f * dtheta, math.tau)
+    return np.array([pa[0] + f * (pb[0] - pa[0]), pa[1] + f * (pb[1] - pa[1]), theta])
+
+
 def iter_log_scans(
     path: str | Path,
     odometry_sign: str = "velocity",
@@ -904,14 +965,15 @@ def iter_log_scans(
     :func:`iter_scans` reads them.  ``stats`` is filled while iterating (its ``anomalies``
     too); ``strict`` raises at the first log anomaly.
     """
+    if odometry_sign not in ("velocity", "logged"):
+        raise ConfigError(f"odometry_sign must be velocity or logged, got {odometry_sign!r}")
+    reader = CarmenReader(path, lenient=lenient, strict=strict)
+    if stats is not None:
+        reader.stats = stats
+    messages = with_odom_poses(reader.messages())
     if odometry_sign == "velocity":
-        reader = CarmenReader(path, lenient=lenient, strict=strict)
-        if stats is not None:
-            reader.stats = stats
-        return velocity_signed_scans(reader.messages())
-    if odometry_sign == "logged":
-        return iter_scans(path, lenient=lenient, stats=stats, strict=strict)
-    raise ConfigError(f"odometry_sign must be velocity or logged, got {odometry_sign!r}")
+        return velocity_signed_scans(messages)
+    return (m for m in messages if isinstance(m, Scan))
 
 
 def iter_odometry(
