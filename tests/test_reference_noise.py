@@ -136,3 +136,31 @@ def test_evaluate_keeps_the_relations_nees_when_the_scatter_cannot_be_estimated(
     assert out["relations_nees"]["n"] == len(rel)
     assert "relations_nees_with_relations_noise" not in out
     assert "not estimated" in report.format_table()
+
+
+@pytest.mark.parametrize(
+    ("lower_mean", "upper_mean", "verdict"),
+    [(1.7, 2.9, "consistent"), (2.0, 7.8, "consistent"), (3.6, 9.0, "over-confident"),
+     (1.2, 2.5, "under-confident")],
+)  # fmt: skip
+def test_the_two_relations_nees_bracket_the_runs(lower_mean, upper_mean, verdict):
+    """The plain NEES (the relations' scatter counted as the run's error) and the one with the
+    hat's scatter (up to the run's own variance counted as the relations') bracket the run's:
+    it is shown over- or under-confident only when the whole bracket lies beyond the interval."""
+    from slam.evaluation.relations_nees import RelationsNees
+    from slam.evaluation.report import EvaluationReport
+
+    def nees(mean: float) -> RelationsNees:
+        return RelationsNees(100, mean, mean, 2.8, 3.2, 0.9, mean, 0.0, 7.81)
+
+    report = EvaluationReport(
+        n_poses=10,
+        frame="laser",
+        relations_nees=nees(upper_mean),
+        relations_nees_with_relations_noise=nees(lower_mean),
+    )
+    bracket = report.to_dict()["relations_nees_bracket"]
+    assert bracket == {"lower": lower_mean, "upper": upper_mean, "verdict": verdict}
+    assert f"[{lower_mean:.3f}, {upper_mean:.3f}]" in report.format_table()
+    plain = EvaluationReport(n_poses=10, frame="laser", relations_nees=nees(upper_mean))
+    assert "relations_nees_bracket" not in plain.to_dict()

@@ -78,7 +78,32 @@ class EvaluationReport:
             out["relations_nees_with_relations_noise"] = (
                 self.relations_nees_with_relations_noise.to_dict()
             )
+        bracket = self.relations_nees_bracket()
+        if bracket is not None:
+            out["relations_nees_bracket"] = bracket
         return out
+
+    def relations_nees_bracket(self) -> dict[str, Any] | None:
+        """The run's relations NEES bracketed, when both NEES were computed.
+
+        The plain relations NEES counts the relations' own scatter as the run's error (an
+        upper bound on the run's NEES), the one with the three-cornered hat's scatter added
+        counts up to the run's own variance as the relations' (a lower bound;
+        :mod:`slam.evaluation.reference_noise`).  ``verdict``: ``"over-confident"`` when even
+        the lower bound lies above its one-run interval, ``"under-confident"`` when even the
+        upper bound lies below its own, else ``"consistent"`` (the data cannot tell the run
+        inconsistent).
+        """
+        upper, lower = self.relations_nees, self.relations_nees_with_relations_noise
+        if upper is None or lower is None:
+            return None
+        if lower.mean > _interval(lower)[1]:
+            verdict = "over-confident"
+        elif upper.mean < _interval(upper)[0]:
+            verdict = "under-confident"
+        else:
+            verdict = "consistent"
+        return {"lower": lower.mean, "upper": upper.mean, "verdict": verdict}
 
     def format_table(self) -> str:
         """A plain-text table of the metrics."""
@@ -183,11 +208,12 @@ class EvaluationReport:
             rows.append(("relations' own RMS", f"not estimated: {self.relations_noise_skipped}"))
         if self.relations_nees_with_relations_noise is not None:
             q = self.relations_nees_with_relations_noise
-            verdict = "consistent" if q.consistent else "NOT consistent"
+            lo, hi = _interval(q)
+            where = "inside" if lo <= q.mean <= hi else ("below" if q.mean < lo else "above")
             rows += [
                 (
                     "relations NEES + relations' own",
-                    f"{q.mean:.3f} in {_interval_text(q)}: {verdict}; inside 95% "
+                    f"{q.mean:.3f}, {where} {_interval_text(q)}; inside 95% "
                     f"{q.fraction_inside_95:.3f}",
                 ),
                 (
@@ -195,8 +221,31 @@ class EvaluationReport:
                     _by_gap_text(q),
                 ),
             ]
+        bracket = self.relations_nees_bracket()
+        if bracket is not None:
+            rows.append(
+                (
+                    "relations NEES bracket",
+                    f"[{bracket['lower']:.3f}, {bracket['upper']:.3f}] (with the relations' own "
+                    f"scatter, without): {_BRACKET_TEXT[bracket['verdict']]}",
+                )
+            )
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+_BRACKET_TEXT = {
+    "consistent": "consistent as far as the relations tell (their interval meets the bracket)",
+    "over-confident": "over-confident (even the lower bound lies above its interval)",
+    "under-confident": "under-confident (even the upper bound lies below its interval)",
+}
+
+
+def _interval(q: RelationsNees) -> tuple[float, float]:
+    """The interval :attr:`RelationsNees.consistent` tests: one run's, else independent ones'."""
+    if q.one_run is not None:
+        return q.one_run.lower, q.one_run.upper
+    return q.lower, q.upper
 
 
 def _interval_text(q: RelationsNees) -> str:
