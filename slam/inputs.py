@@ -582,10 +582,10 @@ class LogInput:
         log's scans without a pose of their own (``RAWLASER``) more than
         :data:`slam.io.carmen.MAX_ODOMETRY_GAP_S` from its ``ODOM`` lines
         (:func:`slam.io.carmen.with_odom_poses`), are left out when ``need_odometry`` (an
-        :class:`InputWarning` counts them); the indices stay
-        contiguous.  ``stats`` and ``strict``: the log anomalies of a CARMEN log, counted in
-        ``stats.anomalies`` over the part of the log read, or an error at the first one
-        (:meth:`raw_scans`; bags are not checked).
+        :class:`InputWarning` counts them); the indices stay contiguous.  ``stats`` and
+        ``strict``: the log anomalies of a CARMEN log, counted in ``stats.anomalies`` over the
+        part of the log read, or an error at the first one (:meth:`raw_scans`; bags are not
+        checked).
         """
         scanner = self.scanner
         k = 0
