@@ -552,16 +552,12 @@ class LogInput:
         if self.format == "rosbag":
             yield from self._reader.scans()
             return
-        from slam.io.carmen import velocity_signed_scans, with_odom_poses
+        from slam.io.carmen import reader_scans
 
         reader = self._carmen_reader(strict)
         if stats is not None:
             reader.stats = stats
-        messages = with_odom_poses(reader.messages())  # RAWLASER scans: the ODOM pose
-        if self.policy.odometry_sign == "velocity":
-            yield from velocity_signed_scans(messages)
-        else:
-            yield from (m for m in messages if isinstance(m, Scan))
+        yield from reader_scans(reader, self.policy.odometry_sign)
 
     def _carmen_reader(self, strict: bool = False) -> Any:
         from slam.io.carmen import CarmenReader

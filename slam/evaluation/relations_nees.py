@@ -113,11 +113,17 @@ class RelationsNees:
         return out
 
     @property
-    def consistent(self) -> bool:
-        """The mean lies inside its interval: the one-run interval when there is one."""
+    def interval(self) -> tuple[float, float]:
+        """The 95 % interval the mean is tested against: one run's when there is one."""
         if self.one_run is not None:
-            return self.one_run.lower <= self.mean <= self.one_run.upper
-        return self.lower <= self.mean <= self.upper
+            return self.one_run.lower, self.one_run.upper
+        return self.lower, self.upper
+
+    @property
+    def consistent(self) -> bool:
+        """The mean lies inside :attr:`interval`."""
+        lo, hi = self.interval
+        return lo <= self.mean <= hi
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (``metrics.json``'s ``relations_nees``; no per-relation values)."""

@@ -97,9 +97,9 @@ class EvaluationReport:
         upper, lower = self.relations_nees, self.relations_nees_with_relations_noise
         if upper is None or lower is None:
             return None
-        if lower.mean > _interval(lower)[1]:
+        if lower.mean > lower.interval[1]:
             verdict = "over-confident"
-        elif upper.mean < _interval(upper)[0]:
+        elif upper.mean < upper.interval[0]:
             verdict = "under-confident"
         else:
             verdict = "consistent"
@@ -208,7 +208,7 @@ class EvaluationReport:
             rows.append(("relations' own RMS", f"not estimated: {self.relations_noise_skipped}"))
         if self.relations_nees_with_relations_noise is not None:
             q = self.relations_nees_with_relations_noise
-            lo, hi = _interval(q)
+            lo, hi = q.interval
             where = "inside" if lo <= q.mean <= hi else ("below" if q.mean < lo else "above")
             rows += [
                 (
@@ -239,13 +239,6 @@ _BRACKET_TEXT = {
     "over-confident": "over-confident (even the lower bound lies above its interval)",
     "under-confident": "under-confident (even the upper bound lies below its interval)",
 }
-
-
-def _interval(q: RelationsNees) -> tuple[float, float]:
-    """The interval :attr:`RelationsNees.consistent` tests: one run's, else independent ones'."""
-    if q.one_run is not None:
-        return q.one_run.lower, q.one_run.upper
-    return q.lower, q.upper
 
 
 def _interval_text(q: RelationsNees) -> str:

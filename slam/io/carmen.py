@@ -7,6 +7,7 @@ Main entry points (stable, used across the project)::
     velocity_signed_scans(messages) -> Iterator[Scan]  # odometry re-signed by ODOM tv
     with_odom_poses(messages) -> Iterator[Scan | Odometry]  # RAWLASER scans get ODOM poses
     iter_log_scans(path, odometry_sign="velocity") -> Iterator[Scan]  # either of the two
+    reader_scans(reader, odometry_sign) -> Iterator[Scan]  # the same from a CarmenReader
     CarmenReader(path, ...).messages()  # scans and odometry interleaved, in file order
 
 A log is read line by line and yielded as it is read: nothing is loaded whole into Python
@@ -115,6 +116,7 @@ __all__ = [
     "iter_odometry",
     "iter_scans",
     "read_params",
+    "reader_scans",
     "scan_trajectory",
     "velocity_signed_scans",
     "with_odom_poses",
@@ -962,14 +964,24 @@ def iter_log_scans(
 
     ``odometry_sign = "velocity"``: through :func:`velocity_signed_scans` (reversing logged as
     forward motion is repaired; logs without negative ``tv`` are unchanged); ``"logged"``: as
-    :func:`iter_scans` reads them.  ``stats`` is filled while iterating (its ``anomalies``
-    too); ``strict`` raises at the first log anomaly.
+    :func:`iter_scans` reads them.  Either way a scan without a pose of its own takes the
+    ``ODOM`` pose (:func:`with_odom_poses`).  ``stats`` is filled while iterating (its
+    ``anomalies`` too); ``strict`` raises at the first log anomaly.
     """
-    if odometry_sign not in ("velocity", "logged"):
-        raise ConfigError(f"odometry_sign must be velocity or logged, got {odometry_sign!r}")
     reader = CarmenReader(path, lenient=lenient, strict=strict)
     if stats is not None:
         reader.stats = stats
+    return reader_scans(reader, odometry_sign)
+
+
+def reader_scans(reader: CarmenReader, odometry_sign: str) -> Iterator[Scan]:
+    """The scans of ``reader`` as the estimators read them (see :func:`iter_log_scans`).
+
+    Scans without a pose of their own take the ``ODOM`` pose (:func:`with_odom_poses`);
+    ``odometry_sign = "velocity"`` then repairs reversing (:func:`velocity_signed_scans`).
+    """
+    if odometry_sign not in ("velocity", "logged"):
+        raise ConfigError(f"odometry_sign must be velocity or logged, got {odometry_sign!r}")
     messages = with_odom_poses(reader.messages())
     if odometry_sign == "velocity":
         return velocity_signed_scans(messages)
