@@ -414,6 +414,87 @@ def test_right_closure_passes_the_f_test():
     assert entry["f_statistic"] < 10.0
 
 
+def _judge_right_pairs(agree, robust, max_f=None):
+    """The three right pairs judged with ``judge_max_f`` between the closure's robust and
+    Gaussian F statistics (measured first), ``agree`` recent hypotheses agreeing."""
+    from slam.frontend.loop_closure import LoopClosure
+
+    slam, right, _ = _undone_merges_and_a_wrong_pair()
+    g = slam.graph
+    lcc = replace(slam.config.loop_closure, judge_robust_cost=robust)
+    if max_f is not None:
+        lcc = replace(lcc, judge_max_f=max_f)
+    slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
+    local = np.array([r.drop for r in right])
+    old = np.array([r.keep for r in right])
+    found = LoopClosure(np.zeros(3), [(k, k) for k in range(3)], 10.0, 1.0)
+    got = slam.loop_closer.apply(local, old, found, g.n_poses - 1, agree=agree)
+    return got, slam.loop_closer.attempts[-1].as_log()
+
+
+def test_robust_second_chance_needs_every_pair_explained_and_an_agreeing_hypothesis():
+    """``judge_robust_cost``: a closure that fails the Gaussian F test but passes it in the
+    solver's robust cost is accepted only with all its pairs explained and a recent hypothesis
+    agreeing with it; a closure with a pair left metres apart is not, whatever its robust F."""
+    from slam.frontend.loop_closure import LoopClosure
+
+    _, entry = _judge_right_pairs(agree=0, robust=True, max_f=np.inf)
+    f_gauss, f_robust = entry["f_statistic"], entry["f_statistic_robust"]
+    assert entry["consistent_pairs"] == entry["pairs"] == 3
+    assert 0.0 < f_robust < f_gauss  # the robust cost grows less: the kernel bounds each line
+    between = 0.5 * (f_robust + f_gauss)
+    assert _judge_right_pairs(agree=1, robust=True, max_f=between)[0] == 1
+    assert _judge_right_pairs(agree=0, robust=True, max_f=between)[0] == 0
+    assert _judge_right_pairs(agree=1, robust=False, max_f=between)[0] == 0
+
+    # three right pairs and a wrong one: rejected though its robust F is within the limit
+    def wrong_pair(max_f):
+        slam, right, (a, b) = _undone_merges_and_a_wrong_pair()
+        lcc = replace(slam.config.loop_closure, judge_max_f=max_f)
+        slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
+        local = np.array([r.drop for r in right] + [a])
+        old = np.array([r.keep for r in right] + [b])
+        found = LoopClosure(np.zeros(3), [(k, k) for k in range(4)], 10.0, 1.0)
+        got = slam.loop_closer.apply(local, old, found, slam.graph.n_poses - 1, agree=1)
+        return got, slam.loop_closer.attempts[-1].as_log()
+
+    _, entry = wrong_pair(np.inf)
+    assert entry["consistent_pairs"] == 3 and entry["pairs"] == 4
+    assert entry["f_statistic_robust"] < entry["f_statistic"]
+    assert wrong_pair(0.5 * (entry["f_statistic_robust"] + entry["f_statistic"]))[0] == 0
+
+
+def test_judge_cost_counts_an_outlier_line_as_the_solver_does(loop_runs):
+    """The judge's loop cost in the solver's kernel (``judge_robust_cost``): each line factor
+    adds ``2ρ(‖e‖)`` (Cauchy: ``k² log(1 + χ²/k²)``), the odometry its χ².  One line moved
+    2 m off raises the Gaussian total by thousands, the Cauchy total by at most
+    ``k² log(1 + χ²/k²)`` of that factor."""
+    from slam.line_slam.audit import residual_chi2
+
+    g = loop_runs[3]["isam2"][0].graph
+    k = 3.0
+    plain, line = residual_chi2(g, 10)
+    robust, line_r = residual_chi2(g, 10, "cauchy", k)
+    np.testing.assert_array_equal(line, line_r)
+    odo = plain - line.sum()
+    assert odo > 0.0
+    np.testing.assert_allclose(robust, odo + np.sum(k**2 * np.log1p(line / k**2)), rtol=1e-12)
+    assert robust < plain
+    # one observation of the loop's last pose moved 2 m along its normal
+    f = int(np.flatnonzero(g.factor_pose == g.n_poses - 1)[0])
+    z = g.factor_z[f].copy()
+    g.factor_z[f, 0] += 2.0
+    try:
+        plain_off, line_off = residual_chi2(g, 10)
+        robust_off, _ = residual_chi2(g, 10, "cauchy", k)
+    finally:
+        g.factor_z[f] = z
+    pos = int(np.searchsorted(np.flatnonzero(g.factor_pose >= 10), f))
+    grown = float(line_off[pos] - line[pos])
+    assert plain_off - plain > 1000.0 and grown > 1000.0
+    assert 0.0 < robust_off - robust <= k**2 * np.log1p(grown / k**2) + 1e-9
+
+
 def test_estimated_model_error_finds_the_line_worlds_exact_lines():
     """The line world's lines carry their exact covariances: started from the default model error
     (2 cm, 0.01 rad), the estimate (the default) falls to a fraction of it and the factors are

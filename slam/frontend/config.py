@@ -289,6 +289,17 @@ class LoopClosureConfig:
         freedom more than this many times the loop's cost per residual degree of freedom before
         (an F statistic of the merge against the graph's own residual level: a right closure
         spreads the drift along the loop, a wrong one strains it where it binds).
+    judge_robust_cost : bool
+        A second chance for a closure rejected only by that F statistic: it is accepted when
+        all of its merged pairs are explained, a hypothesis found at another keyframe within
+        the last ``local_keyframes`` agrees with it (pairwise consistency at
+        ``consistency_probability``), and the statistic is within ``judge_max_f`` with the
+        loop's cost counted as the judge's solver minimises it: each line factor ``2 ρ(‖e‖)``
+        of the solver's robust kernel (``solver.robust_kernel``, ``robust_k``), not its χ².
+        A line that the front end associated wrongly inside the loop, which the right closure
+        leaves hundreds of σ off, then weighs as the outlier the solver treats it as, not as
+        evidence against the closure.  The log has ``f_statistic_robust`` and
+        ``agreeing_hypotheses``.
     confirmations : int
         How many hypotheses found at other keyframes within the last ``local_keyframes`` must
         agree with one before it is judged (0: none; a hypothesis is never accepted on its own
@@ -350,6 +361,7 @@ class LoopClosureConfig:
     consistency_probability: float = 0.999
     confirmations: int = 0
     judge_max_f: float = 100.0
+    judge_robust_cost: bool = True
     min_consistent_fraction: float = 0.6
     skip_repeated_rejections: bool = True
     judge_hopeless_after: int = 5

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from slam.graph.factors import line_factor_residuals
 from slam.graph.odometry import between_costs
 from slam.graph.problem import LineGraph, MergeRecord
+from slam.graph.robust import RobustKernel, robust_cost
 from slam.line_slam.config import FusionConfig
 from slam.line_slam.landmarks import LandmarkBook
 
@@ -23,11 +24,16 @@ __all__ = ["MergeAudit", "residual_chi2"]
 FloatArray = NDArray[np.float64]
 
 
-def residual_chi2(graph: LineGraph, from_pose: int = 0) -> tuple[float, FloatArray]:
-    """Squared whitened residuals of the graph at its estimate (Gaussian, no kernel).
+def residual_chi2(
+    graph: LineGraph, from_pose: int = 0, kernel: RobustKernel = "none", k: float = 1.0
+) -> tuple[float, FloatArray]:
+    """Squared whitened residuals of the graph at its estimate.
 
     Returns the total over the line factors of poses from ``from_pose`` on and the odometry
-    factors ending there, and each of those line factors' own (2 dof).
+    factors ending there, and each of those line factors' own χ² (2 dof).  With a robust
+    ``kernel`` (``k`` in standard deviations, :mod:`slam.graph.robust`) each line factor
+    adds ``2 ρ(‖e‖)`` to the total instead of ``‖e‖²`` (the cost the solver minimises, in χ²
+    units; the odometry factors are never robustified); the per-factor χ² stay Gaussian.
     """
     g = graph
     line = np.zeros(0)
@@ -55,7 +61,8 @@ def residual_chi2(graph: LineGraph, from_pose: int = 0) -> tuple[float, FloatArr
                 )
             )
         )
-    return float(line.sum()) + odo, line
+    lines = float(np.sum(2.0 * robust_cost(kernel, np.sqrt(line), k))) if line.size else 0.0
+    return lines + odo, line
 
 
 class MergeAudit:

@@ -44,6 +44,7 @@ from slam.frontend.loop_closure import LoopClosure, same_correction, search_loop
 from slam.geometry import pose_between, pose_compose, pose_inverse, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend
 from slam.graph.batch import BatchSolver
+from slam.graph.robust import RobustKernel
 from slam.line_slam.audit import MergeAudit, residual_chi2
 from slam.line_slam.clock import StageClock
 from slam.line_slam.config import SlamConfig
@@ -76,6 +77,8 @@ _ORDER = {
         "judge_stop",
         "judge_free_from",
         "f_statistic",
+        "f_statistic_robust",
+        "agreeing_hypotheses",
         "correction_chi2",
         *_WHERE,
         "accepted",
@@ -144,6 +147,8 @@ class ClosureAttempt:
     judge_free_from: int | None = None
     backend_restarted: bool | None = None
     f_statistic: float | None = None
+    f_statistic_robust: float | None = None
+    agreeing_hypotheses: int | None = None
     where: dict[str, Any] = field(default_factory=dict)
 
     def as_log(self) -> dict[str, Any]:
@@ -326,7 +331,8 @@ class LoopCloser:
         hyp = self.hypothesis(found, near, pose, k_old)
         chi2_t = self.chain_chi2(hyp)
         reason = None
-        if not self.confirmed(hyp):
+        agree = self.agreement(hyp)
+        if agree < lcc.confirmations:
             reason = "awaiting a consistent second hypothesis"
         if reason is not None:
             self.attempts.append(
@@ -343,7 +349,7 @@ class LoopCloser:
             self.counters["loop_closures_gated"] += 1
             return 0
         self.counters["loop_closure_candidates"] += 1
-        return self.apply(local, near, found, pose, chi2_t)
+        return self.apply(local, near, found, pose, chi2_t, agree)
 
     # -- the rules ---------------------------------------------------------------------------
     def repeated_rejection(self, found: LoopClosure, pose: int) -> int | None:
@@ -444,11 +450,12 @@ class LoopCloser:
         normals = [n for n in (a.normal, b.normal) if n is not None]
         return self._mahalanobis(e, S, normals)
 
-    def confirmed(self, h: Hypothesis) -> bool:
-        """Whether ``h`` agrees with ``confirmations`` recent hypotheses (else it waits).
+    def agreement(self, h: Hypothesis) -> int:
+        """How many recent hypotheses agree with ``h`` (``h`` then joins them).
 
-        Recent: found within the last ``local_keyframes`` keyframes at another keyframe.  ``h``
-        joins the recent ones either way.
+        Recent: found within the last ``local_keyframes`` keyframes at another keyframe; two
+        agree when their pairwise consistency (:meth:`pair_chi2`) lies within the
+        ``consistency_probability`` quantile of χ²₃.
         """
         lcc = self.config.loop_closure
         self._recent = [r for r in self._recent if r.keyframe > h.keyframe - lcc.local_keyframes]
@@ -457,7 +464,7 @@ class LoopCloser:
             for r in self._recent
         )
         self._recent.append(h)
-        return agree >= lcc.confirmations
+        return agree
 
     def where(self, pose: int, k_old: int) -> dict[str, Any]:
         """Where a candidate was: the two keyframes, their scans and poses."""
@@ -479,6 +486,7 @@ class LoopCloser:
         found: LoopClosure,
         pose: int,
         chi2_t: float = float("nan"),
+        agree: int = 0,
     ) -> int:
         """Spread the correction, merge the verified pairs, judge; keep only if explained.
 
@@ -497,6 +505,8 @@ class LoopCloser:
         old_last = book.last_keyframe[old[[j for _, j in found.pairs]]]
         loop_from = max(int(old_last.min()) - lcc.local_keyframes, 0)
         loop_before, _ = residual_chi2(g, loop_from)
+        kernel = self._judge_kernel()
+        loop_before_robust, _ = residual_chi2(g, loop_from, *kernel)
         k_old = int(np.median(old_last))
         where = self.where(pose, k_old)
         corr = self.effective_correction(found, old)
@@ -541,6 +551,7 @@ class LoopCloser:
         # F statistic: the loop region's cost increase per merged degree of freedom against its
         # own cost per residual degree of freedom before
         loop_after, _ = residual_chi2(g, loop_from)
+        loop_after_robust, _ = residual_chi2(g, loop_from, *kernel)
         m_loop = max(
             2 * int(np.count_nonzero(g.factor_pose >= loop_from))
             + 3 * int(np.count_nonzero(g.odometry_second >= loop_from))
@@ -548,6 +559,9 @@ class LoopCloser:
             1,
         )
         f_stat = ((loop_after - loop_before) / (2 * len(done))) / max(loop_before / m_loop, 1e-12)
+        f_robust = ((loop_after_robust - loop_before_robust) / (2 * len(done))) / max(
+            loop_before_robust / m_loop, 1e-12
+        )
         attempt = ClosureAttempt(
             "judged",
             int(pose),
@@ -565,13 +579,21 @@ class LoopCloser:
             where=where,
         )
         attempt.f_statistic = float(f_stat)
+        attempt.f_statistic_robust = float(f_robust)
+        attempt.agreeing_hypotheses = int(agree)
         self.attempts.append(attempt)
         explained = (
             good >= max(lcc.min_matches - 1, 2)
             and good >= lcc.min_consistent_fraction * len(records)
             and worst <= lcc.judge_max_pair_chi2
         )
-        if explained and f_stat <= lcc.judge_max_f:
+        f_ok = f_stat <= lcc.judge_max_f or (
+            lcc.judge_robust_cost
+            and agree >= 1
+            and good == len(records)
+            and f_robust <= lcc.judge_max_f
+        )
+        if explained and f_ok:
             # explained (up to a few wrong pairs, which are undone)
             self.audit.audit(records)
             self.converge(reset=big)
@@ -594,6 +616,12 @@ class LoopCloser:
             (int(pose), np.asarray(found.correction, dtype=float), len(found.pairs))
         )
         return 0
+
+    def _judge_kernel(self) -> tuple[RobustKernel, float]:
+        """The kernel of the judge's loop cost: the solver's own, or none (Gaussian)."""
+        if self.config.loop_closure.judge_robust_cost:
+            return self.config.solver.robust_kernel, self.config.solver.robust_k
+        return "none", 1.0
 
     def converge(self, reset: bool) -> None:
         """Bring the back-end to the graph, converge, and refresh the extents.
