@@ -17,13 +17,16 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    ``confirmations`` of 1 or more it must agree with that many other recent hypotheses
    (pairwise consistency through the front end's chains, as in PCM, Mangelson et al. 2018;
    within the ``consistency_probability`` quantile of χ²): a revisit is then recognised twice
-   before it is judged.
+   before it is judged.  How many recent hypotheses agree is passed to the judge either way.
 4. **Judge.**  A large correction is first spread over the loop (:func:`spread_correction`); the
    paired landmarks are merged and a batch solve of the loop
    (:class:`slam.graph.batch.BatchSolver`, at most ``judge_iterations``) outside the back-end
    decides: the closure is kept when enough merged pairs are explained
-   (:class:`slam.line_slam.audit.MergeAudit`), else the landmark book is restored to its
-   snapshot and the back-end never sees it.  An accepted closure with a large correction
+   (:class:`slam.line_slam.audit.MergeAudit`) and the loop's cost rises little per merged
+   degree of freedom (an F test in χ², or, for a closure whose every pair is explained and
+   that a recent hypothesis agrees with, in the solver's robust cost:
+   ``judge_robust_cost``), else the landmark book is restored to its snapshot and the
+   back-end never sees it.  An accepted closure with a large correction
    restarts the back-end from the judged estimate; a small one reaches it incrementally.
 
 Every attempt is recorded as a :class:`ClosureAttempt` (``summary.json``:
@@ -496,7 +499,9 @@ class LoopCloser:
         touching the back-end: a rejected closure is rolled back (the book's snapshot) and the
         back-end never sees it; an accepted one with a large correction restarts the back-end
         from the judged estimate, a small one reaches it incrementally
-        (``large_correction_*``).  Returns 1 when accepted, else 0.
+        (``large_correction_*``).  ``agree`` is the number of recent hypotheses that agree
+        with this one (:meth:`agreement`; the robust second chance needs one).  Returns 1
+        when accepted, else 0.
         """
         book = self.book
         g = book.graph
