@@ -375,6 +375,24 @@ def _undone_merges_and_a_wrong_pair(seed=3):
     return slam, right, (a, b)
 
 
+def _judge(with_wrong_pair, agree=0, **loop_closure):
+    """The three right pairs (and the wrong one) judged as one closure with the loop-closure
+    settings changed by ``loop_closure``, ``agree`` recent hypotheses agreeing; returns
+    ``(accepted, log entry)``."""
+    from slam.frontend.loop_closure import LoopClosure
+
+    slam, right, (a, b) = _undone_merges_and_a_wrong_pair()
+    lcc = replace(slam.config.loop_closure, **loop_closure)
+    slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
+    local = [r.drop for r in right] + ([a] if with_wrong_pair else [])
+    old = [r.keep for r in right] + ([b] if with_wrong_pair else [])
+    found = LoopClosure(np.zeros(3), [(k, k) for k in range(len(local))], 10.0, 1.0)
+    got = slam.loop_closer.apply(
+        np.array(local), np.array(old), found, slam.graph.n_poses - 1, agree=agree
+    )
+    return got, slam.loop_closer.attempts[-1].as_log()
+
+
 @pytest.mark.parametrize(
     ("max_pair_chi2", "max_f", "accepted"),
     [(np.inf, np.inf, 1), (1000.0, np.inf, 0), (np.inf, 100.0, 0)],
@@ -383,17 +401,7 @@ def test_closure_with_a_pair_left_metres_apart_is_rejected_whole(max_pair_chi2, 
     """Three right pairs and one pairing a wall with a perpendicular one: the fraction rule
     (3 of 4 explained) accepts it; ``judge_max_pair_chi2`` rejects it whole, and so does the F
     test of the merged loop against its own residual level (``judge_max_f``)."""
-    from slam.frontend.loop_closure import LoopClosure
-
-    slam, right, (a, b) = _undone_merges_and_a_wrong_pair()
-    g = slam.graph
-    local = np.array([r.drop for r in right] + [a])
-    old = np.array([r.keep for r in right] + [b])
-    lcc = replace(slam.config.loop_closure, judge_max_pair_chi2=max_pair_chi2, judge_max_f=max_f)
-    slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
-    found = LoopClosure(np.zeros(3), [(k, k) for k in range(4)], 10.0, 1.0)
-    got = slam.loop_closer.apply(local, old, found, g.n_poses - 1)
-    entry = slam.loop_closer.attempts[-1].as_log()
+    got, entry = _judge(True, judge_max_pair_chi2=max_pair_chi2, judge_max_f=max_f)
     assert entry["consistent_pairs"] == 3 and entry["worst_pair_chi2"] > 1000.0
     assert entry["f_statistic"] > 100.0
     assert got == accepted
@@ -402,66 +410,29 @@ def test_closure_with_a_pair_left_metres_apart_is_rejected_whole(max_pair_chi2, 
 def test_right_closure_passes_the_f_test():
     """The same three right pairs without the wrong one: the merged loop's cost per merged
     degree of freedom stays at the graph's own level (F well below ``judge_max_f``)."""
-    from slam.frontend.loop_closure import LoopClosure
-
-    slam, right, _ = _undone_merges_and_a_wrong_pair()
-    g = slam.graph
-    local = np.array([r.drop for r in right])
-    old = np.array([r.keep for r in right])
-    found = LoopClosure(np.zeros(3), [(k, k) for k in range(3)], 10.0, 1.0)
-    assert slam.loop_closer.apply(local, old, found, g.n_poses - 1) == 1
-    entry = slam.loop_closer.attempts[-1].as_log()
+    got, entry = _judge(False)
+    assert got == 1
     assert entry["f_statistic"] < 10.0
-
-
-def _judge_right_pairs(agree, robust, max_f=None):
-    """The three right pairs judged with ``judge_max_f`` between the closure's robust and
-    Gaussian F statistics (measured first), ``agree`` recent hypotheses agreeing."""
-    from slam.frontend.loop_closure import LoopClosure
-
-    slam, right, _ = _undone_merges_and_a_wrong_pair()
-    g = slam.graph
-    lcc = replace(slam.config.loop_closure, judge_robust_cost=robust)
-    if max_f is not None:
-        lcc = replace(lcc, judge_max_f=max_f)
-    slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
-    local = np.array([r.drop for r in right])
-    old = np.array([r.keep for r in right])
-    found = LoopClosure(np.zeros(3), [(k, k) for k in range(3)], 10.0, 1.0)
-    got = slam.loop_closer.apply(local, old, found, g.n_poses - 1, agree=agree)
-    return got, slam.loop_closer.attempts[-1].as_log()
 
 
 def test_robust_second_chance_needs_every_pair_explained_and_an_agreeing_hypothesis():
     """``judge_robust_cost``: a closure that fails the Gaussian F test but passes it in the
     solver's robust cost is accepted only with all its pairs explained and a recent hypothesis
     agreeing with it; a closure with a pair left metres apart is not, whatever its robust F."""
-    from slam.frontend.loop_closure import LoopClosure
-
-    _, entry = _judge_right_pairs(agree=0, robust=True, max_f=np.inf)
+    _, entry = _judge(False, judge_robust_cost=True, judge_max_f=np.inf)
     f_gauss, f_robust = entry["f_statistic"], entry["f_statistic_robust"]
     assert entry["consistent_pairs"] == entry["pairs"] == 3
     assert 0.0 < f_robust < f_gauss  # the robust cost grows less: the kernel bounds each line
     between = 0.5 * (f_robust + f_gauss)
-    assert _judge_right_pairs(agree=1, robust=True, max_f=between)[0] == 1
-    assert _judge_right_pairs(agree=0, robust=True, max_f=between)[0] == 0
-    assert _judge_right_pairs(agree=1, robust=False, max_f=between)[0] == 0
-
+    assert _judge(False, 1, judge_robust_cost=True, judge_max_f=between)[0] == 1
+    assert _judge(False, 0, judge_robust_cost=True, judge_max_f=between)[0] == 0
+    assert _judge(False, 1, judge_robust_cost=False, judge_max_f=between)[0] == 0
     # three right pairs and a wrong one: rejected though its robust F is within the limit
-    def wrong_pair(max_f):
-        slam, right, (a, b) = _undone_merges_and_a_wrong_pair()
-        lcc = replace(slam.config.loop_closure, judge_max_f=max_f)
-        slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
-        local = np.array([r.drop for r in right] + [a])
-        old = np.array([r.keep for r in right] + [b])
-        found = LoopClosure(np.zeros(3), [(k, k) for k in range(4)], 10.0, 1.0)
-        got = slam.loop_closer.apply(local, old, found, slam.graph.n_poses - 1, agree=1)
-        return got, slam.loop_closer.attempts[-1].as_log()
-
-    _, entry = wrong_pair(np.inf)
+    _, entry = _judge(True, 1, judge_max_f=np.inf)
     assert entry["consistent_pairs"] == 3 and entry["pairs"] == 4
     assert entry["f_statistic_robust"] < entry["f_statistic"]
-    assert wrong_pair(0.5 * (entry["f_statistic_robust"] + entry["f_statistic"]))[0] == 0
+    between = 0.5 * (entry["f_statistic_robust"] + entry["f_statistic"])
+    assert _judge(True, 1, judge_max_f=between)[0] == 0
 
 
 def test_judge_cost_counts_an_outlier_line_as_the_solver_does(loop_runs):
@@ -473,8 +444,10 @@ def test_judge_cost_counts_an_outlier_line_as_the_solver_does(loop_runs):
 
     g = loop_runs[3]["isam2"][0].graph
     k = 3.0
-    plain, line = residual_chi2(g, 10)
-    robust, line_r = residual_chi2(g, 10, "cauchy", k)
+    plain, plain_r, line = residual_chi2(g, 10)
+    assert plain_r == pytest.approx(plain, rel=1e-12)  # no kernel: the χ² total
+    plain_c, robust, line_r = residual_chi2(g, 10, "cauchy", k)
+    assert plain_c == plain
     np.testing.assert_array_equal(line, line_r)
     odo = plain - line.sum()
     assert odo > 0.0
@@ -485,8 +458,7 @@ def test_judge_cost_counts_an_outlier_line_as_the_solver_does(loop_runs):
     z = g.factor_z[f].copy()
     g.factor_z[f, 0] += 2.0
     try:
-        plain_off, line_off = residual_chi2(g, 10)
-        robust_off, _ = residual_chi2(g, 10, "cauchy", k)
+        plain_off, robust_off, line_off = residual_chi2(g, 10, "cauchy", k)
     finally:
         g.factor_z[f] = z
     pos = int(np.searchsorted(np.flatnonzero(g.factor_pose >= 10), f))

@@ -26,14 +26,14 @@ FloatArray = NDArray[np.float64]
 
 def residual_chi2(
     graph: LineGraph, from_pose: int = 0, kernel: RobustKernel = "none", k: float = 1.0
-) -> tuple[float, FloatArray]:
+) -> tuple[float, float, FloatArray]:
     """Squared whitened residuals of the graph at its estimate.
 
-    Returns the total over the line factors of poses from ``from_pose`` on and the odometry
-    factors ending there, and each of those line factors' own χ² (2 dof).  With a robust
-    ``kernel`` (``k`` in standard deviations, :mod:`slam.graph.robust`) each line factor
-    adds ``2 ρ(‖e‖)`` to the total instead of ``‖e‖²`` (the cost the solver minimises, in χ²
-    units; the odometry factors are never robustified); the per-factor χ² stay Gaussian.
+    Returns the χ² total over the line factors of poses from ``from_pose`` on and the
+    odometry factors ending there; the same total in the cost the solver minimises, each line
+    factor adding ``2 ρ(‖e‖)`` of the robust ``kernel`` (``k`` in standard deviations,
+    :mod:`slam.graph.robust`; χ² units; the odometry factors are never robustified) instead
+    of ``‖e‖²``; and each of those line factors' own χ² (2 dof).
     """
     g = graph
     line = np.zeros(0)
@@ -61,8 +61,8 @@ def residual_chi2(
                 )
             )
         )
-    lines = float(np.sum(2.0 * robust_cost(kernel, np.sqrt(line), k))) if line.size else 0.0
-    return lines + odo, line
+    robust = float(np.sum(2.0 * robust_cost(kernel, np.sqrt(line), k))) if line.size else 0.0
+    return float(line.sum()) + odo, robust + odo, line
 
 
 class MergeAudit:

@@ -509,9 +509,8 @@ class LoopCloser:
         before = book.snapshot()
         old_last = book.last_keyframe[old[[j for _, j in found.pairs]]]
         loop_from = max(int(old_last.min()) - lcc.local_keyframes, 0)
-        loop_before, _ = residual_chi2(g, loop_from)
         kernel = self._judge_kernel()
-        loop_before_robust, _ = residual_chi2(g, loop_from, *kernel)
+        loop_before, loop_before_robust, _ = residual_chi2(g, loop_from, *kernel)
         k_old = int(np.median(old_last))
         where = self.where(pose, k_old)
         corr = self.effective_correction(found, old)
@@ -555,8 +554,7 @@ class LoopCloser:
         # graph's own residual level (its variance factor, from the line factors' median χ²)
         # F statistic: the loop region's cost increase per merged degree of freedom against its
         # own cost per residual degree of freedom before
-        loop_after, _ = residual_chi2(g, loop_from)
-        loop_after_robust, _ = residual_chi2(g, loop_from, *kernel)
+        loop_after, loop_after_robust, _ = residual_chi2(g, loop_from, *kernel)
         m_loop = max(
             2 * int(np.count_nonzero(g.factor_pose >= loop_from))
             + 3 * int(np.count_nonzero(g.odometry_second >= loop_from))
