@@ -35,7 +35,7 @@ from slam.frontend.scan_match import (
     slip_covariance,
     visible_points,
 )
-from slam.geometry import pose_between, pose_compose
+from slam.geometry import pose_between, pose_compose, pose_log
 from slam.io import read_tum
 from slam.io.relations import read_relations
 from slam.models import MotionNoiseConfig
@@ -353,12 +353,46 @@ def test_a_rejected_match_that_finds_a_slip_contradicts_the_odometry(slip_deg):
     assert used.accepted and used.slip and not used.contradicted
 
 
-def test_slip_covariance_widens_the_heading_only():
-    Q = _odometry_cov(TRUE_DELTA)
+def _driven(length_m: float, turn_rad: float, n: int = 4000) -> np.ndarray:
+    """Relative pose after driving ``length_m`` while turning uniformly by ``turn_rad``."""
+    s = (np.arange(n) + 0.5) / n
+    return np.array(
+        [
+            length_m * np.mean(np.cos(turn_rad * s)),
+            length_m * np.mean(np.sin(turn_rad * s)),
+            turn_rad,
+        ]
+    )
+
+
+@pytest.mark.parametrize(
+    ("length_m", "turn_rad"), [(0.5, 0.0), (0.6, 0.1), (0.3, -0.15), (0.3, 0.6)]
+)
+def test_slip_covariance_spreads_the_translation_along_the_heading_slip(length_m, turn_rad):
+    """A slip: the wheels misreport the heading by ``φ`` accrued over the step, and the
+    odometry integrates its translation along that heading.  To first order the true step
+    differs from the odometry's by ``φ v``, ``v = (−t_y/2, t_x/2, 1)`` (in the step's start
+    frame; rotated by ``−dθ`` in its end frame, the odometry factor's): the slip component is
+    ``Q + σ_slip² v vᵀ``.  Checked against the step driven with and without the slip."""
     cfg = ScanMatchConfig()
+    phi = 1e-3
+    odo = _driven(length_m, turn_rad)
+    true = _driven(length_m, turn_rad + phi)
+    Q = _odometry_cov(odo)
+    for body in (False, True):
+        v = (slip_covariance(Q, cfg, odo, body=body) - Q) / cfg.slip_sigma_rad**2
+        e = pose_log(pose_between(odo, true)) if body else true - odo
+        measured = e / phi
+        predicted = v[:, 2]  # the column of v vᵀ with v[2] = 1
+        np.testing.assert_allclose(v, np.outer(predicted, predicted), atol=1e-15)
+        # exact for a straight step; a turning one bends its lever arm (about L·|dθ|/12),
+        # far less than the other frame's vector would be off
+        tol = 0.002 + 0.1 * abs(turn_rad) * length_m
+        np.testing.assert_allclose(measured, predicted, atol=tol, rtol=0.0)
+    # without the step: the heading only; the argument is not modified
     wide = slip_covariance(Q, cfg)
     np.testing.assert_array_equal(wide - Q, np.diag([0.0, 0.0, cfg.slip_sigma_rad**2]))
-    assert Q[2, 2] == _odometry_cov(TRUE_DELTA)[2, 2]  # the argument is not modified
+    assert Q[2, 2] == _odometry_cov(odo)[2, 2]
 
 
 def test_overconfidence_of_the_summed_cost():

@@ -20,10 +20,11 @@ and so overstates their evidence; it is divided by ``κ = tr(H C)/3`` (``H`` its
 (Chandler & Bate 2007), before it is weighed against the prior.
 
 **Slips.**  With ``slip_probability > 0`` the odometry's heading is a mixture: its Gaussian, or
-with that probability a slip (``slip_sigma_rad`` more spread in rotation).  The search weighs
-the starts under the mixture; the component more probable at the match is then its prior (a
-max-mixture, Olson & Agarwal 2012): a slip's match keeps the rotation the points say, and
-:attr:`ScanMatch.slip` tells the caller that the odometry's rotation did not hold.
+with that probability a slip (``slip_sigma_rad`` more spread in rotation, and with it the
+translation the odometry integrated along the slipped heading, :func:`slip_covariance`).  The
+search weighs the starts under the mixture; the component more probable at the match is then
+its prior (a max-mixture, Olson & Agarwal 2012): a slip's match keeps the rotation the points
+say, and :attr:`ScanMatch.slip` tells the caller that the odometry's rotation did not hold.
 
 **Covariance.**  The points' part is the Cauchy M-estimator's sandwich ``A⁻¹ B A⁻¹`` in
 expectation under the noise model (``A = E[ψ'] Σ JᵀJ/σ²``; in ``B`` the model error is one
@@ -677,15 +678,16 @@ class _Matcher:
 class _OdometryPrior:
     """The odometry step as the match's prior: its Gaussian, or a mixture with a heading slip.
 
-    ``N(x0, Q)`` with probability ``1 − ε`` and ``N(x0, Q + diag(0, 0, σ_slip²))`` with
-    probability ``ε`` (``slip_probability``, ``slip_sigma_rad``); ``ε = 0``: the Gaussian.
+    ``N(x0, Q)`` with probability ``1 − ε`` and ``N(x0, Q + σ_slip² v vᵀ)`` with probability
+    ``ε`` (``slip_probability``, ``slip_sigma_rad``; ``v`` the slip's direction,
+    :func:`slip_covariance`); ``ε = 0``: the Gaussian.
     """
 
     def __init__(self, x0: FloatArray, Q: FloatArray, config: ScanMatchConfig) -> None:
         self.x0 = x0
         self.slip_probability = eps = config.slip_probability
         self.cov = Q
-        self.cov_slip = slip_covariance(Q, config)
+        self.cov_slip = slip_covariance(Q, config, x0)
         self.info = _symmetric_inverse(Q)
         self.info_slip = _symmetric_inverse(self.cov_slip)
         self.info_search = self.info_slip if eps > 0.0 else self.info
@@ -718,10 +720,38 @@ class _OdometryPrior:
         return l1 > l0
 
 
-def slip_covariance(Q: FloatArray, config: ScanMatchConfig) -> FloatArray:
-    """The slip component's covariance: ``Q + diag(0, 0, σ_slip²)`` (``slip_sigma_rad``)."""
+def slip_covariance(
+    Q: FloatArray, config: ScanMatchConfig, delta: FloatArray | None = None, body: bool = False
+) -> FloatArray:
+    """The slip component's covariance: ``Q + σ_slip² v vᵀ`` (``slip_sigma_rad``).
+
+    A slip is a heading error ``φ`` that the wheels accrue over the step, and the odometry
+    integrates the step's translation ``t`` along that heading: to first order (a straight
+    step, the error growing uniformly) the true step is the odometry's moved by
+    ``φ v``, ``v = (−t_y/2, t_x/2, 1)`` in the step's start frame.
+
+    Parameters
+    ----------
+    Q : ndarray, shape (3, 3)
+        The odometry's covariance of the step.
+    config : ScanMatchConfig
+    delta : ndarray, shape (3,), optional
+        The odometry's step ``(t_x, t_y, dθ)``; None: the heading only, ``v = (0, 0, 1)``.
+    body : bool
+        ``v`` in the step's end frame (the right tangent space of an odometry factor:
+        its translation rotated by ``−dθ``) instead of the start frame (the match's
+        coordinates).
+    """
     cov = np.array(Q, dtype=np.float64)
-    cov[2, 2] += config.slip_sigma_rad**2
+    v = np.array([0.0, 0.0, 1.0])
+    if delta is not None:
+        t = np.asarray(delta, dtype=float)
+        lever = 0.5 * np.array([-t[1], t[0]])
+        if body:
+            c, s = math.cos(float(t[2])), math.sin(float(t[2]))
+            lever = np.array([c * lever[0] + s * lever[1], -s * lever[0] + c * lever[1]])
+        v[:2] = lever
+    cov += config.slip_sigma_rad**2 * np.outer(v, v)
     return cov
 
 

@@ -298,7 +298,7 @@ class LineSlam:
                     if match.contradicted:
                         # the points say the odometry's heading slipped but not by how much:
                         # the step keeps the odometry with the slip component's covariance
-                        Q = slip_covariance(Q, cfg.frontend.scan_matching)
+                        Q = slip_covariance(Q, cfg.frontend.scan_matching, step.delta, body=True)
                         contradicted = True
                         self.counters["scan_match_contradictions"] += 1
             self._points = points
