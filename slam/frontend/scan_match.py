@@ -291,7 +291,8 @@ class ScanMatch:
     slip : bool
         Accepted, and the odometry's heading slipped (the slip component of the prior is the
         more probable at the match; :class:`ScanMatchConfig` ``slip_probability``): ``cov``
-        then holds the odometry's translation with the slip's rotation spread and the points.
+        then holds the slip component (the rotation spread, the translation moved with it) and
+        the points.
     contradicted : bool
         Not accepted, yet the slip component is the more probable at the match: the points
         contradict the odometry's heading without settling it.  The step's prior is then the

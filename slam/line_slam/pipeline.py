@@ -17,9 +17,9 @@ For each keyframe:
    previous keyframe's with ``(δ, Q)`` as the prior (:mod:`slam.frontend.scan_match`), and an
    accepted match replaces ``δ`` in ``x̂`` (``Q`` is kept; the match is no graph factor).  A
    match that finds the odometry's heading slipped (``scan_matching.slip_probability``)
-   replaces the keyframe's odometry factor (the match's posterior: the odometry's
-   translation, the points' rotation), and the step is left out of the odometry-noise
-   estimate.
+   replaces the keyframe's odometry factor (the match's posterior under the slip component:
+   the points' rotation, the translation moved with it), and the step is left out of the
+   odometry-noise estimate.
 4. **Front end** (:mod:`~slam.line_slam.local_map`, :mod:`~slam.line_slam.front_end`): the
    lines are registered against the local map around ``x̂``; the registered pose is the
    keyframe's initial estimate and the registration's pairs are the data association.
@@ -335,7 +335,7 @@ class LineSlam:
                     g.add_odometry(prev, i, step.delta, Q)
                 else:
                     # the odometry's heading slipped: the step's factor is the match (the
-                    # odometry's translation, the points' rotation)
+                    # points' rotation, the translation moved with the slip)
                     g.add_odometry(prev, i, slip.delta, slip.cov)
                 if cfg.frontend.pose_factor == "inflated" and reg.cov is not None:
                     add_registration_factor(g, prev, i, reg, cfg.frontend.pose_factor_inflation)
