@@ -110,8 +110,9 @@ class ScanMatchConfig:
         Prior probability that a step's odometry heading is a slip (0: the odometry's
         Gaussian alone).
     slip_sigma_rad : float
-        Standard deviation of a slip's heading error (rad), added to the odometry's; the
-        search's ``rotation_window_rad`` covers two of them.
+        Standard deviation of a slip's heading error (rad), added to the odometry's, with the
+        translation the odometry integrated along it (:func:`slip_covariance`); the search's
+        ``rotation_window_rad`` covers two of them.
     """
 
     RENAMED_KEYS: ClassVar[dict[str, str]] = {
