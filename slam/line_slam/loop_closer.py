@@ -561,10 +561,12 @@ class LoopCloser:
             - 3 * (g.n_poses - loop_from),
             1,
         )
-        f_stat = ((loop_after - loop_before) / (2 * len(done))) / max(loop_before / m_loop, 1e-12)
-        f_robust = ((loop_after_robust - loop_before_robust) / (2 * len(done))) / max(
-            loop_before_robust / m_loop, 1e-12
-        )
+
+        def f_statistic(before: float, after: float) -> float:
+            return ((after - before) / (2 * len(done))) / max(before / m_loop, 1e-12)
+
+        f_stat = f_statistic(loop_before, loop_after)
+        f_robust = f_statistic(loop_before_robust, loop_after_robust)
         attempt = ClosureAttempt(
             "judged",
             int(pose),
