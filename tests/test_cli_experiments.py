@@ -82,7 +82,12 @@ def test_consistency_long_run_reports_the_anees_per_loop(tmp_path):
         per_loop = est["anees_per_loop"]
         assert len(per_loop) == 2
         assert np.mean(per_loop) == pytest.approx(est["mean_anees"], rel=0.05)
+        heading = est["anees_heading_per_loop"]
+        assert len(heading) == 2
+        assert np.mean(heading) == pytest.approx(est["mean_anees_heading"], rel=0.05)
+        assert np.all(np.array(heading) < np.array(per_loop))
     assert (out / "nees.png").stat().st_size > 1000
+    assert (out / "nees_heading.png").stat().st_size > 1000
 
 
 @pytest.mark.parametrize(

@@ -41,6 +41,14 @@ def test_odometry_only_is_consistent_and_the_ekf_beats_it():
     assert res.fraction_inside >= 0.85, res.fraction_inside
     assert 2.4 < res.mean_anees < 3.6
     assert np.all(np.isnan(res.nees[:, 0]))  # the first pose is given exactly
+    # the heading part alone is χ²(1): its average near 1, and never above the pose NEES
+    # (a marginal of the quadratic form), defined exactly where the pose NEES is
+    assert res.heading_bounds == pytest.approx(nees_bounds(1, 20, 0.95))
+    assert 0.7 < res.mean_anees_heading < 1.3, res.mean_anees_heading
+    ok = np.isfinite(res.nees)
+    np.testing.assert_array_equal(np.isfinite(res.nees_heading), ok)
+    assert np.all(res.nees_heading[ok] <= res.nees[ok] * (1.0 + 1e-12))
+    assert np.mean(res.nees_heading[ok] < 0.5 * res.nees[ok]) > 0.3  # not the whole NEES
 
 
 def test_serial_and_local_cluster_give_identical_results():
@@ -52,6 +60,7 @@ def test_serial_and_local_cluster_give_identical_results():
     for name in cfg.estimators:
         a, b = serial.estimators[name], parallel.estimators[name]
         np.testing.assert_array_equal(a.nees, b.nees)
+        np.testing.assert_array_equal(a.nees_heading, b.nees_heading)
         np.testing.assert_array_equal(a.pos_rmse_m, b.pos_rmse_m)
         np.testing.assert_array_equal(a.landmarks, b.landmarks)
     ekf, odo = serial.estimators["ekf"], serial.estimators["odometry"]

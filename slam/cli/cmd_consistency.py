@@ -3,9 +3,10 @@
 Runs ``--runs`` seeded simulations (line-level simulator, :mod:`slam.experiments.linesim`)
 through each estimator, serially, on ``--workers`` local processes, or on a Dask cluster
 (``--dask ADDRESS``) — the same numbers either way.  Writes ``config.toml``,
-``consistency.json`` (per estimator: ANEES over time and per loop, bounds, fraction inside,
-RMSE, run time) and the figures ``nees.png`` (with ``--loops`` ≥ 2 the mean per loop drawn
-over the curves) and ``error.png``.  ``--odometry-scale``, ``--line-range-sigma`` and
+``consistency.json`` (per estimator: ANEES over time and per loop, its heading part per loop,
+bounds, fraction inside, RMSE, run time) and the figures ``nees.png`` (with ``--loops`` ≥ 2
+the mean per loop drawn over the curves), ``nees_heading.png`` (the heading part, 1 dof) and
+``error.png``.  ``--odometry-scale``, ``--line-range-sigma`` and
 ``--line-point-spacing`` set the simulator's noise (the estimators are told the same models).
 """
 
@@ -115,6 +116,17 @@ def consistency(
             n_runs=runs,
             title=f"Pose NEES over time, {world} x{loops:g}, {runs} runs",
             segments=result.n_loops,
+        )
+        interrupts.check()
+        plot_nees_over_time(
+            {k: v.anees_heading for k, v in result.estimators.items()},
+            next(iter(result.estimators.values())).heading_bounds,
+            work / "nees_heading.png",
+            dof=1,
+            n_runs=runs,
+            title=f"Heading NEES over time, {world} x{loops:g}, {runs} runs",
+            segments=result.n_loops,
+            ylabel="average heading NEES",
         )
         interrupts.check()
         plot_errors_over_time(

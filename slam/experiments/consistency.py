@@ -2,11 +2,13 @@
 
 Each run ``i`` simulates the world with seed ``task_seed(seed, i)`` (the same data for every
 estimator: a paired comparison), runs each estimator on it, and records per pose the NEES
-(:func:`slam.evaluation.pose_nees_values`, tangent space), the position and heading errors and
-the run time.  The summary per estimator is the average NEES over runs at each time step
-(ANEES) with its two-sided χ² bounds (``n_runs · ANEES ~ χ²_{3 n_runs}`` for a consistent
-estimator, :func:`slam.evaluation.nees_bounds`), the fraction of time steps inside them, and
-the mean over time.
+(:func:`slam.evaluation.pose_nees_values`, tangent space) and its heading part alone
+(``ξ_θ² / P_θθ``, 1 dof: where the EKF's spurious heading information shows, Huang, Mourikis &
+Roumeliotis 2010), the position and heading errors and the run time.  The summary per
+estimator is the average NEES over runs at each time step (ANEES) with its two-sided χ² bounds
+(``n_runs · ANEES ~ χ²_{3 n_runs}`` for a consistent estimator,
+:func:`slam.evaluation.nees_bounds`; ``χ²_{n_runs}`` for the heading part), the fraction of
+time steps inside them, and the mean over time.
 
 Filtering estimators (EKF) are evaluated on their filtered pose at each time; smoothing ones
 (the batch graph) on their final trajectory; both are what the estimator reports for that pose.
@@ -34,7 +36,7 @@ from slam.experiments.linesim import (
     world_and_trajectory,
 )
 from slam.experiments.parallel import map_tasks, task_seed
-from slam.geometry import pose_between
+from slam.geometry import pose_between, pose_log
 
 __all__ = [
     "ConsistencyConfig",
@@ -112,8 +114,9 @@ def consistency_task(task: ConsistencyTask) -> dict[str, dict[str, Any]]:
     Returns
     -------
     dict
-        ``{estimator: {"nees": (N,), "pos_err_m": (N,), "rot_err_rad": (N,),
-        "runtime_s": float, "landmarks": int, "stopped_at_scan": int or None}}``.
+        ``{estimator: {"nees": (N,), "nees_heading": (N,), "pos_err_m": (N,),
+        "rot_err_rad": (N,), "runtime_s": float, "landmarks": int,
+        "stopped_at_scan": int or None}}``.
     """
     cfg = task.config
     world, truth = world_and_trajectory(cfg.world, cfg.loops)
@@ -126,8 +129,11 @@ def consistency_task(task: ConsistencyTask) -> dict[str, dict[str, Any]]:
         runtime = time.perf_counter() - t0
         n = est.poses_world_laser.shape[0]
         nees = np.full(truth.shape[0], np.nan)
+        nees_heading = np.full(truth.shape[0], np.nan)
         if est.pose_covariances is not None:
             nees[:n] = pose_nees_values(est.poses_world_laser, est.pose_covariances, truth[:n])
+            nees_heading[:n] = _heading_nees(est.poses_world_laser, est.pose_covariances, truth[:n])
+            nees_heading[~np.isfinite(nees)] = np.nan  # defined where the pose NEES is
         err = pose_between(truth[:n], est.poses_world_laser)
         pos = np.full(truth.shape[0], np.nan)
         rot = np.full(truth.shape[0], np.nan)
@@ -135,12 +141,26 @@ def consistency_task(task: ConsistencyTask) -> dict[str, dict[str, Any]]:
         rot[:n] = np.abs(err[:, 2])
         out[name] = {
             "nees": nees,
+            "nees_heading": nees_heading,
             "pos_err_m": pos,
             "rot_err_rad": rot,
             "runtime_s": runtime,
             "landmarks": int(est.landmarks_r_alpha.shape[0]),
             "stopped_at_scan": est.stats.get("stopped_at_scan"),
         }
+    return out
+
+
+def _heading_nees(poses_est: FloatArray, covariances: FloatArray, truth: FloatArray) -> FloatArray:
+    """Heading part of the pose NEES, ``ξ_θ² / P_θθ`` (1 dof), ``ξ = Log(P̂⁻¹ · Q)``.
+
+    It never exceeds the pose NEES of the same pose (a marginal of a quadratic form).
+    """
+    xi_theta = pose_log(pose_between(poses_est, truth))[:, 2]
+    var_theta = covariances[:, 2, 2]
+    out = np.full(xi_theta.shape, np.nan)
+    ok = np.isfinite(var_theta) & (var_theta > 0.0)
+    out[ok] = xi_theta[ok] ** 2 / var_theta[ok]
     return out
 
 
@@ -158,6 +178,11 @@ class EstimatorConsistency:
         Average over runs at each time step.
     bounds : tuple of float
         Two-sided χ² bounds of the ANEES for 3 dof and ``n_runs`` runs.
+    nees_heading : ndarray, shape (n_runs, N)
+        The heading part of ``nees`` alone, ``ξ_θ² / P_θθ`` (1 dof; ``nan`` where ``nees``
+        is).
+    heading_bounds : tuple of float
+        Two-sided χ² bounds of its average over runs (1 dof, ``n_runs`` runs).
     fraction_inside : float
         Share of time steps (with a defined ANEES) inside the bounds.
     pos_err_m : ndarray, shape (n_runs, N)
@@ -177,11 +202,23 @@ class EstimatorConsistency:
     pos_rmse_m: FloatArray
     runtime_s: FloatArray
     landmarks: NDArray[np.int64]
+    nees_heading: FloatArray
+    heading_bounds: tuple[float, float]
 
     @property
     def mean_anees(self) -> float:
         """ANEES averaged over time."""
         return float(np.nanmean(self.anees))
+
+    @property
+    def anees_heading(self) -> FloatArray:
+        """Average heading NEES over runs at each time step, shape (N,) (1 dof)."""
+        return _nanmean_rows(self.nees_heading)
+
+    @property
+    def mean_anees_heading(self) -> float:
+        """Heading ANEES averaged over time (1 dof: 1 for a consistent estimator)."""
+        return float(np.nanmean(self.anees_heading))
 
     @property
     def pos_rmse_over_time(self) -> FloatArray:
@@ -196,13 +233,11 @@ class EstimatorConsistency:
 
     def anees_per_segment(self, n_segments: int) -> FloatArray:
         """ANEES averaged over each of ``n_segments`` equal stretches of the run (e.g. loops)."""
-        bounds = np.linspace(0, self.anees.shape[0], max(n_segments, 1) + 1).round().astype(int)
-        out = []
-        for a, b in itertools.pairwise(bounds):
-            part = self.anees[a:b]
-            ok = np.isfinite(part)
-            out.append(float(np.mean(part[ok])) if np.any(ok) else float("nan"))
-        return np.array(out)
+        return _segment_means(self.anees, n_segments)
+
+    def anees_heading_per_segment(self, n_segments: int) -> FloatArray:
+        """Heading ANEES averaged over each of ``n_segments`` equal stretches of the run."""
+        return _segment_means(self.anees_heading, n_segments)
 
     @property
     def run_mean_nees(self) -> FloatArray:
@@ -226,6 +261,8 @@ class EstimatorConsistency:
             "runtime_s_mean": float(np.mean(self.runtime_s)),
             "landmarks_mean": float(np.mean(self.landmarks)),
             "anees": [None if not np.isfinite(v) else float(v) for v in self.anees],
+            "mean_anees_heading": self.mean_anees_heading,
+            "heading_bounds": list(self.heading_bounds),
         }
 
 
@@ -259,7 +296,11 @@ class ConsistencyResult:
                 "odometry": asdict(sim.odometry),
             },
             "estimators": {
-                k: {**v.to_dict(), "anees_per_loop": v.anees_per_segment(self.n_loops).tolist()}
+                k: {
+                    **v.to_dict(),
+                    "anees_per_loop": v.anees_per_segment(self.n_loops).tolist(),
+                    "anees_heading_per_loop": v.anees_heading_per_segment(self.n_loops).tolist(),
+                }
                 for k, v in self.estimators.items()
             },
         }
@@ -282,12 +323,30 @@ class ConsistencyResult:
                 f"{est.fraction_above:>7.2f} {np.mean(est.pos_rmse_m):>8.4f} "
                 f"{np.mean(est.runtime_s):>7.2f} {np.mean(est.landmarks):>9.1f}"
             )
+        hlo, hhi = next(iter(self.estimators.values())).heading_bounds
+        lines.append(f"heading part (1 dof), bounds [{hlo:.2f}, {hhi:.2f}]:")
+        for est in self.estimators.values():
+            lines.append(f"{est.name:<12} {est.mean_anees_heading:>7.2f}")
         if self.n_loops >= 2:
-            lines.append(f"ANEES per loop ({self.n_loops} loops):")
+            lines.append(f"ANEES per loop ({self.n_loops} loops), then its heading part:")
             for est in self.estimators.values():
                 per = " ".join(f"{v:.2f}" for v in est.anees_per_segment(self.n_loops))
                 lines.append(f"{est.name:<12} {per}")
+            for est in self.estimators.values():
+                per = " ".join(f"{v:.2f}" for v in est.anees_heading_per_segment(self.n_loops))
+                lines.append(f"{est.name:<12} {per}")
         return "\n".join(lines)
+
+
+def _segment_means(series: FloatArray, n_segments: int) -> FloatArray:
+    """Mean of the finite values of ``series`` over each of ``n_segments`` equal stretches."""
+    edges = np.linspace(0, series.shape[0], max(n_segments, 1) + 1).round().astype(int)
+    out = []
+    for a, b in itertools.pairwise(edges):
+        part = series[a:b]
+        ok = np.isfinite(part)
+        out.append(float(np.mean(part[ok])) if np.any(ok) else float("nan"))
+    return np.array(out)
 
 
 def _nanmean_rows(a: FloatArray) -> FloatArray:
@@ -348,5 +407,7 @@ def run_consistency(
             pos_rmse_m=np.sqrt(np.nanmean(pos**2, axis=1)),
             runtime_s=np.array([o[name]["runtime_s"] for o in outputs]),
             landmarks=np.array([o[name]["landmarks"] for o in outputs], dtype=np.int64),
+            nees_heading=np.array([o[name]["nees_heading"] for o in outputs]),
+            heading_bounds=nees_bounds(1, config.n_runs, config.probability),
         )
     return ConsistencyResult(config, summary, wall)

@@ -46,8 +46,12 @@ def plot_nees_over_time(
     title: str = "",
     n_runs: int | None = None,
     segments: int = 1,
+    ylabel: str = "average pose NEES",
 ) -> Path:
     """Average pose NEES over time per estimator with the χ² band of a consistent estimator.
+
+    ``dof`` is the dimension of the error (3 for the pose; 1 for its heading part, with
+    ``ylabel`` saying so).
 
     With ``segments > 1`` (the loops of a long run) each curve is drawn thin and its mean over
     each of ``segments`` equal stretches is drawn over it as a thick step, with the stretches'
@@ -79,7 +83,7 @@ def plot_nees_over_time(
     ax.set_ylim(*nees_axis_limits(anees, bounds))
     runs = f", {n_runs} runs" if n_runs else ""
     title = title or f"Pose NEES over time{runs}"
-    return _finish_log_scale(fig, ax, path, "scan", "average pose NEES", title, "upper left")
+    return _finish_log_scale(fig, ax, path, "scan", ylabel, title, "upper left")
 
 
 def nees_axis_limits(
