@@ -871,6 +871,7 @@ def _open_bag(path: Path, scanner: ScannerConfig) -> LogInput:
 
 
 def _open_carmen(resolved: ResolvedLog, scanner: ScannerConfig, max_scans: int | None) -> LogInput:
+    from slam.io.anomalies import readable
     from slam.io.carmen import CarmenReader, _sniff_laser_type, read_params
     from slam.io.laser import guess_laser_geometry
 
@@ -948,7 +949,7 @@ def _open_carmen(resolved: ResolvedLog, scanner: ScannerConfig, max_scans: int |
                 else:
                     warnings.warn(
                         f"{where}: the laser pose and the odometry pose of the log differ by an "
-                        f"offset that varies over the log (by {estimate.spread_m:.3f} m, "
+                        f"offset that varies over the log (by {readable(estimate.spread_m)} m, "
                         f"{math.degrees(estimate.spread_rad):.2f} deg): no mounting derived; "
                         "state one with --mount X,Y,THETA_DEG",
                         InputWarning,

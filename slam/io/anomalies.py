@@ -61,6 +61,7 @@ __all__ = [
     "TIME_BACKWARD_TOLERANCE_S",
     "LogAnomalies",
     "is_message_name",
+    "readable",
 ]
 
 TIME_BACKWARD_TOLERANCE_S = 2.0
@@ -147,6 +148,11 @@ _TEXT = {
 def is_message_name(token: str) -> bool:
     """``token`` looks like a CARMEN message name (upper case, digits, ``_`` or ``-``)."""
     return _NAME.fullmatch(token) is not None
+
+
+def readable(value: float) -> str:
+    """``value`` with three decimals, or in exponent notation when it is huge (a corrupt pose)."""
+    return f"{value:.3f}" if abs(value) < 1e9 else f"{value:.3g}"
 
 
 def _wrap(angle: float) -> float:
@@ -245,7 +251,7 @@ class LogAnomalies:
             self.add(
                 "odometry_jumps",
                 line_number,
-                f"{moved:.3f} m and {turned:.3f} rad in {dt:.3f} s",
+                f"{readable(moved)} m and {turned:.3f} rad in {dt:.3f} s",
             )
 
     def to_dict(self) -> dict[str, Any]:
