@@ -55,6 +55,17 @@ class EkfConfig:
         ``"sparse"``: Joseph form on the columns ``H`` touches, ``O(n² m)``.  ``"filterpy"``:
         ``filterpy.kalman.ExtendedKalmanFilter.update`` on the dense state, ``O(n³)`` (the
         reference; same numbers).
+    jacobians : {"current", "first-estimates"}
+        Where the filter linearises.  ``"current"``: the standard EKF, every Jacobian at the
+        estimates of the moment.  ``"first-estimates"``: the first-estimates Jacobian EKF
+        (FEJ-EKF; Huang, Mourikis & Roumeliotis 2008): the propagation Jacobian from the
+        propagated poses (``x̂_{k+1|k} − x̂_{k|k−1}`` in place of ``x̂_{k+1|k} − x̂_{k|k}``) and
+        the measurement Jacobians at the propagated pose and each landmark's first estimate,
+        so that the linearised model, like the nonlinear one, carries no information on the
+        global position and heading (three unobservable directions; the standard EKF's
+        linearised model observes all three with line landmarks, and this spurious
+        information is what makes it over-confident over long runs; ``tests/test_ekf_fej.py``).
+        Innovations, gating and landmark merging use the current estimates either way.
     merge_landmarks : bool
         Fuse two landmarks that pass the χ² test on their joint marginal and overlap (an exact
         EKF constraint update ``l_i − l_j = 0`` followed by deleting ``l_j``).  Tested for the
@@ -96,6 +107,7 @@ class EkfConfig:
     on_max_landmarks: Literal["stop", "freeze"] = "stop"
     max_runtime_s: float | None = None
     update_impl: Literal["sparse", "filterpy"] = "sparse"
+    jacobians: Literal["current", "first-estimates"] = "current"
     merge_landmarks: bool = True
     merge_probability: float = 0.999
     merge_every_n_updates: int = 1
@@ -134,6 +146,10 @@ class EkfConfig:
         if self.update_impl not in ("sparse", "filterpy"):
             raise ConfigError(
                 f"ekf.update_impl must be 'sparse' or 'filterpy', got {self.update_impl!r}"
+            )
+        if self.jacobians not in ("current", "first-estimates"):
+            raise ConfigError(
+                f"ekf.jacobians must be 'current' or 'first-estimates', got {self.jacobians!r}"
             )
         if self.merge_every_n_updates < 1:
             raise ConfigError("ekf.merge_every_n_updates must be >= 1")

@@ -17,7 +17,12 @@ prediction touches only the pose rows and columns, ``O(M)``).
 
 ``H`` : ``(2m, 3 + 2M)``, ``R`` : ``(2m, 2m)``, ``y`` : ``(2m,)``, ``S`` : ``(2m, 2m)``,
 ``K`` : ``(3 + 2M, 2m)`` — the last update with ``m`` matched lines (stored as attributes
-``y``, ``S``, ``K`` of the filter after each update).
+``H``, ``y``, ``S``, ``K`` of the filter after each update).
+
+Where ``F`` and ``H`` are evaluated is ``EkfConfig.jacobians``: at the estimates of the moment
+(the standard EKF), or at the first estimates (FEJ-EKF: the propagated poses and each
+landmark's first estimate; Huang, Mourikis & Roumeliotis 2008), whose linearised model keeps
+the three unobservable directions of the nonlinear one.
 
 One scan (:meth:`EkfSlam.add_scan`)
 -----------------------------------
@@ -64,7 +69,11 @@ from slam.ekf.config import EkfConfig
 from slam.ekf.conventions import cov_state_to_tangent, tangent_to_state_jacobian
 from slam.ekf.extents import LandmarkExtents
 from slam.ekf.merging import merge_compatible_landmarks, wrap_state_angles
-from slam.ekf.motion import odometry_covariance, predict_pose
+from slam.ekf.motion import (
+    first_estimates_propagation_jacobian,
+    odometry_covariance,
+    predict_pose,
+)
 from slam.ekf.records import ScanRecords, ScanReport
 from slam.ekf.update import filterpy_update, joseph_update, line_measurements
 from slam.errors import InputError
@@ -133,10 +142,14 @@ class EkfSlam:
         self.F: FloatArray = np.eye(3)
         self.Q: FloatArray = np.zeros((3, 3))
         self.y: FloatArray = np.zeros(0)
+        self.H: FloatArray = np.zeros((0, 3))
         self.S: FloatArray = np.zeros((0, 0))
         self.K: FloatArray = np.zeros((3, 0))
         self._extents = LandmarkExtents(self.config.segment_gap_m)
         self._n_obs: list[int] = []
+        # the first-estimates Jacobians' linearisation points (config.jacobians)
+        self._pose_propagated: FloatArray = np.zeros(3)
+        self._lm_first: list[FloatArray] = []
         self._touched: set[int] = set()
         self._update_odom: FloatArray | None = None
         self._n_updates = 0
@@ -199,6 +212,8 @@ class EkfSlam:
         if cov_state is None:
             cov_state = np.diag(np.square(self.config.initial_pose_sigma))
         self.P = np.asarray(cov_state, dtype=float).reshape(3, 3).copy()
+        self._pose_propagated = self.x[:3].copy()
+        self._lm_first = []
         self._started = True
 
     def set_state(self, x: FloatArray, P: FloatArray, ends_world: FloatArray | None = None) -> None:
@@ -234,6 +249,8 @@ class EkfSlam:
         for ends in np.asarray(ends_world, dtype=float).reshape(M, 2, 2):
             self._extents.append(ends)
         self._n_obs = [1] * M
+        self._pose_propagated = self.x[:3].copy()
+        self._lm_first = [row.copy() for row in lm]
         self._started = True
 
     def predict(self, increment: FloatArray, Q_u: FloatArray | None = None) -> None:
@@ -251,6 +268,9 @@ class EkfSlam:
         if Q_u is None:
             Q_u = odometry_covariance(u, self.config.odometry)
         pose_new, F, Q = predict_pose(self.x[:3], u, Q_u)
+        if self.config.jacobians == "first-estimates":
+            F = first_estimates_propagation_jacobian(pose_new, self._pose_propagated)
+        self._pose_propagated = pose_new.copy()
         self.F, self.Q = F, Q
         self.x[:3] = pose_new
         P = self.P
@@ -266,13 +286,16 @@ class EkfSlam:
             return
         z = np.asarray(z_r_alpha, dtype=float).reshape(-1, 2)
         R = np.asarray(R, dtype=float).reshape(-1, 2, 2)
+        lin = None
+        if self.config.jacobians == "first-estimates":
+            lin = (self._pose_propagated, np.array([self._lm_first[int(j)] for j in idx]))
+        meas = line_measurements(self.x, idx, z, R, lin)
         if self.config.update_impl == "filterpy":
-            x, P, S, K = filterpy_update(self.x, self.P, idx, z, R)
-            self.y = line_measurements(self.x, idx, z, R).y
+            x, P, S, K = filterpy_update(self.x, self.P, idx, z, R, lin)
         else:
-            meas = line_measurements(self.x, idx, z, R)
             x, P, S, K = joseph_update(self.x, self.P, meas)
-            self.y = meas.y
+        self.y = meas.y
+        self.H = meas.dense_H(self.x.shape[0])
         self.x, self.P, self.S, self.K = x, P, S, K
         self._wrap_angles()
         for j in idx:
@@ -293,8 +316,12 @@ class EkfSlam:
         z = np.asarray(z_r_alpha, dtype=float).reshape(-1, 2)
         if z.shape[0] == 0:
             return
+        m_before = self.n_landmarks
         self.x, self.P = augment_state(self.x, self.P, z, np.asarray(R, dtype=float))
         self._wrap_angles()
+        self._lm_first.extend(
+            self.x[3 + 2 * j : 5 + 2 * j].copy() for j in range(m_before, self.n_landmarks)
+        )
         for ends in np.asarray(ends_world, dtype=float).reshape(-1, 2, 2):
             self._extents.append(ends)
             self._n_obs.append(1)
@@ -398,6 +425,7 @@ class EkfSlam:
             self.config.merge_probability,
             self.config.association.overlap_margin_m,
             candidates,
+            self._lm_first,
         )
         self.stats["landmarks_merged"] += removed
         return removed

@@ -54,6 +54,7 @@ def merge_compatible_landmarks(
     merge_probability: float,
     overlap_margin_m: float,
     candidates: IntArray | None = None,
+    first_estimates: list[FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray, int]:
     """Fuse compatible landmark pairs greedily by increasing ``D²``, one at a time.
 
@@ -75,6 +76,9 @@ def merge_compatible_landmarks(
     candidates : ndarray of int, optional
         Test only pairs that involve one of these landmarks (e.g. those observed in the last
         scan), ``O(len(candidates) · M)``; default: all pairs, ``O(M²)``.
+    first_estimates : list of ndarray, optional
+        Each landmark's first estimate (the FEJ-EKF's linearisation point); updated in place
+        (the removed landmark's entry deleted, the kept one keeps its own).
 
     Returns
     -------
@@ -130,6 +134,8 @@ def merge_compatible_landmarks(
         extents.delete(b)
         n_obs[a] += n_obs[b]
         del n_obs[b]
+        if first_estimates is not None:
+            del first_estimates[b]
         removed += 1
         if touched is not None:
             if b in touched:

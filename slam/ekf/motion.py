@@ -32,7 +32,12 @@ from slam.ekf.conventions import tangent_to_state_jacobian
 from slam.geometry import pose_compose
 from slam.models.motion import MotionNoiseConfig
 
-__all__ = ["MotionNoiseConfig", "odometry_covariance", "predict_pose"]
+__all__ = [
+    "MotionNoiseConfig",
+    "first_estimates_propagation_jacobian",
+    "odometry_covariance",
+    "predict_pose",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -83,3 +88,26 @@ def predict_pose(
     J = tangent_to_state_jacobian(pose_new[2])
     Q = J @ np.asarray(Q_u, dtype=float) @ J.T
     return pose_new, F, Q
+
+
+def first_estimates_propagation_jacobian(
+    pose_propagated: FloatArray, pose_propagated_before: FloatArray
+) -> FloatArray:
+    """The FEJ-EKF's ``F`` (Huang, Mourikis & Roumeliotis 2008), shape (3, 3).
+
+    :func:`predict_pose`'s ``F`` is ``[[1, 0, −(y_{k+1} − y_k)], [0, 1, x_{k+1} − x_k], [0, 0,
+    1]]`` with ``(x_k, y_k)`` the updated estimate ``x̂_{k|k}``; here ``(x_k, y_k)`` is the
+    propagated one, ``x̂_{k|k−1}``, the point at which step ``k``'s measurements were
+    linearised, and ``(x_{k+1}, y_{k+1}) = x̂_{k+1|k}``.
+
+    Parameters
+    ----------
+    pose_propagated : ndarray, shape (3,)
+        ``x̂_{k+1|k}``, the pose this prediction produced.
+    pose_propagated_before : ndarray, shape (3,)
+        ``x̂_{k|k−1}``, the pose the previous prediction produced (the first pose at the start).
+    """
+    F = np.eye(3)
+    F[0, 2] = -(float(pose_propagated[1]) - float(pose_propagated_before[1]))
+    F[1, 2] = float(pose_propagated[0]) - float(pose_propagated_before[0])
+    return F

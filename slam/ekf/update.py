@@ -81,7 +81,11 @@ def _block_diag2(blocks: FloatArray) -> FloatArray:
 
 
 def line_measurements(
-    x: FloatArray, landmark_idx: IntArray, z_r_alpha: FloatArray, R: FloatArray
+    x: FloatArray,
+    landmark_idx: IntArray,
+    z_r_alpha: FloatArray,
+    R: FloatArray,
+    linearization: tuple[FloatArray, FloatArray] | None = None,
 ) -> MeasurementStack:
     """Linearise the line measurement model at ``x`` for measured landmarks.
 
@@ -95,6 +99,10 @@ def line_measurements(
         Measured ``(r, α)`` in the laser frame.
     R : ndarray, shape (m, 2, 2)
         Their covariances.
+    linearization : (ndarray (3,), ndarray (m, 2)), optional
+        The pose and the landmarks at which ``H`` is evaluated (the first-estimates Jacobians
+        of :class:`slam.ekf.EkfConfig` ``jacobians``); the innovation is still ``z − h(x)``.
+        Default: ``x`` itself.
 
     Returns
     -------
@@ -106,6 +114,10 @@ def line_measurements(
     lm = np.stack([x[3 + 2 * idx], x[4 + 2 * idx]], axis=-1)
     z_pred, H_xi, H_l = predict_line_measurement(lm, pose[None, :])
     res, sign = line_residual(z_pred, np.asarray(z_r_alpha, dtype=float).reshape(m, 2))
+    if linearization is not None:
+        pose = np.asarray(linearization[0], dtype=float).reshape(3)
+        lm_lin = np.asarray(linearization[1], dtype=float).reshape(m, 2)
+        _, H_xi, H_l = predict_line_measurement(lm_lin, pose[None, :])
     H_x = state_jacobian_from_tangent(H_xi, pose[2])
     H_x[:, 0, :] *= sign[:, None]
     H_l = H_l.copy()
@@ -213,11 +225,13 @@ def filterpy_update(
     landmark_idx: IntArray,
     z_r_alpha: FloatArray,
     R: FloatArray,
+    linearization: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """The same update through ``filterpy.kalman.ExtendedKalmanFilter.update`` (dense, O(n³)).
 
     The measurement function, its Jacobian and the residual are handed to filterpy as
     callables; filterpy forms ``H``, ``S``, ``K`` and the Joseph-form ``P`` itself.
+    ``linearization`` as in :func:`line_measurements`.
 
     Returns
     -------
@@ -235,7 +249,7 @@ def filterpy_update(
         return np.asarray(z_pred.reshape(-1))
 
     def h_jacobian(state: FloatArray) -> FloatArray:
-        return line_measurements(state, idx, z, R_arr).dense_H(n)
+        return line_measurements(state, idx, z, R_arr, linearization).dense_H(n)
 
     def residual(z_flat: FloatArray, h_flat: FloatArray) -> FloatArray:
         res, _ = line_residual(h_flat.reshape(-1, 2), z_flat.reshape(-1, 2))

@@ -7,6 +7,7 @@ the trajectory with pose covariances (right-perturbation tangent space) and run 
 
 * ``"ekf"`` — :class:`slam.ekf.EkfSlam` with ``RunConfig.ekf`` (association as configured);
 * ``"ekf-nn"``, ``"ekf-jcbb"`` — the same with the association forced;
+* ``"ekf-fej"`` — the same with the first-estimates Jacobians (``EkfConfig.jacobians``);
 * ``"graph-isam2"``, ``"graph-batch"`` — :class:`slam.line_slam.LineSlam` with ``RunConfig.slam``
   and that back-end, then :meth:`~slam.line_slam.LineSlam.optimize` (the graph's association is its
   registration front end's nearest neighbour, with no JCBB option);
@@ -88,10 +89,13 @@ def _ekf(
     association: Literal["nn", "jcbb"] | None = None,
     use_lines: bool = True,
     time_budget_s: float | None = None,
+    jacobians: Literal["current", "first-estimates"] | None = None,
 ) -> EstimateOutput:
     ekf_cfg = config.ekf
     if association is not None:
         ekf_cfg = replace(ekf_cfg, association=replace(ekf_cfg.association, method=association))
+    if jacobians is not None:
+        ekf_cfg = replace(ekf_cfg, jacobians=jacobians)
     if time_budget_s is not None:
         limit = min(time_budget_s, ekf_cfg.max_runtime_s or math.inf)
         ekf_cfg = replace(ekf_cfg, max_runtime_s=limit)
@@ -179,6 +183,7 @@ ESTIMATORS: dict[str, EstimatorFn] = {
     "ekf": partial(_ekf, "ekf"),
     "ekf-nn": partial(_ekf, "ekf-nn", association="nn"),
     "ekf-jcbb": partial(_ekf, "ekf-jcbb", association="jcbb"),
+    "ekf-fej": partial(_ekf, "ekf-fej", jacobians="first-estimates"),
     "odometry": partial(_ekf, "odometry", use_lines=False),
     "graph-isam2": partial(_graph, "graph-isam2", backend="isam2"),
     "graph-batch": partial(_graph, "graph-batch", backend="batch"),
