@@ -1,4 +1,5 @@
-"""The first-estimates Jacobian EKF (``EkfConfig.jacobians = "first-estimates"``).
+"""The FEJ-EKF and the OC-EKF (``EkfConfig.jacobians``: first-estimates,
+observability-constrained).
 
 The nonlinear line-SLAM model cannot tell where the world is: moving or turning the robot and
 every landmark together changes no measurement, three unobservable directions.  The standard
@@ -6,7 +7,8 @@ EKF linearises at estimates that change from one step to the next, and its linea
 observes them (with line landmarks all three: a translation moves ``r`` by ``cos α``,
 ``sin α`` of the current ``α`` estimates): the spurious information that makes it
 over-confident over long runs (Huang, Mourikis & Roumeliotis 2008, 2010).  The FEJ-EKF
-linearises at the first estimates and keeps all three.  Checked on the observability matrix
+linearises at the first estimates and keeps all three; the OC-EKF projects the current
+Jacobians onto the closest ones that keep them.  Checked on the observability matrix
 of the filter's own ``F`` and ``H`` over a noisy run.
 """
 
@@ -16,6 +18,7 @@ import numpy as np
 import pytest
 
 from slam.ekf import EkfConfig, EkfSlam
+from slam.ekf.update import line_measurements, observability_constrained, unobservable_directions
 from slam.errors import ConfigError
 from slam.geometry import pose_compose, predict_line_measurement
 
@@ -79,9 +82,10 @@ def _nullity(M):
     return int(np.sum(s < 1e-9 * s[0])) + max(M.shape[1] - M.shape[0], 0)
 
 
+@pytest.mark.parametrize("jacobians", ["first-estimates", "observability-constrained"])
 @pytest.mark.parametrize("seed", [3, 11])
-def test_first_estimates_keep_three_unobservable_directions_the_standard_ekf_two(seed):
-    fej, x0, Fs, Hs = _run("first-estimates", seed)
+def test_fej_and_oc_keep_three_unobservable_directions_the_standard_ekf_none(seed, jacobians):
+    fej, x0, Fs, Hs = _run(jacobians, seed)
     M = _observability(Fs, Hs, x0.shape[0])
     assert M.shape == (2 * 3 * 8, 9)
     assert _nullity(M) == 3
@@ -120,11 +124,12 @@ def test_first_estimates_equal_the_standard_jacobians_at_the_first_step():
     np.testing.assert_array_equal(a.P, b.P)
 
 
-def test_first_estimates_follow_landmark_merges_and_the_filterpy_reference():
+@pytest.mark.parametrize("jacobians", ["first-estimates", "observability-constrained"])
+def test_first_estimates_follow_landmark_merges_and_the_filterpy_reference(jacobians):
     """Merging drops the removed landmark's first estimate; the dense reference agrees."""
     rng = np.random.default_rng(2)
     R2 = np.tile(np.diag([SIGMA_R**2, SIGMA_A**2]), (2, 1, 1))
-    ekf = EkfSlam(EkfConfig(jacobians="first-estimates"))
+    ekf = EkfSlam(EkfConfig(jacobians=jacobians))
     ekf.initialize(np.zeros(3))
     wall = WALLS[:1]
     ends = np.array([[[4.0, -1.0], [4.0, 0.0]], [[4.0, 0.1], [4.0, 1.0]]])
@@ -136,7 +141,7 @@ def test_first_estimates_follow_landmark_merges_and_the_filterpy_reference():
     assert len(ekf._lm_first) == ekf.n_landmarks == 1
     np.testing.assert_array_equal(ekf._lm_first[0], first[0])  # the kept one's own
     assert not np.allclose(ekf._lm_first[0], ekf.landmarks_r_alpha[0])  # not the merged value
-    dense = EkfSlam(EkfConfig(jacobians="first-estimates", update_impl="filterpy"))
+    dense = EkfSlam(EkfConfig(jacobians=jacobians, update_impl="filterpy"))
     dense.set_state(ekf.x.copy(), ekf.P.copy())
     dense._lm_first = [row.copy() for row in ekf._lm_first]
     for f in (ekf, dense):
@@ -146,6 +151,34 @@ def test_first_estimates_follow_landmark_merges_and_the_filterpy_reference():
     dense.update(np.array([0]), z, R2[:1])
     np.testing.assert_allclose(dense.x, ekf.x, atol=1e-12)
     np.testing.assert_allclose(dense.P, ekf.P, atol=1e-12)
+
+
+def test_oc_jacobians_are_the_closest_that_see_no_unobservable_direction():
+    """``H* U = 0``; an ``H`` with ``H U = 0`` is kept; the FEJ ``H`` (which also has ``H U =
+    0``) is never closer to the current one."""
+    rng = np.random.default_rng(8)
+    pose_first, pose_now = np.array([3.0, -2.0, 0.4]), np.array([3.05, -1.97, 0.43])
+    first = WALLS + rng.normal(0.0, [0.05, 0.1], size=WALLS.shape)  # first estimates, far off
+    x = np.r_[pose_now, WALLS.ravel()]
+    z = _measure(rng, pose_now, WALLS)
+    R = np.tile(np.diag([SIGMA_R**2, SIGMA_A**2]), (3, 1, 1))
+    idx = np.arange(3)
+    current = line_measurements(x, idx, z, R)
+    oc = observability_constrained(current, pose_first, first[:, 1])
+    fej = line_measurements(x, idx, z, R, (pose_first, first))
+    N_pose, N_lm = unobservable_directions(pose_first, first[:, 1])
+    for i in range(3):
+        U = np.vstack([N_pose, N_lm[i]])
+        cols = np.r_[0:3, 3 + 2 * i, 4 + 2 * i]
+        H_oc = oc.H_sub[2 * i : 2 * i + 2][:, cols]
+        H_fej = fej.H_sub[2 * i : 2 * i + 2][:, cols]
+        H_cur = current.H_sub[2 * i : 2 * i + 2][:, cols]
+        np.testing.assert_allclose(H_oc @ U, 0.0, atol=1e-12)
+        np.testing.assert_allclose(H_fej @ U, 0.0, atol=1e-12)  # FEJ meets it too
+        assert np.linalg.norm(H_oc - H_cur) < np.linalg.norm(H_fej - H_cur)
+    again = observability_constrained(oc, pose_first, first[:, 1])
+    np.testing.assert_allclose(again.H_sub, oc.H_sub, atol=1e-12)  # a projection
+    np.testing.assert_array_equal(oc.y, current.y)  # the innovation is the current one
 
 
 def test_unknown_jacobians_are_rejected():

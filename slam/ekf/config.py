@@ -55,7 +55,7 @@ class EkfConfig:
         ``"sparse"``: Joseph form on the columns ``H`` touches, ``O(n² m)``.  ``"filterpy"``:
         ``filterpy.kalman.ExtendedKalmanFilter.update`` on the dense state, ``O(n³)`` (the
         reference; same numbers).
-    jacobians : {"current", "first-estimates"}
+    jacobians : {"current", "first-estimates", "observability-constrained"}
         Where the filter linearises.  ``"current"``: the standard EKF, every Jacobian at the
         estimates of the moment.  ``"first-estimates"``: the first-estimates Jacobian EKF
         (FEJ-EKF; Huang, Mourikis & Roumeliotis 2008): the propagation Jacobian from the
@@ -65,7 +65,12 @@ class EkfConfig:
         global position and heading (three unobservable directions; the standard EKF's
         linearised model observes all three with line landmarks, and this spurious
         information is what makes it over-confident over long runs; ``tests/test_ekf_fej.py``).
-        Innovations, gating and landmark merging use the current estimates either way.
+        ``"observability-constrained"``: the OC-EKF (Huang, Mourikis & Roumeliotis 2010): the
+        FEJ-EKF's propagation Jacobian, and each measurement's Jacobian at the current
+        estimates projected onto the closest one that sees none of the three directions
+        (taken at the propagated pose and the landmarks' first estimates): the FEJ-EKF's
+        property without linearising at a first estimate that may be far off.
+        Innovations, gating and landmark merging use the current estimates in every case.
     merge_landmarks : bool
         Fuse two landmarks that pass the χ² test on their joint marginal and overlap (an exact
         EKF constraint update ``l_i − l_j = 0`` followed by deleting ``l_j``).  Tested for the
@@ -107,7 +112,7 @@ class EkfConfig:
     on_max_landmarks: Literal["stop", "freeze"] = "stop"
     max_runtime_s: float | None = None
     update_impl: Literal["sparse", "filterpy"] = "sparse"
-    jacobians: Literal["current", "first-estimates"] = "current"
+    jacobians: Literal["current", "first-estimates", "observability-constrained"] = "current"
     merge_landmarks: bool = True
     merge_probability: float = 0.999
     merge_every_n_updates: int = 1
@@ -147,9 +152,10 @@ class EkfConfig:
             raise ConfigError(
                 f"ekf.update_impl must be 'sparse' or 'filterpy', got {self.update_impl!r}"
             )
-        if self.jacobians not in ("current", "first-estimates"):
+        if self.jacobians not in ("current", "first-estimates", "observability-constrained"):
             raise ConfigError(
-                f"ekf.jacobians must be 'current' or 'first-estimates', got {self.jacobians!r}"
+                "ekf.jacobians must be 'current', 'first-estimates' or "
+                f"'observability-constrained', got {self.jacobians!r}"
             )
         if self.merge_every_n_updates < 1:
             raise ConfigError("ekf.merge_every_n_updates must be >= 1")

@@ -22,7 +22,9 @@ prediction touches only the pose rows and columns, ``O(M)``).
 Where ``F`` and ``H`` are evaluated is ``EkfConfig.jacobians``: at the estimates of the moment
 (the standard EKF), or at the first estimates (FEJ-EKF: the propagated poses and each
 landmark's first estimate; Huang, Mourikis & Roumeliotis 2008), whose linearised model keeps
-the three unobservable directions of the nonlinear one.
+the three unobservable directions of the nonlinear one; or the Jacobians at the estimates of
+the moment projected so that they see none of those directions (OC-EKF; Huang, Mourikis &
+Roumeliotis 2010).
 
 One scan (:meth:`EkfSlam.add_scan`)
 -----------------------------------
@@ -75,7 +77,12 @@ from slam.ekf.motion import (
     predict_pose,
 )
 from slam.ekf.records import ScanRecords, ScanReport
-from slam.ekf.update import filterpy_update, joseph_update, line_measurements
+from slam.ekf.update import (
+    filterpy_update,
+    joseph_update,
+    line_measurements,
+    observability_constrained,
+)
 from slam.errors import InputError
 from slam.geometry import pose_between
 from slam.inputs import InputPolicy
@@ -268,7 +275,7 @@ class EkfSlam:
         if Q_u is None:
             Q_u = odometry_covariance(u, self.config.odometry)
         pose_new, F, Q = predict_pose(self.x[:3], u, Q_u)
-        if self.config.jacobians == "first-estimates":
+        if self.config.jacobians != "current":
             F = first_estimates_propagation_jacobian(pose_new, self._pose_propagated)
         self._pose_propagated = pose_new.copy()
         self.F, self.Q = F, Q
@@ -286,16 +293,19 @@ class EkfSlam:
             return
         z = np.asarray(z_r_alpha, dtype=float).reshape(-1, 2)
         R = np.asarray(R, dtype=float).reshape(-1, 2, 2)
-        lin = None
-        if self.config.jacobians == "first-estimates":
-            lin = (self._pose_propagated, np.array([self._lm_first[int(j)] for j in idx]))
+        jac = self.config.jacobians
+        first: FloatArray = np.array([self._lm_first[int(j)] for j in idx]).reshape(-1, 2)
+        lin = (self._pose_propagated, first) if jac == "first-estimates" else None
         meas = line_measurements(self.x, idx, z, R, lin)
+        if jac == "observability-constrained":
+            meas = observability_constrained(meas, self._pose_propagated, first[:, 1])
+        self.H = meas.dense_H(self.x.shape[0])
         if self.config.update_impl == "filterpy":
-            x, P, S, K = filterpy_update(self.x, self.P, idx, z, R, lin)
+            H = None if jac == "current" else self.H
+            x, P, S, K = filterpy_update(self.x, self.P, idx, z, R, H)
         else:
             x, P, S, K = joseph_update(self.x, self.P, meas)
         self.y = meas.y
-        self.H = meas.dense_H(self.x.shape[0])
         self.x, self.P, self.S, self.K = x, P, S, K
         self._wrap_angles()
         for j in idx:

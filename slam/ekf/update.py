@@ -37,6 +37,8 @@ __all__ = [
     "filterpy_update",
     "joseph_update",
     "line_measurements",
+    "observability_constrained",
+    "unobservable_directions",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -126,6 +128,69 @@ def line_measurements(
     cols = np.concatenate([np.arange(3), np.stack([3 + 2 * idx, 4 + 2 * idx], -1).reshape(-1)])
     R_big = _block_diag2(np.asarray(R, dtype=float).reshape(m, 2, 2))
     return MeasurementStack(-res.reshape(-1), H_sub, cols.astype(np.intp), R_big)
+
+
+def unobservable_directions(
+    pose_world_laser: FloatArray, landmarks_alpha: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The directions no line measurement sees: moving the world by ``(dx, dy)``, turning it.
+
+    Parameters
+    ----------
+    pose_world_laser : ndarray, shape (3,)
+    landmarks_alpha : ndarray, shape (m,)
+        The landmarks' ``α``.
+
+    Returns
+    -------
+    N_pose : ndarray, shape (3, 3)
+        Columns ``dx``, ``dy``, ``dφ`` (a turn about the world origin) on ``(x, y, θ)``:
+        ``[[1, 0, −y], [0, 1, x], [0, 0, 1]]``.
+    N_landmarks : ndarray, shape (m, 2, 3)
+        The same on each ``(r, α)``: ``[[cos α, sin α, 0], [0, 0, 1]]``.
+    """
+    pose = np.asarray(pose_world_laser, dtype=float).reshape(3)
+    alpha = np.asarray(landmarks_alpha, dtype=float).reshape(-1)
+    N_pose = np.eye(3)
+    N_pose[0, 2] = -pose[1]
+    N_pose[1, 2] = pose[0]
+    N_lm = np.zeros((alpha.shape[0], 2, 3))
+    N_lm[:, 0, 0] = np.cos(alpha)
+    N_lm[:, 0, 1] = np.sin(alpha)
+    N_lm[:, 1, 2] = 1.0
+    return N_pose, N_lm
+
+
+def observability_constrained(
+    meas: MeasurementStack, pose_world_laser: FloatArray, landmarks_alpha: FloatArray
+) -> MeasurementStack:
+    """The Jacobians closest to ``meas``'s that see none of the unobservable directions.
+
+    Each measurement's rows ``H_i`` (pose and its landmark) are replaced by the closest (in the
+    Frobenius norm) ``H_i*`` with ``H_i* U_i = 0``, ``U_i`` the rows of
+    :func:`unobservable_directions` for the pose and that landmark: ``H_i* = H_i (I − U_i
+    U_i⁺)`` (the OC-EKF of Huang, Mourikis & Roumeliotis 2010, for line landmarks).
+
+    Parameters
+    ----------
+    meas : MeasurementStack
+        From :func:`line_measurements` (``m`` measurements of distinct landmarks).
+    pose_world_laser : ndarray, shape (3,)
+        The pose the unobservable directions are taken at (the propagated pose).
+    landmarks_alpha : ndarray, shape (m,)
+        ``α`` of each measurement's landmark for those directions (its first estimate).
+    """
+    N_pose, N_lm = unobservable_directions(pose_world_laser, landmarks_alpha)
+    m = N_lm.shape[0]
+    H_sub = meas.H_sub.copy()
+    for i in range(m):
+        rows = slice(2 * i, 2 * i + 2)
+        cols = np.r_[0:3, 3 + 2 * i, 4 + 2 * i]
+        U = np.vstack([N_pose, N_lm[i]])  # (5, 3)
+        Hi = H_sub[rows][:, cols]
+        Hi = Hi - Hi @ U @ np.linalg.solve(U.T @ U, U.T)
+        H_sub[rows.start : rows.stop, cols] = Hi
+    return MeasurementStack(meas.y, H_sub, meas.cols, meas.R)
 
 
 def joseph_update(
@@ -225,13 +290,14 @@ def filterpy_update(
     landmark_idx: IntArray,
     z_r_alpha: FloatArray,
     R: FloatArray,
-    linearization: tuple[FloatArray, FloatArray] | None = None,
+    H: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """The same update through ``filterpy.kalman.ExtendedKalmanFilter.update`` (dense, O(n³)).
 
     The measurement function, its Jacobian and the residual are handed to filterpy as
-    callables; filterpy forms ``H``, ``S``, ``K`` and the Joseph-form ``P`` itself.
-    ``linearization`` as in :func:`line_measurements`.
+    callables; filterpy forms ``H``, ``S``, ``K`` and the Joseph-form ``P`` itself.  ``H``
+    (dense, ``(2m, n)``) replaces the Jacobian at ``x`` (the first-estimates or
+    observability-constrained Jacobians of ``EkfConfig.jacobians``).
 
     Returns
     -------
@@ -249,7 +315,9 @@ def filterpy_update(
         return np.asarray(z_pred.reshape(-1))
 
     def h_jacobian(state: FloatArray) -> FloatArray:
-        return line_measurements(state, idx, z, R_arr, linearization).dense_H(n)
+        if H is not None:
+            return H
+        return line_measurements(state, idx, z, R_arr).dense_H(n)
 
     def residual(z_flat: FloatArray, h_flat: FloatArray) -> FloatArray:
         res, _ = line_residual(h_flat.reshape(-1, 2), z_flat.reshape(-1, 2))

@@ -7,7 +7,8 @@ the trajectory with pose covariances (right-perturbation tangent space) and run 
 
 * ``"ekf"`` — :class:`slam.ekf.EkfSlam` with ``RunConfig.ekf`` (association as configured);
 * ``"ekf-nn"``, ``"ekf-jcbb"`` — the same with the association forced;
-* ``"ekf-fej"`` — the same with the first-estimates Jacobians (``EkfConfig.jacobians``);
+* ``"ekf-fej"``, ``"ekf-oc"`` — the same with the first-estimates or the
+  observability-constrained Jacobians (``EkfConfig.jacobians``);
 * ``"graph-isam2"``, ``"graph-batch"`` — :class:`slam.line_slam.LineSlam` with ``RunConfig.slam``
   and that back-end, then :meth:`~slam.line_slam.LineSlam.optimize` (the graph's association is its
   registration front end's nearest neighbour, with no JCBB option);
@@ -89,7 +90,7 @@ def _ekf(
     association: Literal["nn", "jcbb"] | None = None,
     use_lines: bool = True,
     time_budget_s: float | None = None,
-    jacobians: Literal["current", "first-estimates"] | None = None,
+    jacobians: Literal["current", "first-estimates", "observability-constrained"] | None = None,
 ) -> EstimateOutput:
     ekf_cfg = config.ekf
     if association is not None:
@@ -184,6 +185,7 @@ ESTIMATORS: dict[str, EstimatorFn] = {
     "ekf-nn": partial(_ekf, "ekf-nn", association="nn"),
     "ekf-jcbb": partial(_ekf, "ekf-jcbb", association="jcbb"),
     "ekf-fej": partial(_ekf, "ekf-fej", jacobians="first-estimates"),
+    "ekf-oc": partial(_ekf, "ekf-oc", jacobians="observability-constrained"),
     "odometry": partial(_ekf, "odometry", use_lines=False),
     "graph-isam2": partial(_graph, "graph-isam2", backend="isam2"),
     "graph-batch": partial(_graph, "graph-batch", backend="batch"),
