@@ -65,8 +65,10 @@ class EkfConfig:
         global position and heading (three unobservable directions; the standard EKF's
         linearised model observes all three with line landmarks, and this spurious
         information is what makes it over-confident over long runs; ``tests/test_ekf_fej.py``).
-        ``"observability-constrained"``: the OC-EKF (Huang, Mourikis & Roumeliotis 2010): the
-        FEJ-EKF's propagation Jacobian, and each measurement's Jacobian at the current
+        ``"observability-constrained"``: an OC-EKF (the observability constraint of Huang,
+        Mourikis & Roumeliotis 2010, met by projecting the Jacobian as Hesch, Kottas, Bowman &
+        Roumeliotis 2014 do): the FEJ-EKF's propagation Jacobian, and each measurement's
+        Jacobian at the current
         estimates projected onto the closest one that sees none of the three directions
         (taken at the propagated pose and the landmarks' first estimates): the FEJ-EKF's
         property without linearising at a first estimate that may be far off.

@@ -23,8 +23,8 @@ Where ``F`` and ``H`` are evaluated is ``EkfConfig.jacobians``: at the estimates
 (the standard EKF), or at the first estimates (FEJ-EKF: the propagated poses and each
 landmark's first estimate; Huang, Mourikis & Roumeliotis 2008), whose linearised model keeps
 the three unobservable directions of the nonlinear one; or the Jacobians at the estimates of
-the moment projected so that they see none of those directions (OC-EKF; Huang, Mourikis &
-Roumeliotis 2010).
+the moment projected so that they see none of those directions (an OC-EKF: the constraint
+of Huang, Mourikis & Roumeliotis 2010, the projection of Hesch et al. 2014).
 
 One scan (:meth:`EkfSlam.add_scan`)
 -----------------------------------

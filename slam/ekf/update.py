@@ -169,7 +169,8 @@ def observability_constrained(
     Each measurement's rows ``H_i`` (pose and its landmark) are replaced by the closest (in the
     Frobenius norm) ``H_i*`` with ``H_i* U_i = 0``, ``U_i`` the rows of
     :func:`unobservable_directions` for the pose and that landmark: ``H_i* = H_i (I − U_i
-    U_i⁺)`` (the OC-EKF of Huang, Mourikis & Roumeliotis 2010, for line landmarks).
+    U_i⁺)``: the observability constraint of Huang, Mourikis & Roumeliotis (2010) met by the
+    projection of Hesch, Kottas, Bowman & Roumeliotis (2014), here for line landmarks.
 
     Parameters
     ----------
