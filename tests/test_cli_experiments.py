@@ -206,3 +206,20 @@ def test_compare_reports_the_logs_warnings_once_as_every_command_does(tmp_path, 
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if "CARMEN's rule" in line]
     assert len(lines) == 1 and lines[0].startswith("lineslam: warning: 1 x InputWarning: ")
+
+
+@pytest.mark.parametrize("command", ["consistency", "compare"])
+def test_the_help_names_every_estimator(command, capsys):
+    """The estimator names in ``--help`` are exactly :data:`ESTIMATORS` (kept in step by hand:
+    the CLI does not import the experiments to print its help)."""
+    import re
+
+    from slam.experiments.estimators import ESTIMATORS
+
+    try:
+        main([command, "--help"])
+    except SystemExit as exc:  # typer may exit 0 after printing the help
+        assert exc.code in (0, None)
+    text = " ".join(capsys.readouterr().out.split())
+    listed = set(re.findall(r"\b(?:ekf(?:-[a-z]+)?|graph-[a-z0-9]+|odometry)\b", text))
+    assert set(ESTIMATORS) <= listed, set(ESTIMATORS) - listed

@@ -63,8 +63,9 @@ def compare(
         str | None,
         typer.Option(
             "--variants",
-            help="Comma-separated NAME=ESTIMATOR\\[/unweighted] or estimator names; "
-            "default: every available variant.",
+            help="Comma-separated NAME=ESTIMATOR\\[/unweighted] or estimator names (ekf, ekf-nn, "
+            "ekf-jcbb, ekf-fej, ekf-oc, graph-isam2, graph-batch, odometry); default: every "
+            "available variant.",
         ),
     ] = None,
     workers: Annotated[

@@ -45,7 +45,12 @@ def consistency(
     loops: Annotated[float, typer.Option("--loops", help="Repetitions of the route.")] = 1.0,
     runs: Annotated[int, typer.Option("--runs", help="Seeded runs per estimator.")] = 50,
     estimators: Annotated[
-        str, typer.Option("--estimators", help="Comma-separated estimator names.")
+        str,
+        typer.Option(
+            "--estimators",
+            help="Comma-separated estimator names: ekf, ekf-nn, ekf-jcbb, ekf-fej, ekf-oc, "
+            "graph-isam2, graph-batch, odometry.",
+        ),
     ] = "ekf,graph-isam2,graph-batch,odometry",
     odometry_scale: Annotated[
         float,
