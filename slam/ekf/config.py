@@ -68,10 +68,10 @@ class EkfConfig:
         ``"observability-constrained"``: an OC-EKF (the observability constraint of Huang,
         Mourikis & Roumeliotis 2010, met by projecting the Jacobian as Hesch, Kottas, Bowman &
         Roumeliotis 2014 do): the FEJ-EKF's propagation Jacobian, and each measurement's
-        Jacobian at the current
-        estimates projected onto the closest one that sees none of the three directions
-        (taken at the propagated pose and the landmarks' first estimates): the FEJ-EKF's
-        property without linearising at a first estimate that may be far off.
+        Jacobian at the current estimates projected onto the closest one that sees none of
+        the three directions (taken at the propagated pose and the landmarks' first
+        estimates): the FEJ-EKF's property without linearising at a first estimate that may
+        be far off.
         Innovations, gating and landmark merging use the current estimates in every case.
     merge_landmarks : bool
         Fuse two landmarks that pass the χ² test on their joint marginal and overlap (an exact

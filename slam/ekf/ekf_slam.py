@@ -78,6 +78,7 @@ from slam.ekf.motion import (
 )
 from slam.ekf.records import ScanRecords, ScanReport
 from slam.ekf.update import (
+    MeasurementStack,
     filterpy_update,
     joseph_update,
     line_measurements,
@@ -149,7 +150,7 @@ class EkfSlam:
         self.F: FloatArray = np.eye(3)
         self.Q: FloatArray = np.zeros((3, 3))
         self.y: FloatArray = np.zeros(0)
-        self.H: FloatArray = np.zeros((0, 3))
+        self._last_measurements: tuple[MeasurementStack, int] | None = None
         self.S: FloatArray = np.zeros((0, 0))
         self.K: FloatArray = np.zeros((3, 0))
         self._extents = LandmarkExtents(self.config.segment_gap_m)
@@ -201,6 +202,17 @@ class EkfSlam:
     def landmarks_r_alpha(self) -> FloatArray:
         """Current landmarks ``(M, 2)`` as stored (signed, not normalised)."""
         return self.x[3:].reshape(-1, 2).copy()
+
+    @property
+    def H(self) -> FloatArray:
+        """The last update's Jacobian, dense ``(2m, n)`` (``n`` the state size at that update).
+
+        Formed on request from the sparse columns the update used; ``(0, 3)`` before any.
+        """
+        if self._last_measurements is None:
+            return np.zeros((0, 3))
+        meas, n = self._last_measurements
+        return meas.dense_H(n)
 
     def landmark_marginals(self) -> FloatArray:
         """Marginal covariances of the landmarks, shape ``(M, 2, 2)``."""
@@ -294,12 +306,15 @@ class EkfSlam:
         z = np.asarray(z_r_alpha, dtype=float).reshape(-1, 2)
         R = np.asarray(R, dtype=float).reshape(-1, 2, 2)
         jac = self.config.jacobians
-        first: FloatArray = np.array([self._lm_first[int(j)] for j in idx]).reshape(-1, 2)
-        lin = (self._pose_propagated, first) if jac == "first-estimates" else None
-        meas = line_measurements(self.x, idx, z, R, lin)
+        lin = None
+        if jac != "current":
+            first = np.array([self._lm_first[int(j)] for j in idx]).reshape(-1, 2)
+            lin = (self._pose_propagated, first)
+        meas = line_measurements(self.x, idx, z, R, lin if jac == "first-estimates" else None)
         if jac == "observability-constrained":
-            meas = observability_constrained(meas, self._pose_propagated, first[:, 1])
-        self.H = meas.dense_H(self.x.shape[0])
+            assert lin is not None
+            meas = observability_constrained(meas, lin[0], lin[1][:, 1])
+        self._last_measurements = (meas, self.x.shape[0])
         if self.config.update_impl == "filterpy":
             H = None if jac == "current" else self.H
             x, P, S, K = filterpy_update(self.x, self.P, idx, z, R, H)
