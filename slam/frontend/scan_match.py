@@ -373,11 +373,13 @@ def _normal_equations(
     q12: FloatArray,
     q22: FloatArray,
     inlier_m: float,
+    with_cost: bool = True,
 ) -> tuple[FloatArray, FloatArray, int, int, float, float]:
     """``H = Σ w JᵀJ``, ``g = Σ w J e`` at ``x`` (Cauchy weights over each residual's variance).
 
     Also returns the number of pairs within ``d_max``, of residuals within ``inlier_m``,
-    ``Σ w e²`` and the robust cost ``Σ ½ log(1 + e²/σ²)`` of the pairs.
+    ``Σ w e²`` and the robust cost ``Σ ½ log(1 + e²/σ²)`` of the pairs (all four 0 without
+    ``with_cost``: a Gauss-Newton step needs only ``H`` and ``g``).
     """
     c = np.cos(x[2])
     s = np.sin(x[2])
@@ -415,11 +417,12 @@ def _normal_equations(
         g[0] += w * J0 * e
         g[1] += w * J1 * e
         g[2] += w * J2 * e
-        wee += w * e * e
-        cost += 0.5 * np.log1p(e * e / var)
-        pairs += 1
-        if abs(e) <= inlier_m:
-            inliers += 1
+        if with_cost:
+            wee += w * e * e
+            cost += 0.5 * np.log1p(e * e / var)
+            pairs += 1
+            if abs(e) <= inlier_m:
+                inliers += 1
     H[1, 0] = H[0, 1]
     H[2, 0] = H[0, 2]
     H[2, 1] = H[1, 2]
@@ -451,7 +454,7 @@ def _gauss_newton(
     x = x0.copy()
     for _ in range(iterations):
         H, g, _, _, _, _ = _normal_equations(
-            x, p, n, var_ref, keys, order, cell, d_max, q, q11, q12, q22, d_max
+            x, p, n, var_ref, keys, order, cell, d_max, q, q11, q12, q22, d_max, False
         )
         r = x - x_prior
         r[2] = np.arctan2(np.sin(r[2]), np.cos(r[2]))
