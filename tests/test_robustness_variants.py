@@ -19,13 +19,14 @@ from slam.experiments.robustness import (
     DecimateBeams,
     DecimateScans,
     MoveOdometryToCentre,
+    NoisyOdometry,
     Variant,
     fill_dropped_scans,
     make_variant,
     rewrite_lines,
     score_run,
 )
-from slam.geometry import pose_compose
+from slam.geometry import pose_between, pose_compose
 from slam.io.carmen import CarmenReader, iter_odometry, iter_scans
 from slam.io.catalog import load_catalog
 from slam.io.relations import read_relations, relations_from_trajectory, write_relations
@@ -184,6 +185,65 @@ def test_bias_keeps_the_laser_offset_and_scales_the_velocities():
     np.testing.assert_allclose(laser, [[0.61, 0.0, 0.0]], atol=1e-9)
     tv, rv = (float(v) for v in out[-1].split()[4:6])
     assert (tv, rv) == (pytest.approx(1.02), pytest.approx(-0.49))
+
+
+def test_noise_of_zero_variance_keeps_every_pose_and_the_velocities_as_logged():
+    # velocities logged with fewer decimals than the transforms write
+    lines = [
+        odom(p, 9.5 + i, tv=0.25, rv=-0.125).replace("0.250000 -0.125000", "0.25 -0.125")
+        for i, p in enumerate(_wavy_poses(6))
+    ]
+    assert all(" 0.25 -0.125 " in line for line in lines)
+    lines += [flaser([1.0], p, p, 10.0 + i) for i, p in enumerate(_wavy_poses(6))]
+    out = rewrite_lines(NoisyOdometry(0.0, 0.0, 0.0, seed=3), lines)
+    odo, base, laser = _odometry_poses(out)
+    np.testing.assert_allclose(odo, _wavy_poses(6), atol=1e-6)
+    np.testing.assert_allclose(base, _wavy_poses(6), atol=1e-6)
+    np.testing.assert_allclose(laser, base, atol=1e-6)
+    for before, after in zip(lines, out, strict=True):
+        b, a = before.split(), after.split()
+        assert len(a) == len(b) and a[0] == b[0] and a[-3:] == b[-3:]  # stamps kept
+        if b[0] == "ODOM":
+            assert a[4:] == b[4:]  # tv, rv (and the rest) as logged, not re-formatted
+
+
+def test_noise_is_reproducible_from_its_seed():
+    lines = _log(20, _wavy_poses(20))
+    a = rewrite_lines(NoisyOdometry(1e-3, 1e-3, 1e-3, seed=1), lines)
+    assert a == rewrite_lines(NoisyOdometry(1e-3, 1e-3, 1e-3, seed=1), lines)
+    assert a != rewrite_lines(NoisyOdometry(1e-3, 1e-3, 1e-3, seed=2), lines)
+    # the laser line keeps its pose on the rewritten odometry; the time stamps stay
+    assert _laser_stamps(a) == _laser_stamps(lines)
+
+
+@pytest.mark.parametrize("step_m", [0.02, 0.2])
+def test_noise_variance_grows_with_the_path_not_with_the_number_of_increments(step_m):
+    # a straight ODOM chain turning by 0.01 rad per step: each increment's error, in the frame
+    # of the previous rewritten pose, has the stated variances whatever the step; summed over
+    # 1 m of path (and its turn) they are the same for both step lengths
+    n = 4000
+    heading = 0.01 * np.arange(n)
+    xy = np.cumsum(step_m * np.column_stack([np.cos(heading), np.sin(heading)]), axis=0)
+    poses = np.column_stack([xy, heading])
+    lines = [odom(p, 10.0 + 0.1 * i) for i, p in enumerate(poses)]
+    v_xy, v_tm, v_tr = 4e-4, 2e-4, 5e-3
+    odo, _, _ = _odometry_poses(rewrite_lines(NoisyOdometry(v_xy, v_tm, v_tr, seed=7), lines))
+    d_true = pose_between(poses[:-1], poses[1:])
+    d_new = pose_between(odo[:-1], odo[1:])
+    err = d_new - d_true
+    err[:, 2] = np.remainder(err[:, 2] + math.pi, 2 * math.pi) - math.pi
+    expected = np.array([v_xy * step_m, v_xy * step_m, v_tm * step_m + v_tr * 0.01])
+    var = np.mean(err**2, axis=0)
+    # the sample variance of n - 1 normal draws: relative standard deviation sqrt(2 / n)
+    np.testing.assert_allclose(var / expected, 1.0, atol=5 * math.sqrt(2.0 / n))
+    assert abs(np.mean(err[:, 2])) < 5 * math.sqrt(expected[2] / n)
+
+
+def test_noise_rejects_a_negative_or_infinite_variance():
+    with pytest.raises(ConfigError, match="var_theta_per_m"):
+        NoisyOdometry(1e-3, -1e-3, 0.0)
+    with pytest.raises(ConfigError, match="var_xy_per_m"):
+        NoisyOdometry(math.inf, 0.0, 0.0)
 
 
 # --------------------------------------------------------------------------------------------

@@ -29,6 +29,10 @@ relations still apply (rewritten only by :class:`MoveOdometryToCentre`):
     reader's model of laser lines between odometry messages), and its laser pose keeps its
     logged offset from the odometry pose; an ``ODOM`` line's ``tv`` becomes ``s·tv`` and
     ``rv`` becomes ``rv + b·|rv|``.
+:class:`NoisyOdometry`
+    The same re-integration with random noise added to every increment: normal, independent,
+    of variances proportional to the increment's length and turn (a random walk whose spread
+    does not depend on how often the odometry was logged), drawn from a seed.
 :class:`MoveOdometryToCentre`
     The laser poses of the ``FLASER`` lines stay; the odometry poses (``FLASER`` ``odom_*`` and
     ``ODOM`` ``x y theta``) move to a robot centre ``pose_laser_centre`` from the laser
@@ -105,6 +109,7 @@ __all__ = [
     "DecimateScans",
     "LogTransform",
     "MoveOdometryToCentre",
+    "NoisyOdometry",
     "RunScore",
     "Variant",
     "VariantFiles",
@@ -183,6 +188,8 @@ class _Pass:
     #: line has come), as logged and as rewritten.
     odometry: tuple[FloatArray, FloatArray] | None = None
     odom_lines: int = 0
+    #: Random draws of the pass (a transform that needs them seeds it at its first use).
+    rng: np.random.Generator | None = None
 
 
 class LogTransform:
@@ -299,61 +306,115 @@ class ClipRanges(LogTransform):
         )
 
 
-@dataclass(frozen=True)
-class BiasOdometry(LogTransform):
-    """Odometry re-integrated with ``(dx, dy, dθ) → (s·dx, s·dy, dθ + b·|dθ|)``.
+class _ReintegratedOdometry(LogTransform):
+    """Odometry re-integrated with every increment rewritten (``_increment``).
 
     The ``ODOM`` lines are the odometry's chain: each one's increment from the previous
-    ``ODOM`` line is biased and integrated.  A ``FLASER`` line's odometry pose is the
-    rewritten pose of the last ``ODOM`` line composed with its own biased increment from that
+    ``ODOM`` line is rewritten and integrated.  A ``FLASER`` line's odometry pose is the
+    rewritten pose of the last ``ODOM`` line composed with its own rewritten increment from that
     line (as :func:`slam.io.carmen.velocity_signed_scans` reads laser lines); before the first
-    ``ODOM`` line (or in a log without any) laser lines chain on each other.
+    ``ODOM`` line (or in a log without any) laser lines chain on each other.  The laser pose of
+    a ``FLASER`` line keeps its logged offset from the odometry pose.
     """
 
-    translation_scale: float
-    heading_bias: float
-    kind: ClassVar[str] = "bias-odometry"
+    def _increment(self, d: FloatArray, state: _Pass) -> FloatArray:  # pragma: no cover
+        raise NotImplementedError
 
-    def _biased(
-        self, previous: tuple[FloatArray, FloatArray] | None, raw: FloatArray
+    def _velocities(self, tv: float, rv: float) -> tuple[float, float] | None:
+        """An ``ODOM`` line's rewritten ``tv``, ``rv`` (None: as logged)."""
+        return None
+
+    def _rewritten(
+        self, previous: tuple[FloatArray, FloatArray] | None, raw: FloatArray, state: _Pass
     ) -> FloatArray:
         if previous is None:
             return raw.copy()
-        d = pose_between(previous[0], raw)
-        biased = np.array(
-            [
-                self.translation_scale * d[0],
-                self.translation_scale * d[1],
-                d[2] + self.heading_bias * abs(d[2]),
-            ]
-        )
-        return pose_compose(previous[1], biased)
+        return pose_compose(previous[1], self._increment(pose_between(previous[0], raw), state))
 
     def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
         if tokens[0] == "ODOM":
             if len(tokens) < 8:
                 raise LogFormatError("ODOM with fewer than 8 fields", where)
             raw = _pose(tokens, 1, where)
-            new = self._biased(state.odometry, raw)
+            new = self._rewritten(state.odometry, raw, state)
             state.odometry = (raw, new)
             state.odom_lines += 1
             tokens[1:4] = _pose_tokens(new)
             try:
-                tv, rv = float(tokens[4]), float(tokens[5])
+                velocities = self._velocities(float(tokens[4]), float(tokens[5]))
             except ValueError:
                 raise LogFormatError("ODOM tv or rv is not a number", where) from None
-            tokens[4] = f"{self.translation_scale * tv:.6f}"
-            tokens[5] = f"{rv + self.heading_bias * abs(rv):.6f}"
+            if velocities is not None:
+                tokens[4:6] = [f"{velocities[0]:.6f}", f"{velocities[1]:.6f}"]
         elif tokens[0] == "FLASER":
             n = _flaser_beams(tokens, where)
             laser = _pose(tokens, 2 + n, where)
             base = _pose(tokens, 5 + n, where)
-            new = self._biased(state.odometry, base)
+            new = self._rewritten(state.odometry, base, state)
             if state.odom_lines == 0:
                 state.odometry = (base, new)
             tokens[2 + n : 5 + n] = _pose_tokens(pose_compose(new, pose_between(base, laser)))
             tokens[5 + n : 8 + n] = _pose_tokens(new)
         yield _join(tokens)
+
+
+@dataclass(frozen=True)
+class BiasOdometry(_ReintegratedOdometry):
+    """Odometry re-integrated with ``(dx, dy, dθ) → (s·dx, s·dy, dθ + b·|dθ|)``.
+
+    See :class:`_ReintegratedOdometry` for which increments; an ``ODOM`` line's ``tv`` becomes
+    ``s·tv`` and ``rv`` becomes ``rv + b·|rv|``.
+    """
+
+    translation_scale: float
+    heading_bias: float
+    kind: ClassVar[str] = "bias-odometry"
+
+    def _increment(self, d: FloatArray, state: _Pass) -> FloatArray:
+        return np.array(
+            [
+                self.translation_scale * d[0],
+                self.translation_scale * d[1],
+                d[2] + self.heading_bias * abs(d[2]),
+            ]
+        )
+
+    def _velocities(self, tv: float, rv: float) -> tuple[float, float] | None:
+        return self.translation_scale * tv, rv + self.heading_bias * abs(rv)
+
+
+@dataclass(frozen=True)
+class NoisyOdometry(_ReintegratedOdometry):
+    """Odometry re-integrated with random noise added to every increment (a random walk).
+
+    An increment ``d = (dx, dy, dθ)`` becomes ``d + (n_x, n_y, n_θ)`` with independent normal
+    components of variances ``var_xy_per_m·ℓ`` (``n_x``, ``n_y``) and ``var_theta_per_m·ℓ +
+    var_theta_per_rad·|dθ|`` (``n_θ``), ``ℓ = hypot(dx, dy)``: the variances grow with the
+    path and the turning, not with the number of increments, so the accumulated error does not
+    depend on how often the odometry was logged.  The draws come from ``seed`` (one generator
+    per pass over a log).  Velocities are kept as logged.
+    """
+
+    var_xy_per_m: float
+    var_theta_per_m: float
+    var_theta_per_rad: float
+    seed: int = 0
+    kind: ClassVar[str] = "noisy-odometry"
+
+    def __post_init__(self) -> None:
+        for name in ("var_xy_per_m", "var_theta_per_m", "var_theta_per_rad"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ConfigError(f"NoisyOdometry.{name} must be finite and >= 0, got {value}")
+
+    def _increment(self, d: FloatArray, state: _Pass) -> FloatArray:
+        if state.rng is None:
+            state.rng = np.random.default_rng(self.seed)
+        length = math.hypot(float(d[0]), float(d[1]))
+        sigma_xy = math.sqrt(self.var_xy_per_m * length)
+        sigma_theta = math.sqrt(self.var_theta_per_m * length + self.var_theta_per_rad * abs(d[2]))
+        noise = state.rng.standard_normal(3) * np.array([sigma_xy, sigma_xy, sigma_theta])
+        return np.asarray(d, dtype=float) + noise
 
 
 @dataclass(frozen=True)
@@ -580,6 +641,13 @@ VARIANTS: tuple[Variant, ...] = (
 )
 
 
+#: Random odometry noise of the ``*-odom-noise`` rows: σ 5 cm per √m in x and in y, heading
+#: σ 0.05 rad per √m and 0.1 rad per √rad turned (variances per metre and per radian).
+_ODOM_NOISE_VAR_XY = 0.05**2
+_ODOM_NOISE_VAR_THETA_M = 0.05**2
+_ODOM_NOISE_VAR_THETA_RAD = 0.1**2
+_ODOM_NOISE = "odometry noise: σ 5 cm/√m in x and y, heading 0.05 rad/√m + 0.1 rad/√rad, seed 0"
+
 #: More rows, never used to choose a default before they were added: the same transforms on
 #: Intel, and chains of two or three transforms on the three logs (a lower scan rate together
 #: with a mounted laser, a shorter range, fewer beams or biased odometry).  Intel's bar is its
@@ -689,6 +757,27 @@ EXTRA_VARIANTS: tuple[Variant, ...] = (
         0.10,
         Chain((DecimateScans(4), BiasOdometry(1.02, 0.02))),
         "every 4th FLASER line, biased odometry",
+    ),
+    Variant(
+        "intel-odom-noise",
+        "intel",
+        0.05,
+        NoisyOdometry(_ODOM_NOISE_VAR_XY, _ODOM_NOISE_VAR_THETA_M, _ODOM_NOISE_VAR_THETA_RAD),
+        _ODOM_NOISE,
+    ),
+    Variant(
+        "aces-odom-noise",
+        "aces",
+        0.08,
+        NoisyOdometry(_ODOM_NOISE_VAR_XY, _ODOM_NOISE_VAR_THETA_M, _ODOM_NOISE_VAR_THETA_RAD),
+        _ODOM_NOISE,
+    ),
+    Variant(
+        "fr079-odom-noise",
+        "fr079",
+        0.10,
+        NoisyOdometry(_ODOM_NOISE_VAR_XY, _ODOM_NOISE_VAR_THETA_M, _ODOM_NOISE_VAR_THETA_RAD),
+        _ODOM_NOISE,
     ),
     Variant(
         "fr079-every4-beams90",
