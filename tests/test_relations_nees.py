@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -37,11 +39,18 @@ def _noisy_step(rng: np.random.Generator, u: np.ndarray) -> np.ndarray:
     return np.asarray(pose_compose(u, pose_exp(w)))
 
 
-def _synthetic_run(seed: int, tmp_path, n_kf: int = 30):
+def _synthetic_run(
+    seed: int,
+    tmp_path: Path,
+    n_kf: int = 30,
+    offset_covs: np.ndarray | None = None,
+    name: str = "",
+) -> tuple[Trajectory, np.ndarray, np.ndarray, Path]:
     """A solved synthetic graph written as graph.g2o, with two non-keyframe scans per keyframe.
 
     Returns the run's trajectory (all scans), the true scan poses, and the scans' keyframes.
-    The scans' odometry is a random walk from their keyframe (the model of the covariances).
+    The scans' odometry is a random walk from their keyframe (the model of the covariances);
+    ``offset_covs`` ``(3 n_kf, 3, 3)`` is written as the scans' match covariances.
     """
     rng = np.random.default_rng(seed)
     prob = synthetic_problem(n_kf, seed=seed, motion=MOTION)
@@ -69,7 +78,7 @@ def _synthetic_run(seed: int, tmp_path, n_kf: int = 30):
         is_keyframe=np.array(is_kf),
         keyframe_of_scan=np.array(kf_of),
     )
-    path = tmp_path / f"graph{seed}.g2o"
+    path = tmp_path / f"graph{seed}{name}.g2o"
     write_line_graph_g2o(
         path,
         prob.graph,
@@ -77,8 +86,10 @@ def _synthetic_run(seed: int, tmp_path, n_kf: int = 30):
         scan_offsets=np.array(offsets),
         motion_noise=MOTION,
         robust_kernel=("none", 1.0),
+        scan_offset_covariances=offset_covs,
     )
-    return Trajectory(stamps, np.array(poses)), np.array(truth), np.array(kf_of), path
+    traj = Trajectory(np.asarray(stamps, dtype=np.float64), np.array(poses))
+    return traj, np.array(truth), np.array(kf_of), path
 
 
 def _relations(truth: np.ndarray, stamps: np.ndarray, pairs: np.ndarray) -> Relations:
@@ -116,7 +127,9 @@ def test_g2o_states_how_every_scan_hangs_from_the_graph(tmp_path):
     assert MotionNoiseConfig(**back.motion_noise) == MOTION
     assert back.prior_pose is not None and back.prior_information is not None
     not_kf = np.arange(traj.timestamps.shape[0]) % 3 != 0
+    assert back.offset_keyframes is not None
     np.testing.assert_array_equal(back.offset_keyframes, kf_of[not_kf])
+    assert back.offset_timestamps is not None
     np.testing.assert_allclose(back.offset_timestamps, traj.timestamps[not_kf])
     assert back.timestamps is not None
     np.testing.assert_allclose(back.timestamps, traj.timestamps[::3])
@@ -330,3 +343,216 @@ def test_relation_error_draws_have_the_runs_joint_covariance(tmp_path):
         np.einsum("mii->mi", cov.relative_covariances(t1, t2)),
         rtol=1e-6,
     )
+
+
+# --- scans matched against their keyframe: the offset's covariance Σ_s in graph.g2o ---
+
+
+def _match_covariances(n_kf: int, seed: int = 11) -> np.ndarray:
+    """Σ_s for the scans of :func:`_synthetic_run` (scan 3k is keyframe k): on keyframe k,
+    k % 4 == 0 both scans matched, 1 the first, 2 the second, 3 neither (NaN rows)."""
+    rng = np.random.default_rng(seed)
+    covs = np.full((3 * n_kf, 3, 3), np.nan)
+    for k in range(n_kf):
+        for j in {0: (1, 2), 1: (1,), 2: (2,), 3: ()}[k % 4]:
+            L = rng.standard_normal((3, 3)) * np.array([[0.004], [0.003], [0.002]])
+            covs[3 * k + j] = L @ L.T + np.diag([1e-7, 1e-7, 1e-8])
+    return covs
+
+
+def _matched_run(
+    tmp_path: Path, seed: int = 3, n_kf: int = 12
+) -> tuple[Trajectory, np.ndarray, np.ndarray, Path, np.ndarray]:
+    covs = _match_covariances(n_kf)
+    traj, truth, kf_of, path = _synthetic_run(seed, tmp_path, n_kf, covs, name="_matched")
+    return traj, truth, kf_of, path, covs
+
+
+def _offset_lines(path: Path) -> list[str]:
+    return [x for x in path.read_text().splitlines() if x.startswith("LINESLAM_SCAN_OFFSET ")]
+
+
+def test_g2o_round_trip_of_scan_offset_covariances(tmp_path):
+    """Without match covariances (None or NaN rows) the file is byte for byte the odometry
+    one; with them a matched scan's line has the six covariance fields, read back."""
+    _, _, _, plain = _synthetic_run(3, tmp_path, n_kf=12)
+    nan_rows = np.full((36, 3, 3), np.nan)
+    nan_rows[::3] = np.eye(3)  # keyframes' rows are not read
+    _, _, _, nan_path = _synthetic_run(3, tmp_path, 12, nan_rows, name="_nan")
+    assert nan_path.read_bytes() == plain.read_bytes()
+    lines = _offset_lines(plain)
+    assert len(lines) == 24
+    six = r"LINESLAM_SCAN_OFFSET \d+ \d+\.\d{6}( -?\d+\.\d{9}){3}"
+    assert all(re.fullmatch(six, x) for x in lines)
+    back = read_line_graph_g2o(plain)
+    assert back.offset_covariances is not None and back.offset_covariances.shape == (24, 3, 3)
+    assert np.isnan(back.offset_covariances).all()
+
+    _, _, _, path, covs = _matched_run(tmp_path)
+    matched_lines = _offset_lines(path)
+    not_kf = np.arange(36) % 3 != 0
+    matched = np.isfinite(covs[not_kf]).all(axis=(1, 2))
+    assert 0 < matched.sum() < 24
+    for was, line, m in zip(lines, matched_lines, matched, strict=True):
+        assert line.split() == (was.split() + line.split()[6:]) and len(line.split()) == (
+            12 if m else 6
+        )
+    assert re.fullmatch(six + r"( -?\d\.\d{9}e[-+]\d+){6}", matched_lines[0])
+    got = read_line_graph_g2o(path)
+    ref = read_line_graph_g2o(plain)
+    assert got.offsets is not None and ref.offsets is not None
+    np.testing.assert_array_equal(got.offsets, ref.offsets)
+    assert got.offset_covariances is not None
+    np.testing.assert_allclose(got.offset_covariances[matched], covs[not_kf][matched], rtol=1e-9)
+    assert np.isnan(got.offset_covariances[~matched]).all()
+    # the pose graph is still g2o's and GTSAM's
+    import gtsam
+
+    graph, values = gtsam.readG2o(str(path), False)
+    assert values.size() == 12 and graph.size() == 11
+
+
+def test_scan_offset_covariances_are_checked(tmp_path):
+    """The writer refuses a wrong shape or a covariance that is not symmetric positive
+    definite; the reader names the file and line of a malformed LINESLAM_SCAN_OFFSET."""
+    from slam.errors import InputError, LogFormatError
+
+    covs = _match_covariances(12)
+    with pytest.raises(InputError, match="scan_offset_covariances"):
+        _synthetic_run(3, tmp_path, 12, covs[:-1], name="_short")
+    for bad in (
+        np.diag([1e-4, 1e-4, -1e-6]),
+        np.array([[1e-4, 2e-5, 0], [0, 1e-4, 0], [0, 0, 1e-5]]),
+    ):
+        wrong = covs.copy()
+        wrong[4] = bad
+        with pytest.raises(InputError, match="row 4"):
+            _synthetic_run(3, tmp_path, 12, wrong, name="_bad")
+    partly = covs.copy()
+    partly[5, 0, 0] = 1e-4  # an odometry row (NaN) with one number
+    with pytest.raises(InputError, match="row 5"):
+        _synthetic_run(3, tmp_path, 12, partly, name="_bad")
+
+    _, _, _, path, _ = _matched_run(tmp_path)
+    text = path.read_text().splitlines(keepends=True)
+    at = next(
+        i
+        for i, x in enumerate(text)
+        if x.startswith("LINESLAM_SCAN_OFFSET ") and len(x.split()) == 12
+    )
+    fields = text[at].split()
+    for edit in (
+        fields[:9],  # a covariance cut short
+        [*fields[:11], "x"],  # not a number
+        [*fields[:6], "1e-4", "0", "0", "1e-4", "0", "-1e-6"],  # not positive definite
+        [*fields[:6], "1e-4", "0", "0", "1e-4", "0", "nan"],
+    ):
+        broken = tmp_path / "broken.g2o"
+        broken.write_text("".join([*text[:at], " ".join(edit) + "\n", *text[at + 1 :]]))
+        with pytest.raises(
+            LogFormatError, match=re.escape(f"{broken}:{at + 1}: LINESLAM_SCAN_OFFSET")
+        ):
+            read_line_graph_g2o(broken)
+
+
+def test_two_matched_scans_on_one_keyframe_are_independent(tmp_path):
+    """On one keyframe, a matched scan's noise is its Σ_s, independent of the other scan's:
+    Cov(ρ) = F Σ_a Fᵀ + Σ_b (F = Ad(ρ⁻¹)), moved to ρ⁻¹ backwards; two odometry scans keep
+    the odometry between them, Q(δ_a⁻¹ δ_b)."""
+    traj, _, _, path, covs = _matched_run(tmp_path)
+    cov = RunCovariances.from_file(path)
+    t = traj.timestamps
+    offsets = pose_between(traj.poses[(np.arange(36) // 3) * 3], traj.poses)
+    checked = set()
+    for k in range(12):
+        a, b = 3 * k + 1, 3 * k + 2
+        da, db = offsets[a], offsets[b]
+        rho = pose_between(da, db)
+        F = adjoint_pose2(pose_inverse(rho))
+        Sa = covs[a] if np.isfinite(covs[a]).all() else MOTION.covariance(da)
+        Sb = covs[b] if np.isfinite(covs[b]).all() else MOTION.covariance(db)
+        want = F @ Sa @ F.T + Sb if k % 4 != 3 else MOTION.covariance(rho)
+        got = cov.relative_covariances(t[[a, b, 3 * k, 3 * k]], t[[b, a, a, b]])
+        np.testing.assert_allclose(got[0], want, rtol=1e-6, atol=1e-15)
+        G = adjoint_pose2(rho)
+        np.testing.assert_allclose(got[1], G @ want @ G.T, rtol=1e-6, atol=1e-15)
+        # from the keyframe: the scan's own noise
+        np.testing.assert_allclose(got[2], Sa, rtol=1e-6, atol=1e-15)
+        np.testing.assert_allclose(got[3], Sb, rtol=1e-6, atol=1e-15)
+        if k % 4 != 3:  # not the odometry's between them
+            assert not np.allclose(got[0], MOTION.covariance(rho), rtol=0.05)
+        checked.add(k % 4)
+    assert checked == {0, 1, 2, 3}
+
+
+def test_matched_scan_on_another_keyframe_uses_its_own_covariance(tmp_path):
+    """Between keyframes, a matched scan's Σ_s takes the place of Q(δ_s): the relative
+    covariance moves by exactly Ad(ρ⁻¹)(Σ_a − Q(δ_a))Ad(ρ⁻¹)ᵀ, or Σ_b − Q(δ_b)."""
+    traj, _, _, path, covs = _matched_run(tmp_path)
+    _, _, _, plain = _synthetic_run(3, tmp_path, n_kf=12)
+    matched, odometry = RunCovariances.from_file(path), RunCovariances.from_file(plain)
+    t, poses = traj.timestamps, traj.poses
+    kf_pose = poses[(np.arange(36) // 3) * 3]
+    for a, b in ((1, 8), (8, 1), (4, 14), (2, 35), (11, 3)):
+        rho = pose_between(poses[a], poses[b])
+        F = adjoint_pose2(pose_inverse(rho))
+        want = np.zeros((3, 3))
+        if np.isfinite(covs[a]).all():
+            want += F @ (covs[a] - MOTION.covariance(pose_between(kf_pose[a], poses[a]))) @ F.T
+        if np.isfinite(covs[b]).all():
+            want += covs[b] - MOTION.covariance(pose_between(kf_pose[b], poses[b]))
+        diff = matched.relative_covariances(t[[a]], t[[b]]) - odometry.relative_covariances(
+            t[[a]], t[[b]]
+        )
+        assert np.abs(want).max() > 1e-6 or (a, b) == (11, 3)  # the last: no matched scan
+        np.testing.assert_allclose(diff[0], want, rtol=1e-6, atol=1e-12)
+
+
+@pytest.mark.parametrize("mount", [None, (0.2, -0.05, 0.1)])
+def test_joint_scan_covariance_holds_relative_covariances_of_matched_scans(tmp_path, mount):
+    """With matched scans, the joint covariance of all scans gives every pair's relative
+    covariance as RunCovariances computes it pair by pair, its diagonal blocks each scan's
+    own covariance, and a matched scan no cross-covariance of noise with its neighbour."""
+    traj, _, _, path, covs = _matched_run(tmp_path)
+    cov = RunCovariances.from_file(path, pose_base_laser=mount)
+    poses = traj.poses
+    if mount is not None:
+        poses = pose_compose(poses, np.broadcast_to(pose_inverse(np.array(mount)), poses.shape))
+    S = cov.joint_scan_covariance(traj.timestamps)
+    n = traj.timestamps.shape[0]
+    pairs = np.concatenate(list(_pairs(12).values()))
+    expected = cov.relative_covariances(traj.timestamps[pairs[:, 0]], traj.timestamps[pairs[:, 1]])
+    for (a, b), want in zip(pairs.tolist(), expected, strict=True):
+        rho = pose_between(poses[a], poses[b])
+        A = np.zeros((3, 3 * n))
+        A[:, 3 * a : 3 * a + 3] = -adjoint_pose2(pose_inverse(rho))
+        A[:, 3 * b : 3 * b + 3] += np.eye(3)
+        np.testing.assert_allclose(A @ S @ A.T, want, rtol=1e-6, atol=1e-14)
+    # keyframe 0: both scans matched; keyframe 3: neither (the shared odometry)
+    noise = cov.odometry_noise(cov.scans_of(traj.timestamps[[1, 2]]))
+    np.testing.assert_allclose(noise[:3, :3], covs[1])
+    np.testing.assert_allclose(noise[3:, 3:], covs[2])
+    np.testing.assert_array_equal(noise[:3, 3:], 0.0)
+    assert np.abs(cov.odometry_noise(cov.scans_of(traj.timestamps[[10, 11]]))[:3, 3:]).max() > 0
+    # a matched scan's block is its keyframe's moved along the offset plus Σ_s
+    F = np.eye(3) if mount is None else adjoint_pose2(np.array(mount))
+    kf0 = cov.keyframe_covariances(np.array([0]))[0]
+    G = adjoint_pose2(pose_inverse(pose_between(traj.poses[0], traj.poses[1])))
+    np.testing.assert_allclose(
+        S[3:6, 3:6], F @ (G @ kf0 @ G.T + covs[1]) @ F.T, rtol=1e-9, atol=1e-16
+    )
+
+
+def test_relation_error_draws_of_matched_scans(tmp_path):
+    """The joint draws use the matched scans' Σ_s: relation by relation their covariance is
+    the relative covariance."""
+    traj, _, _, path, _ = _matched_run(tmp_path, seed=5, n_kf=12)
+    cov = RunCovariances.from_file(path)
+    pairs = np.concatenate([p[:4] for p in _pairs(12).values()])
+    t1, t2 = traj.timestamps[pairs[:, 0]], traj.timestamps[pairs[:, 1]]
+    eta = np.concatenate(list(cov.relation_error_draws(t1, t2, 6000, seed=3, chunk=1000)))
+    want = cov.relative_covariances(t1, t2)
+    got = np.einsum("kmi,kmj->mij", eta, eta) / eta.shape[0]
+    sd = np.sqrt(np.einsum("mii->mi", want))
+    corr = (got - want) / (sd[:, :, None] * sd[:, None, :])
+    assert np.abs(corr).max() < 0.07

@@ -31,6 +31,7 @@ from slam.frontend.scan_match import (
     _OdometryPrior,
     match_scans,
     normal_half_window,
+    refine_scan,
     scan_points,
     slip_covariance,
     visible_points,
@@ -38,6 +39,7 @@ from slam.frontend.scan_match import (
 from slam.geometry import pose_between, pose_compose, pose_log
 from slam.io import read_tum
 from slam.io.relations import read_relations
+from slam.io.results import read_covariances
 from slam.models import MotionNoiseConfig
 from slam.runner import run_slam
 from slam.sim.raycast import cast_scan
@@ -483,6 +485,11 @@ SIGMA_MC = 0.01  # σ_d = 1 cm (σ_φ = 0: the simulated noise is exactly the Eq
 
 @pytest.fixture(scope="module")
 def mc_nees() -> np.ndarray:
+    """NEES of :func:`match_scans` over ``N_MC`` seeded runs in the room (:func:`_mc_nees`)."""
+    return _mc_nees(match_scans)
+
+
+def _mc_nees(match) -> np.ndarray:
     """NEES of ``delta − true`` against ``cov`` over ``N_MC`` seeded runs in the room.
 
     Both scans get N(0, σ_d²) range noise, ``model_sigma_m = 0`` (the walls are exact) and the
@@ -502,7 +509,7 @@ def mc_nees() -> np.ndarray:
         ref = scan_points(ra, FULL, MAX_RANGE_M, noise, cfg)
         cur = scan_points(rb, FULL, MAX_RANGE_M, noise, cfg)
         delta0 = TRUE_DELTA + chol @ rng.standard_normal(3)
-        m = match_scans(ref, cur, delta0, prior, cfg)
+        m = match(ref, cur, delta0, prior, cfg)
         assert m.accepted
         e = m.delta - TRUE_DELTA
         e[2] = _angle(float(e[2]))
@@ -532,6 +539,37 @@ def test_monte_carlo_nees_is_in_the_chi2_band(mc_nees):
     """The mean NEES of ``N_MC`` runs lies in the 99 % band of the mean of χ²₃ values."""
     lo, hi = _chi2_band(N_MC)
     assert lo < mc_nees.mean() < hi, mc_nees.mean()
+
+
+def test_refinement_from_the_odometry_alone_has_its_nees_in_the_chi2_band():
+    """:func:`refine_scan` (a scan between keyframes: no search, the Gaussian prior) on the
+    same runs: its covariance is as consistent as the full match's."""
+    nees = _mc_nees(refine_scan)
+    lo, hi = _chi2_band(N_MC)
+    assert lo < nees.mean() < hi, nees.mean()
+
+
+def test_refinement_matches_the_search_where_the_odometry_is_close():
+    """From an odometry 5 cm and 2° off, the refinement lands where the full match does."""
+    cfg = ScanMatchConfig()
+    ref, cur = _pair(ROOM, FULL, cfg)
+    delta0 = TRUE_DELTA + np.array([0.05, -0.03, np.deg2rad(2.0)])
+    prior = _odometry_cov(delta0)
+    full = match_scans(ref, cur, delta0, prior, cfg)
+    lean = refine_scan(ref, cur, delta0, prior, cfg)
+    assert full.accepted and lean.accepted and not lean.slip
+    np.testing.assert_allclose(lean.delta, full.delta, atol=1e-6)
+    np.testing.assert_allclose(lean.cov, full.cov, rtol=1e-6, atol=1e-12)
+    assert _pose_error(lean, TRUE_DELTA) < (1e-3, 1e-4)
+
+
+def test_refinement_of_an_empty_reference_is_rejected():
+    cfg = ScanMatchConfig()
+    empty = scan_points(np.full(HALF.size, np.nan), HALF, MAX_RANGE_M, NOISE, cfg)
+    _, cur = _pair(ROOM, HALF, cfg)
+    m = refine_scan(empty, cur, TRUE_DELTA, _odometry_cov(TRUE_DELTA), cfg)
+    assert not m.accepted
+    np.testing.assert_array_equal(m.delta, TRUE_DELTA)
 
 
 # --------------------------------------------------------------------------------------------
@@ -665,6 +703,45 @@ def test_demo_log_with_scan_matching(tmp_path):
     assert summary["scan_matches_rejected"] <= 0.05 * summary["scan_matches"]
     assert summary["scan_match_slips"] == 0
     assert _relations_error_m(tmp_path / "sm") < 0.02
+
+
+def _nonkeyframe_errors(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position and heading errors of the scans that are not keyframes, and their NEES."""
+    est = read_tum(out / "trajectory.tum")
+    truth = read_tum(DEMO / "ground_truth.tum")
+    assert np.allclose(est.timestamps, truth.timestamps)
+    keyframe = np.zeros(len(est.timestamps), dtype=bool)
+    for line in (out / "graph.g2o").read_text().splitlines():
+        if line.startswith("LINESLAM_SCAN "):
+            keyframe[np.argmin(np.abs(est.timestamps - float(line.split()[2])))] = True
+    _, cov = read_covariances(out / "trajectory_covariance.txt")
+    e = pose_log(pose_between(truth.poses, est.poses))[~keyframe]
+    nees = np.einsum("ni,ni->n", e, np.linalg.solve(cov[~keyframe], e[..., None])[..., 0])
+    return np.hypot(e[:, 0], e[:, 1]), np.abs(e[:, 2]), nees
+
+
+def test_scans_between_keyframes_matched_against_their_keyframe(tmp_path):
+    """With keyframes every 0.6 m, most demo scans are not keyframes.  Matched against their
+    keyframe (``between_keyframes``) they end closer to the ground truth than composed from it
+    with the odometry (the demo: 4 against 12 mm, 0.4 against 2 mrad)."""
+    keyframes = {"min_distance_m": 0.6, "min_angle_rad": 0.45}
+    off = RunConfig()
+    off = replace(off, slam=replace(off.slam, keyframes=replace(off.slam.keyframes, **keyframes)))
+    on = _with_scan_matching(between_keyframes=True)
+    on = replace(on, slam=replace(on.slam, keyframes=off.slam.keyframes))
+    s_off = run_slam(DEMO / "log.clf", tmp_path / "off", off)
+    s_on = run_slam(DEMO / "log.clf", tmp_path / "on", on)
+    assert s_off["scan_matches_between"] == 0
+    n_between = s_on["scans"] - s_on["keyframes"]
+    assert s_on["keyframes"] == s_off["keyframes"] and n_between > 150
+    assert s_on["scan_matches_between"] + s_on["scan_matches_between_rejected"] == n_between
+    assert s_on["scan_matches_between"] >= 0.9 * n_between
+    xy_off, th_off, nees_off = _nonkeyframe_errors(tmp_path / "off")
+    xy_on, th_on, nees_on = _nonkeyframe_errors(tmp_path / "on")
+    assert xy_on.mean() < 0.5 * xy_off.mean() and th_on.mean() < 0.5 * th_off.mean()
+    # the simulator's walls are exact: the matches' 2 cm model error (model_sigma_m) makes
+    # their covariances conservative, as the odometry's are here; never over-confident
+    assert 0.2 < nees_on.mean() < 3.0 and 0.2 < nees_off.mean() < 3.0, (nees_on, nees_off)
 
 
 def test_scan_matching_can_be_turned_off(tmp_path):

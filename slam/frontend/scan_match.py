@@ -59,6 +59,7 @@ __all__ = [
     "ScanPoints",
     "match_scans",
     "normal_half_window",
+    "refine_scan",
     "scan_points",
     "visible_points",
 ]
@@ -113,6 +114,12 @@ class ScanMatchConfig:
         Standard deviation of a slip's heading error (rad), added to the odometry's, with the
         translation the odometry integrated along it (:func:`slip_covariance`); the search's
         ``rotation_window_rad`` covers two of them.
+    between_keyframes : bool
+        Also match every scan between two keyframes against the last keyframe, from its
+        odometry since the keyframe (:func:`refine_scan`): an accepted match is the scan's
+        offset from its keyframe, with the match's covariance, in the result (the graph is
+        unchanged).  False: such a scan is its keyframe composed with the odometry (and the
+        keyframes' correction shared along the stretch).
     """
 
     RENAMED_KEYS: ClassVar[dict[str, str]] = {
@@ -134,6 +141,7 @@ class ScanMatchConfig:
     min_overlap: float = 0.5
     slip_probability: float = 0.01
     slip_sigma_rad: float = 0.35
+    between_keyframes: bool = False
 
     def __post_init__(self) -> None:
         nonneg("model_sigma_m", self.model_sigma_m)
@@ -861,10 +869,31 @@ def match_scans(
         matcher.info_prior = info_prior
         x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
     x[2] = math.remainder(float(x[2]), 2.0 * math.pi)
+    cov, overlap, inl, accepted = _posterior(matcher, reference, current, x, used_cov, info_prior)
+    contradicted = slip and not accepted
+    return ScanMatch(
+        x, cov, float(overlap), inl, float(offset), accepted, slip and accepted, contradicted
+    )
+
+
+def _posterior(
+    matcher: _Matcher,
+    reference: ScanPoints,
+    current: ScanPoints,
+    x: FloatArray,
+    prior_cov: FloatArray,
+    info_prior: FloatArray,
+) -> tuple[FloatArray, float, int, bool]:
+    """``(cov, overlap, inliers, accepted)`` of the match at ``x`` under the prior.
+
+    ``cov`` is the posterior (the points' sandwich covariance and the prior's information
+    together), or ``prior_cov`` where the points' covariance is not finite or the posterior not
+    positive definite (then not accepted); accepted also needs ``overlap >= min_overlap``.
+    """
     cov_points, inl = matcher.covariance(x)
     overlap = inl / max(visible_points(reference, current, x), inl, 1)
     ok = bool(np.all(np.isfinite(cov_points)))
-    cov: FloatArray = np.asarray(used_cov, dtype=np.float64).copy()
+    cov: FloatArray = np.asarray(prior_cov, dtype=np.float64).copy()
     if ok:
         try:
             info = np.linalg.inv(cov_points) + info_prior
@@ -875,8 +904,37 @@ def match_scans(
                 cov = post
         except np.linalg.LinAlgError:
             ok = False
-    accepted = ok and overlap >= cfg.min_overlap
-    contradicted = slip and not accepted
-    return ScanMatch(
-        x, cov, float(overlap), inl, float(offset), accepted, slip and accepted, contradicted
-    )
+    return cov, float(overlap), inl, ok and overlap >= matcher.cfg.min_overlap
+
+
+def refine_scan(
+    reference: ScanPoints,
+    current: ScanPoints,
+    delta0: FloatArray,
+    prior_cov: FloatArray,
+    config: ScanMatchConfig,
+) -> ScanMatch:
+    """Register ``current`` against ``reference`` from the odometry alone (no search).
+
+    For a scan between two keyframes, matched against the last keyframe: its odometry since
+    the keyframe covers a short stretch, so the mode of the posterior (the points' robust
+    likelihood times the odometry's Gaussian ``N(delta0, prior_cov)``) is refined from the
+    odometry itself, as :func:`match_scans` refines its best start (first with pairs within
+    ``max_correspondence_m``, then within ``inlier_m``), without its search over rotations
+    and without the slip component.
+
+    Returns
+    -------
+    ScanMatch
+        ``start_offset_rad`` 0, ``slip`` and ``contradicted`` False.
+    """
+    cfg = config
+    x0 = np.asarray(delta0, dtype=float)
+    Q = np.asarray(prior_cov, dtype=float)
+    info = _symmetric_inverse(Q)
+    matcher = _Matcher(reference, current, cfg, x0, info, lambda x: 0.0)
+    x = matcher.solve(x0, cfg.max_iterations, cfg.max_correspondence_m)
+    x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
+    x[2] = math.remainder(float(x[2]), 2.0 * math.pi)
+    cov, overlap, inl, accepted = _posterior(matcher, reference, current, x, Q, info)
+    return ScanMatch(x, cov, overlap, inl, 0.0, accepted)

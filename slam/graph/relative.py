@@ -12,13 +12,18 @@ batch back-end computes its own (:meth:`slam.graph.batch.BatchSolver.marginals`:
 linearised at the estimate, the kernel's IRLS weights at the estimate, ``gtsam.Marginals``):
 
 * keyframes ``k₁ ≠ k₂``: their joint marginal ``Σ`` (6×6, ``jointMarginalCovariance``); a scan
-  ``s`` hanging from keyframe ``k`` with odometry offset ``δ_s`` has the right perturbation
-  ``ξ_s = Ad(δ_s⁻¹) ξ_k + w_s``, ``w_s ~ N(0, Q(δ_s))`` (the run's final motion model, as
-  :func:`slam.line_slam.assembly.assemble_result` computes each scan's own covariance),
-  independent between keyframes;
-* both scans on one keyframe: the keyframe cancels, ``Cov(ρ) = Q(δ₁⁻¹ δ₂)`` (the odometry
-  between them, the earlier scan first; moved to ``ρ``'s tangent space when the relation runs
-  backwards);
+  ``s`` hanging from keyframe ``k`` with offset ``δ_s`` has the right perturbation
+  ``ξ_s = Ad(δ_s⁻¹) ξ_k + w_s``, independent between keyframes, with ``w_s ~ N(0, Q(δ_s))``
+  (the run's final motion model) for an odometry offset and ``w_s ~ N(0, Σ_s)`` for a scan
+  matched against its keyframe (the match's covariance, ``LINESLAM_SCAN_OFFSET`` with twelve
+  fields), as :func:`slam.line_slam.assembly.assemble_result` computes each scan's own
+  covariance;
+* both scans on one keyframe: the keyframe cancels.  Two odometry scans share the odometry
+  from the keyframe to the earlier one, and ``Cov(ρ) = Q(δ₁⁻¹ δ₂)`` (the odometry between them,
+  the earlier scan first; moved to ``ρ``'s tangent space when the relation runs backwards).
+  When either is a matched scan (or the keyframe itself) their noises are independent:
+  ``Cov(ρ) = F Σ₁ Fᵀ + Σ₂``, ``F = Ad(ρ⁻¹)``, each ``Σ`` the scan's own noise (``Σ_s``,
+  ``Q(δ_s)``, or zero for the keyframe), with the same ordering and backwards handling;
 * then ``η = −Ad(ρ⁻¹) ξ₁ + ξ₂`` (right perturbation of ``ρ``), and in the reported frame
   ``base`` (``pose_world_base = pose_world_laser ∘ M⁻¹``, ``M = pose_base_laser``)
   ``η_base = Ad(M) η``.
@@ -163,6 +168,13 @@ class RunCovariances:
         self.scan_timestamps = np.concatenate([f.timestamps, f.offset_timestamps])
         self.scan_keyframe = np.concatenate([np.arange(n_kf), f.offset_keyframes])
         self.scan_offset = np.concatenate([np.zeros((n_kf, 3)), f.offsets])
+        own = f.offset_covariances
+        if own is None:
+            own = np.full((f.offsets.shape[0], 3, 3), np.nan)
+        self.scan_offset_cov = np.concatenate([np.full((n_kf, 3, 3), np.nan), own])
+        """Each scan's match covariance ``Σ_s`` ``(N, 3, 3)``; NaN for keyframes and odometry."""
+        self.scan_matched = np.all(np.isfinite(self.scan_offset_cov.reshape(-1, 9)), axis=1)
+        """Whether each scan's offset is a scan match's (its noise ``Σ_s``, not ``Q(δ_s)``)."""
         self.mount = None if pose_base_laser is None else np.asarray(pose_base_laser, float)
         self._marginals: gtsam.Marginals | None = None
         self._information_lu: tuple[Any, Any, dict[int, int]] | None = None
@@ -234,10 +246,11 @@ class RunCovariances:
 
         Block ``(i, j)`` is ``Cov(ξᵢ, ξⱼ)``, each scan's error in its own right tangent space
         in the reported frame: the keyframes' joint marginal (``jointMarginalCovariance``),
-        each other scan ``ξ_s = Ad(δ_s⁻¹) ξ_k + w_s`` with its odometry noise ``w_s``
-        independent of the keyframes and of other keyframes' scans (module docstring); two
-        scans on one keyframe get the cross-covariance of ``w`` that makes the covariance of
-        their relative pose the odometry's between them, as in :meth:`relative_covariances`.
+        each other scan ``ξ_s = Ad(δ_s⁻¹) ξ_k + w_s`` with its own noise ``w_s`` (``Q(δ_s)``
+        or a match's ``Σ_s``) independent of the keyframes and of other keyframes' scans
+        (module docstring); two odometry scans on one keyframe get the cross-covariance of
+        ``w`` that makes the covariance of their relative pose the odometry's between them,
+        a matched scan none (:meth:`odometry_noise`), as in :meth:`relative_covariances`.
         Its diagonal blocks are the per-scan covariances of ``trajectory_covariance.txt``.
         Dense: meant for a few thousand scans at most
         (:data:`slam.evaluation.nees.MAX_BOUND_POSES`).
@@ -267,23 +280,22 @@ class RunCovariances:
         return np.asarray(0.5 * (out + out.T))
 
     def odometry_noise(self, scans: IntArray) -> FloatArray:
-        """Joint covariance ``(3n, 3n)`` of the odometry noise ``w_s`` of scans on one keyframe.
+        """Joint covariance ``(3n, 3n)`` of the noises ``w_s`` of scans on one keyframe.
 
-        A keyframe has none; another scan ``Q(δ_s)``, the motion model at its offset; two scans
-        ``a`` before ``b`` share the stretch of odometry between the keyframe and ``a``: their
-        cross-covariance ``C`` makes the covariance of their relative pose the odometry's
-        between them, as :meth:`relative_covariances` has it:
+        A keyframe has none; a matched scan its match's covariance ``Σ_s``, independent of
+        the others'; another scan ``Q(δ_s)``, the motion model at its offset, and two such
+        scans ``a`` before ``b`` share the stretch of odometry between the keyframe and ``a``:
+        their cross-covariance ``C`` makes the covariance of their relative pose the
+        odometry's between them, as :meth:`relative_covariances` has it:
         ``F Q_a Fᵀ + Q_b − F C − (F C)ᵀ = Q_ab`` with ``F = Ad(ρ⁻¹)`` and ``F C`` symmetric.
         """
         rows = [int(x) for x in np.asarray(scans).reshape(-1)]
         n = len(rows)
         out = np.zeros((3 * n, 3 * n))
-        moving = [i for i in range(n) if not self._is_kf(rows[i])]
-        for i in moving:
-            out[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = self.motion.covariance(
-                self.scan_offset[rows[i]]
-            )
-        for i, j in ((i, j) for i in moving for j in moving if i < j):
+        for i in range(n):
+            out[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = self._own_noise(rows[i])
+        odometry = [i for i in range(n) if not (self._is_kf(rows[i]) or self.scan_matched[rows[i]])]
+        for i, j in ((i, j) for i in odometry for j in odometry if i < j):
             ia, ib = (i, j) if self._earlier(rows[i], rows[j]) else (j, i)
             da, db = self.scan_offset[rows[ia]], self.scan_offset[rows[ib]]
             rho = pose_between(da, db)
@@ -312,7 +324,7 @@ class RunCovariances:
         The keyframes' errors are drawn from ``N(0, H⁻¹)``, ``H = AᵀA`` the information of the
         graph linearised at its estimate as :attr:`marginals` has it (``A`` the whitened
         Jacobian, GTSAM's ``sparseJacobian_``; a draw is ``H⁻¹ Aᵀ z``, ``z ~ N(0, I)``, solved
-        with SciPy's sparse LU), each other scan's by its odometry from its keyframe
+        with SciPy's sparse LU), each other scan's by its own noise from its keyframe
         (:meth:`odometry_noise`, drawn per keyframe), and each relation's error is
         ``η = −Ad(ρ⁻¹) ξ₁ + ξ₂`` as in :meth:`relative_covariances`, whose covariances the
         draws have.  Yields arrays ``(k, m, 3)`` (``k ≤ chunk`` draws of the ``m`` relations)
@@ -391,11 +403,15 @@ class RunCovariances:
         ka, kb = int(self.scan_keyframe[a]), int(self.scan_keyframe[b])
         da, db = self.scan_offset[a], self.scan_offset[b]
         if ka == kb:
-            # the same keyframe: only the odometry between the two scans, earlier one first
+            # the same keyframe: only the noise between the two scans, earlier one first
             forward = self._earlier(a, b)
-            first, second = (da, db) if forward else (db, da)
-            rho = pose_between(first, second)
-            Q = self.motion.covariance(rho)
+            first, second = (a, b) if forward else (b, a)
+            rho = pose_between(self.scan_offset[first], self.scan_offset[second])
+            if self.scan_matched[first] or self.scan_matched[second]:
+                F = adjoint_pose2(pose_inverse(rho))  # independent noises
+                Q = F @ self._own_noise(first) @ F.T + self._own_noise(second)
+            else:
+                Q = self.motion.covariance(rho)  # the odometry between them
             if forward:
                 return np.asarray(Q)
             F = adjoint_pose2(rho)  # η of ρ⁻¹ = −Ad(ρ) η of ρ
@@ -409,8 +425,8 @@ class RunCovariances:
         Fa = adjoint_pose2(pose_inverse(da))
         Fb = adjoint_pose2(pose_inverse(db))
         P = np.zeros((6, 6))
-        P[:3, :3] = Fa @ J[:3, :3] @ Fa.T + self.motion.covariance(da) * (not self._is_kf(a))
-        P[3:, 3:] = Fb @ J[3:, 3:] @ Fb.T + self.motion.covariance(db) * (not self._is_kf(b))
+        P[:3, :3] = Fa @ J[:3, :3] @ Fa.T + self._own_noise(a)
+        P[3:, 3:] = Fb @ J[3:, 3:] @ Fb.T + self._own_noise(b)
         P[:3, 3:] = Fa @ J[:3, 3:] @ Fb.T
         P[3:, :3] = P[:3, 3:].T
         graph_poses = self.graph.poses
@@ -419,6 +435,14 @@ class RunCovariances:
         rho = pose_between(pa, pb)
         A = np.hstack([-adjoint_pose2(pose_inverse(rho)), np.eye(3)])
         return np.asarray(A @ P @ A.T)
+
+    def _own_noise(self, scan: int) -> FloatArray:
+        """Covariance of a scan's noise ``w_s`` from its keyframe: 0, ``Σ_s`` or ``Q(δ_s)``."""
+        if self._is_kf(scan):
+            return np.zeros((3, 3))
+        if self.scan_matched[scan]:
+            return np.asarray(self.scan_offset_cov[scan], dtype=np.float64)
+        return np.asarray(self.motion.covariance(self.scan_offset[scan]), dtype=np.float64)
 
     def _is_kf(self, scan: int) -> bool:
         return bool(scan < self.graph_file.pose_graph.vertex_ids.shape[0])

@@ -38,6 +38,7 @@ g2o and GTSAM skip as unknown tags)::
     LINESLAM_ROBUST_KERNEL name k               kernel on the line factors (none/huber/cauchy)
     LINESLAM_MOTION_NOISE sxy_min sxy_per_m sxy_per_rad sth_min sth_per_m sth_per_rad
     LINESLAM_SCAN_OFFSET i timestamp dx dy dtheta
+    LINESLAM_SCAN_OFFSET i timestamp dx dy dtheta C11 C12 C13 C22 C23 C33
 
 A ``LINESLAM_EDGE_SE2_LINE2D`` is a line measurement: the line ``(r, α)`` measured in the
 laser frame of pose ``i`` (``{p : p·(cos α, sin α) = r}``), predicted from landmark ``k`` by
@@ -53,10 +54,13 @@ relations NEES, :mod:`slam.graph.relative`): ``LINESLAM_PRIOR_SE2`` is the prior
 the gauge (information in the tangent space of pose ``i``; ``FIX`` says the same to g2o),
 ``LINESLAM_ROBUST_KERNEL`` the kernel and its width (whitened units) on the line factors, and
 every scan that is not a keyframe has a ``LINESLAM_SCAN_OFFSET``: it hangs from keyframe ``i``
-with the odometry offset ``(dx, dy, dθ)`` (laser frame of the keyframe), its pose covariance
-being the keyframe's moved along the offset plus the motion noise of the offset,
-``LINESLAM_MOTION_NOISE`` (σ's of :class:`slam.models.motion.MotionNoiseConfig`: m, m/√m,
-m/√rad, rad, rad/√m, rad/√rad).
+with the offset ``(dx, dy, dθ)`` (laser frame of the keyframe), its pose covariance being the
+keyframe's moved along the offset plus the noise of the offset.  With six fields the offset is
+the odometry's and its noise the motion model's at the offset, ``LINESLAM_MOTION_NOISE`` (σ's
+of :class:`slam.models.motion.MotionNoiseConfig`: m, m/√m, m/√rad, rad, rad/√m, rad/√rad);
+with twelve it is a scan match's estimate against the keyframe and ``C`` its covariance
+``Σ_s`` (upper triangle, row by row; right perturbation of the offset, the motion model's
+convention).
 """
 
 from __future__ import annotations
@@ -246,6 +250,38 @@ _MOTION_FIELDS = (
     "sigma_theta_per_rad",
 )
 _KERNELS = ("none", "huber", "cauchy")
+_OFFSET_FMT = ("%.6f", "%.9f", "%.9f", "%.9f")
+
+
+def _is_covariance(cov: FloatArray) -> bool:
+    """Whether a 3×3 matrix is finite, symmetric (to rounding) and positive definite."""
+    if not np.isfinite(cov).all():
+        return False
+    scale = float(np.max(np.abs(cov)))
+    if not np.allclose(cov, cov.T, rtol=0.0, atol=1e-9 * scale):
+        return False
+    try:
+        np.linalg.cholesky(0.5 * (cov + cov.T))
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def _upper(cov: FloatArray) -> FloatArray:
+    """Upper triangle, row by row, of the symmetric part of a 3×3 matrix."""
+    sym: FloatArray = 0.5 * (cov + cov.T)
+    return sym[_UPPER[0], _UPPER[1]]
+
+
+def _checked_offset_covariances(covs: FloatArray, scans: NDArray[np.intp]) -> FloatArray:
+    """``covs`` ``(S, 3, 3)`` of the non-keyframe scans ``scans``: all-NaN or SPD rows."""
+    for cov, scan in zip(covs, scans.tolist(), strict=True):
+        if not (np.isnan(cov).all() or _is_covariance(cov)):
+            raise InputError(
+                f"scan_offset_covariances: row {scan} is neither all NaN nor a symmetric "
+                "positive-definite covariance"
+            )
+    return covs
 
 
 def write_line_graph_g2o(
@@ -256,6 +292,7 @@ def write_line_graph_g2o(
     scan_offsets: ArrayLike | None = None,
     motion_noise: Any = None,
     robust_kernel: tuple[str, float] | None = None,
+    scan_offset_covariances: ArrayLike | None = None,
 ) -> Path:
     """Write a :class:`slam.graph.problem.LineGraph` as g2o with the line extension (module doc).
 
@@ -276,11 +313,34 @@ def write_line_graph_g2o(
         :class:`slam.models.motion.MotionNoiseConfig`): ``LINESLAM_MOTION_NOISE``.
     robust_kernel : (name, k), optional
         The kernel on the line factors: ``LINESLAM_ROBUST_KERNEL``.
+    scan_offset_covariances : array_like, shape (N, 3, 3), optional
+        Row by row with ``scan_offsets``: the covariance ``Σ_s`` of a scan's offset when it is
+        a scan match's estimate (symmetric positive definite, written after the offset), a
+        row of NaN for an odometry offset (whose noise is the motion model's); the rows of
+        keyframes are not read.
+
+    Raises
+    ------
+    InputError
+        ``scan_offsets`` or ``scan_offset_covariances`` of the wrong shape, a covariance row
+        of a scan that is neither all NaN nor symmetric positive definite, or an unknown
+        robust kernel.
     """
     poses = np.asarray(graph.poses, dtype=float)
     n = poses.shape[0]
     stamps: FloatArray | None = None
     offset_rows: FloatArray | None = None
+    offset_covs: FloatArray | None = None
+    covs: FloatArray | None = None
+    if scan_offset_covariances is not None:
+        if scan_offsets is None:
+            raise InputError("scan_offset_covariances: needs scan_offsets")
+        covs = np.asarray(scan_offset_covariances, dtype=float)
+        n_scans = np.asarray(scan_offsets, dtype=float).reshape(-1, 3).shape[0]
+        if covs.shape != (n_scans, 3, 3):
+            raise InputError(
+                f"scan_offset_covariances: need shape ({n_scans}, 3, 3), got {covs.shape}"
+            )
     if result is not None:
         kf = np.asarray(result.is_keyframe, dtype=bool)
         if int(kf.sum()) == n:
@@ -292,6 +352,8 @@ def write_line_graph_g2o(
                 t = np.asarray(result.timestamps, dtype=float)
                 k = np.asarray(result.keyframe_of_scan, dtype=np.int64)
                 offset_rows = np.column_stack([k[~kf], t[~kf], off[~kf]])
+                if covs is not None:
+                    offset_covs = _checked_offset_covariances(covs[~kf], np.flatnonzero(~kf))
     alive = np.flatnonzero(np.asarray(graph.landmark_alive, dtype=bool))
     line_id = np.full(np.asarray(graph.landmark_alive).shape[0], -1, dtype=np.int64)
     line_id[alive] = n + np.arange(alive.shape[0])
@@ -332,7 +394,17 @@ def write_line_graph_g2o(
             np.savetxt(handle, table, fmt=[f"{_LINE_EDGE} %d", "%d"] + ["%.9f"] * 2 + ["%.9g"] * 3)
         # after every edge: gtsam.readG2o stops reading edges at some unknown lines
         if offset_rows is not None and offset_rows.shape[0]:
-            np.savetxt(handle, offset_rows, fmt=[f"{_OFFSET} %d", "%.6f", "%.9f", "%.9f", "%.9f"])
+            if offset_covs is None:
+                np.savetxt(handle, offset_rows, fmt=[f"{_OFFSET} %d", *_OFFSET_FMT])
+            else:
+                row_fmt = " ".join([f"{_OFFSET} %d", *_OFFSET_FMT])
+                for row, cov in zip(offset_rows, offset_covs, strict=True):
+                    extra = (
+                        ""
+                        if np.isnan(cov).all()
+                        else " " + " ".join(f"{v:.9e}" for v in _upper(cov))
+                    )
+                    handle.write(row_fmt % tuple(row) + extra + "\n")
         if robust_kernel is not None:
             name, width = robust_kernel
             if name not in _KERNELS:
@@ -380,7 +452,11 @@ class LineGraphFile:
         The six σ of the non-keyframe scans' motion model (``MotionNoiseConfig`` fields).
     offset_timestamps, offset_keyframes, offsets : ndarray or None
         The scans that are not keyframes: time stamp ``(S,)``, keyframe they hang from ``(S,)``
-        and odometry offset from it ``(S, 3)``, if written.
+        and offset from it ``(S, 3)``, if written.
+    offset_covariances : ndarray, shape (S, 3, 3), or None
+        The covariance ``Σ_s`` of each of those offsets that is a scan match's estimate, NaN
+        for the odometry offsets (whose noise is ``motion_noise``'s); None when no offsets
+        are written.
     """
 
     pose_graph: PoseGraph2D
@@ -398,16 +474,25 @@ class LineGraphFile:
     offset_timestamps: FloatArray | None = None
     offset_keyframes: NDArray[np.int64] | None = None
     offsets: FloatArray | None = None
+    offset_covariances: FloatArray | None = None
 
 
 def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
-    """Read a file of :func:`write_line_graph_g2o` (the pose graph and the line extension)."""
+    """Read a file of :func:`write_line_graph_g2o` (the pose graph and the line extension).
+
+    Raises
+    ------
+    LogFormatError
+        A line of the extension with the wrong fields (naming the file and line): among
+        them a ``LINESLAM_SCAN_OFFSET`` whose covariance is not positive definite.
+    """
     where = str(path)
     plain: list[str] = []
     lines_v: list[list[float]] = []
     lines_e: list[list[float]] = []
     stamps: dict[int, float] = {}
     offsets: list[list[float]] = []
+    offset_covs: list[FloatArray] = []
     prior: list[float] | None = None
     robust: tuple[str, float] | None = None
     motion: dict[str, float] | None = None
@@ -423,8 +508,19 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
                 lines_e.append([float(t) for t in tokens[1:]])
             elif tokens[0] == _SCAN and len(tokens) == 3:
                 stamps[int(tokens[1])] = float(tokens[2])
-            elif tokens[0] == _OFFSET and len(tokens) == 6:
-                offsets.append([float(tokens[2]), int(tokens[1]), *map(float, tokens[3:])])
+            elif tokens[0] == _OFFSET and len(tokens) in (6, 12):
+                offsets.append([float(tokens[2]), int(tokens[1]), *map(float, tokens[3:6])])
+                cov = np.full((3, 3), np.nan)
+                if len(tokens) == 12:
+                    cov[_UPPER[0], _UPPER[1]] = [float(t) for t in tokens[6:]]
+                    cov[_UPPER[1], _UPPER[0]] = cov[_UPPER[0], _UPPER[1]]
+                    if not _is_covariance(cov):
+                        raise LogFormatError(
+                            f"{_OFFSET}: the covariance is not positive definite",
+                            where,
+                            line_number,
+                        )
+                offset_covs.append(cov)
             elif tokens[0] == _PRIOR and len(tokens) == 11 and int(tokens[1]) == 0:
                 prior = [float(t) for t in tokens[2:]]
             elif tokens[0] == _ROBUST and len(tokens) == 3 and tokens[1] in _KERNELS:
@@ -477,4 +573,7 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
         offset_timestamps=off[:, 0].copy() if written else None,
         offset_keyframes=off[:, 1].astype(np.int64) if written else None,
         offsets=off[:, 2:].copy() if written else None,
+        offset_covariances=np.asarray(offset_covs, dtype=float).reshape(-1, 3, 3)
+        if written
+        else None,
     )

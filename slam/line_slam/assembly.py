@@ -5,10 +5,12 @@
   ``C = δ_{k+1}⁻¹ (x_k⁻¹ x_{k+1})`` the correction the estimate made to the odometry between
   the two keyframes and ``f`` the fraction of that stretch already driven (path, turning
   weighted by :data:`~slam.line_slam.keyframes.ANGLE_WEIGHT_M_PER_RAD`).  After the last
-  keyframe: ``x_k ∘ δ_s``.
+  keyframe: ``x_k ∘ δ_s``.  A scan matched against its keyframe
+  (``scan_matching.between_keyframes``) is ``x_k ∘ δ_s`` with ``δ_s`` the match.
 * **Covariances** (``pose_covariances = "keyframes"``): each keyframe's marginal from the
   back-end; a non-keyframe scan's is its keyframe's moved along ``δ_s`` (adjoint) plus the
-  motion noise of ``δ_s``.  Reported in the output frame of the input policy.
+  motion noise of ``δ_s`` (a matched scan: the match's covariance).  Reported in the output
+  frame of the input policy.
 * **Map.**  Landmarks with at least ``map_min_observations`` measurements, in normal form
   ``(r ≥ 0, α)`` with their marginal covariances; their visible segments are the union of the
   observed pieces (gaps up to ``map_segment_gap_m`` bridged), each end's variance including
@@ -58,7 +60,8 @@ def scan_poses(graph: LineGraph, track: KeyframeTrack) -> tuple[FloatArray, IntA
         return np.zeros((0, 3)), kf, offsets
     poses = pose_compose(g.poses[kf], offsets)
     nxt = kf + 1
-    has_next = (nxt < g.n_poses) & ~np.asarray(track.scan_is_keyframe, dtype=bool)
+    matched = np.all(np.isfinite(np.asarray(track.scan_offset_cov).reshape(n, 9)), axis=1)
+    has_next = (nxt < g.n_poses) & ~np.asarray(track.scan_is_keyframe, dtype=bool) & ~matched
     if np.any(has_next):
         k = kf[has_next]
         d_next = track.keyframe_delta[k + 1]
@@ -140,10 +143,13 @@ def assemble_result(
     if config.pose_covariances == "keyframes" and g.n_poses:
         kf_cov = backend.pose_covariances(g, np.arange(g.n_poses))
         F = adjoint_pose2(pose_inverse(offsets))
+        offset_cov = np.asarray(track.scan_offset_cov).reshape(n, 3, 3)
+        matched = np.all(np.isfinite(offset_cov.reshape(n, 9)), axis=1)
+        noise = np.where(
+            matched[:, None, None], offset_cov, (motion or config.motion).covariance(offsets)
+        )
         cov = F @ kf_cov[kf] @ np.swapaxes(F, 1, 2) + np.where(
-            np.asarray(track.scan_is_keyframe)[:, None, None],
-            0.0,
-            (motion or config.motion).covariance(offsets),
+            np.asarray(track.scan_is_keyframe)[:, None, None], 0.0, noise
         )
     interrupts.check()  # between the covariance blocks (slam.interrupts)
     poses, cov_out = policy.report(poses, cov)

@@ -71,6 +71,9 @@ class KeyframeTrack:
         self.timestamps: list[float] = []
         self.scan_keyframe: list[int] = []
         self.scan_offset: list[FloatArray] = []
+        #: covariance of a scan's offset where it was matched against its keyframe (else NaN:
+        #: the offset is the odometry's, its noise the motion model's)
+        self.scan_offset_cov: list[FloatArray] = []
         self.scan_progress: list[float] = []
         self.scan_is_keyframe: list[bool] = []
         self.scan_runtime_s: list[float] = []
@@ -126,11 +129,19 @@ class KeyframeTrack:
         keyframe_scan: bool,
         n_landmarks: int,
         runtime_s: float,
+        offset_cov: FloatArray | None = None,
     ) -> None:
-        """Record one scan: its keyframe, odometry offset from it and progress towards the next."""
+        """Record one scan: its keyframe, offset from it and progress towards the next.
+
+        The offset is the odometry's, or with ``offset_cov`` (3×3) the scan's match against the
+        keyframe.
+        """
         self.timestamps.append(float(timestamp))
         self.scan_keyframe.append(keyframe)
         self.scan_offset.append(np.asarray(offset, dtype=float))
+        self.scan_offset_cov.append(
+            np.full((3, 3), np.nan) if offset_cov is None else np.asarray(offset_cov, dtype=float)
+        )
         self.scan_progress.append(0.0 if keyframe_scan else self._progress)
         self.scan_is_keyframe.append(keyframe_scan)
         self.scan_n_landmarks.append(n_landmarks)

@@ -59,6 +59,7 @@ from slam.frontend.scan_match import (
     ScanMatch,
     ScanPoints,
     match_scans,
+    refine_scan,
     scan_points,
     slip_covariance,
 )
@@ -219,7 +220,8 @@ class LineSlam:
         scan_no = self.track.n_scans
         if not step.keyframe:
             kf = self.graph.n_poses - 1
-            self._record(scan, kf, step.delta, False, t_start)
+            offset, offset_cov = self._between_keyframes(scan, step)
+            self._record(scan, kf, offset, False, t_start, offset_cov)
             return ScanReport(scan_no, False, kf)
         if lines is None:
             with self.clock("extract"):
@@ -242,8 +244,38 @@ class LineSlam:
         self._record(scan, report.pose_index, np.zeros(3), True, t_start)
         return report
 
+    def _between_keyframes(
+        self, scan: Scan, step: OdometryStep
+    ) -> tuple[FloatArray, FloatArray | None]:
+        """A scan that is not a keyframe: its offset from the keyframe, and its covariance.
+
+        The odometry's offset (covariance None: the motion model's), or with
+        ``scan_matching.between_keyframes`` the scan's points matched against the keyframe's
+        from it (:func:`refine_scan`) where the match is accepted.
+        """
+        smc = self.config.frontend.scan_matching
+        if not (smc.enabled and smc.between_keyframes) or self._points is None:
+            return step.delta, None
+        with self.clock("frontend"):
+            points = scan_points(
+                scan.ranges, scan.bearings, scan.max_range_m, self.linefit_config.noise, smc
+            )
+            Q = self.odometry_noise.model.covariance(step.delta)
+            match = refine_scan(self._points, points, step.delta, Q, smc)
+        if not match.accepted:
+            self.counters["scan_matches_between_rejected"] += 1
+            return step.delta, None
+        self.counters["scan_matches_between"] += 1
+        return match.delta, match.cov
+
     def _record(
-        self, scan: Scan, kf: int, offset: FloatArray, keyframe: bool, t_start: float
+        self,
+        scan: Scan,
+        kf: int,
+        offset: FloatArray,
+        keyframe: bool,
+        t_start: float,
+        offset_cov: FloatArray | None = None,
     ) -> None:
         self.track.record_scan(
             scan.timestamp,
@@ -252,6 +284,7 @@ class LineSlam:
             keyframe,
             int(np.count_nonzero(self.graph.landmark_alive)),
             time.perf_counter() - t_start,
+            offset_cov,
         )
 
     # -- one keyframe ------------------------------------------------------------------------
@@ -425,6 +458,7 @@ class LineSlam:
             self.graph,
             result,
             scan_offsets=np.array(self.track.scan_offset).reshape(-1, 3),
+            scan_offset_covariances=np.array(self.track.scan_offset_cov).reshape(-1, 3, 3),
             motion_noise=self.odometry_noise.model,
             robust_kernel=(solver.robust_kernel, solver.robust_k),
         )

@@ -48,6 +48,8 @@ COUNTERS = (
     "scan_matches_rejected",
     "scan_match_slips",
     "scan_match_contradictions",
+    "scan_matches_between",
+    "scan_matches_between_rejected",
     "loop_closure_attempts",
     "loop_closure_candidates",
     "loop_closures",
