@@ -563,6 +563,24 @@ def test_refinement_matches_the_search_where_the_odometry_is_close():
     assert _pose_error(lean, TRUE_DELTA) < (1e-3, 1e-4)
 
 
+def test_current_scan_needs_no_local_lines():
+    """A scan only matched (never a reference) can skip its local lines: the same points, the
+    same covariances, the same match."""
+    cfg = ScanMatchConfig()
+    ref, cur = _pair(ROOM, FULL, cfg)
+    rb = _ranges(ROOM, pose_compose(POSE_A, TRUE_DELTA), FULL)
+    bare = scan_points(rb, FULL, MAX_RANGE_M, NOISE, cfg, with_normals=False)
+    assert not bare.has_normal.any() and (bare.segment == -1).all() and cur.has_normal.any()
+    for name in ("xy", "q11", "q12", "q22"):
+        np.testing.assert_array_equal(getattr(bare, name), getattr(cur, name))
+    delta0 = TRUE_DELTA + np.array([0.03, 0.02, -0.02])
+    a = refine_scan(ref, cur, delta0, _odometry_cov(delta0), cfg)
+    b = refine_scan(ref, bare, delta0, _odometry_cov(delta0), cfg)
+    np.testing.assert_array_equal(a.delta, b.delta)
+    np.testing.assert_array_equal(a.cov, b.cov)
+    assert (a.overlap, a.inliers, a.accepted) == (b.overlap, b.inliers, b.accepted)
+
+
 def test_refinement_of_an_empty_reference_is_rejected():
     cfg = ScanMatchConfig()
     empty = scan_points(np.full(HALF.size, np.nan), HALF, MAX_RANGE_M, NOISE, cfg)

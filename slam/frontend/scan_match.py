@@ -246,20 +246,26 @@ def scan_points(
     max_range_m: float,
     noise: SensorNoiseConfig,
     config: ScanMatchConfig,
+    with_normals: bool = True,
 ) -> ScanPoints:
     """The valid readings of a scan as :class:`ScanPoints` (laser frame).
 
     Readings that are not finite, not positive, or at or beyond ``max_range_m`` (no return)
-    are left out.
+    are left out.  Without ``with_normals`` no point gets a local line (``has_normal`` all
+    False, ``segment`` all −1): enough for a scan that is only ever matched, never a reference.
     """
     d = np.asarray(ranges, dtype=float)
     b = np.asarray(bearings, dtype=float)
-    h = normal_half_window(b, config)
     valid = np.isfinite(d) & (d > 0.0) & (d < max_range_m)
-    d, b = d[valid], b[valid]
-    xy = np.stack([d * np.cos(b), d * np.sin(b)], axis=-1)
-    q11, q12, q22 = point_covariance_entries(d, b, noise)
-    normals, ok = _local_lines(xy, h, config)
+    d_valid, b_valid = d[valid], b[valid]
+    xy = np.stack([d_valid * np.cos(b_valid), d_valid * np.sin(b_valid)], axis=-1)
+    q11, q12, q22 = point_covariance_entries(d_valid, b_valid, noise)
+    if not with_normals:
+        n = xy.shape[0]
+        return ScanPoints(
+            xy, q11, q12, q22, np.zeros((n, 2)), np.zeros(n, dtype=bool), np.full(n, -1)
+        )
+    normals, ok = _local_lines(xy, normal_half_window(b, config), config)
     return ScanPoints(xy, q11, q12, q22, normals, ok, _segments(xy, ok, config))
 
 

@@ -258,7 +258,12 @@ class LineSlam:
             return step.delta, None
         with self.clock("frontend"):
             points = scan_points(
-                scan.ranges, scan.bearings, scan.max_range_m, self.linefit_config.noise, smc
+                scan.ranges,
+                scan.bearings,
+                scan.max_range_m,
+                self.linefit_config.noise,
+                smc,
+                with_normals=False,  # matched, never a reference
             )
             Q = self.odometry_noise.model.covariance(step.delta)
             match = refine_scan(self._points, points, step.delta, Q, smc)
