@@ -3,8 +3,9 @@
 Each row of :data:`slam.experiments.robustness.VARIANTS` is a catalogued log (Intel, ACES,
 fr079), unmodified or rewritten: laser lines decimated (every 3rd / 4th, from line 0, 1 or 2),
 readings above 8 m set to the log's no-return value, odometry biased (translation ×1.02, heading
-increments ``dθ + 0.02·|dθ|``), the odometry moved to a robot centre 0.2 m behind the laser
-(relations rewritten for the centre), fewer beams.  The variant logs are generated once into a
+increments ``dθ + 0.02·|dθ|``) or made noisier (a seeded random walk added to every increment),
+the odometry moved to a robot centre 0.2 m behind the laser (relations rewritten for the
+centre), fewer beams.  The variant logs are generated once into a
 cache outside the repository (keyed by the source log's sha256 and the transform's parameters).
 A variant log is named after the variant, so it is a log the dataset catalogue does not know:
 the catalogue's sensor facts (ACES's 50 m no-return value, fr079's 0.04 m mounting) do not
@@ -35,8 +36,9 @@ Usage::
     .venv/bin/python scripts/robustness.py --list                        # rows and bars
 
 Options: ``--only NAME...`` runs a subset; ``--extra`` also runs the extra rows
-(:data:`slam.experiments.robustness.EXTRA_VARIANTS`: the same transforms on Intel, and chains
-of two or three transforms on the three logs; ``--list`` shows them); ``--workers N`` runs N rows at
+(:data:`slam.experiments.robustness.EXTRA_VARIANTS`: the same transforms on Intel, chains
+of two or three transforms on the three logs, and the three logs with noisier odometry;
+``--list`` shows them); ``--workers N`` runs N rows at
 once (1 by default; the times are only comparable between runs on an equally loaded machine);
 ``--config FILE.toml`` is passed to every run; ``--keep DIR`` keeps the results folders
 (``DIR/NAME``, with the run's output in ``DIR/NAME.log``); ``--work DIR`` is the variant cache
