@@ -3,7 +3,7 @@
 Main entry points::
 
     VARIANTS                                   # the table: name, dataset, bar (m), transform
-    EXTRA_VARIANTS                             # more rows: Intel's variants, chains
+    EXTRA_VARIANTS                             # more rows: Intel's variants, chains, noise
     make_variant(variant, cache_dir) -> VariantFiles      # log + relations, generated once
     score_run(trajectory, frame, files) -> RunScore       # relations metric on every relation
     fill_dropped_scans(trajectory, odometry) -> Trajectory
@@ -649,9 +649,10 @@ _ODOM_NOISE_VAR_THETA_RAD = 0.1**2
 _ODOM_NOISE = "odometry noise: σ 5 cm/√m in x and y, heading 0.05 rad/√m + 0.1 rad/√rad, seed 0"
 
 #: More rows, never used to choose a default before they were added: the same transforms on
-#: Intel, and chains of two or three transforms on the three logs (a lower scan rate together
-#: with a mounted laser, a shorter range, fewer beams or biased odometry).  Intel's bar is its
-#: own plus 0.02 m; a chain's is its log's bar for the variants.  ``aces-every4-mount-0.22``
+#: Intel, chains of two or three transforms on the three logs (a lower scan rate together
+#: with a mounted laser, a shorter range, fewer beams or biased odometry), and the three logs
+#: with noisier odometry.  Intel's bar is its own plus 0.02 m; a chain's (and a noise row's)
+#: is its log's bar for the variants.  ``aces-every4-mount-0.22``
 #: is about 1.35 scans/s with the laser 0.22 m ahead of the robot centre.
 EXTRA_VARIANTS: tuple[Variant, ...] = (
     Variant("intel-every4", "intel", 0.05, DecimateScans(4), "every 4th FLASER line"),
