@@ -232,13 +232,7 @@ class LineSlam:
         points = None
         if self.config.frontend.scan_matching.enabled:
             with self.clock("frontend"):
-                points = scan_points(
-                    scan.ranges,
-                    scan.bearings,
-                    scan.max_range_m,
-                    self.linefit_config.noise,
-                    self.config.frontend.scan_matching,
-                )
+                points = self._scan_points(scan)
         report = self._keyframe(scan_no, step, lines, points)
         self.track.end_keyframe(step)
         self._record(scan, report.pose_index, np.zeros(3), True, t_start)
@@ -257,14 +251,7 @@ class LineSlam:
         if not (smc.enabled and smc.between_keyframes) or self._points is None:
             return step.delta, None
         with self.clock("frontend"):
-            points = scan_points(
-                scan.ranges,
-                scan.bearings,
-                scan.max_range_m,
-                self.linefit_config.noise,
-                smc,
-                with_normals=False,  # matched, never a reference
-            )
+            points = self._scan_points(scan, with_normals=False)  # matched, never a reference
             Q = self.odometry_noise.model.covariance(step.delta)
             match = refine_scan(self._points, points, step.delta, Q, smc)
         if not match.accepted:
@@ -272,6 +259,17 @@ class LineSlam:
             return step.delta, None
         self.counters["scan_matches_between"] += 1
         return match.delta, match.cov
+
+    def _scan_points(self, scan: Scan, with_normals: bool = True) -> ScanPoints:
+        """The scan matcher's points of ``scan`` (:func:`scan_points`)."""
+        return scan_points(
+            scan.ranges,
+            scan.bearings,
+            scan.max_range_m,
+            self.linefit_config.noise,
+            self.config.frontend.scan_matching,
+            with_normals=with_normals,
+        )
 
     def _record(
         self,
