@@ -273,15 +273,20 @@ def _upper(cov: FloatArray) -> FloatArray:
     return sym[_UPPER[0], _UPPER[1]]
 
 
-def _checked_offset_covariances(covs: FloatArray, scans: NDArray[np.intp]) -> FloatArray:
-    """``covs`` ``(S, 3, 3)`` of the non-keyframe scans ``scans``: all-NaN or SPD rows."""
-    for cov, scan in zip(covs, scans.tolist(), strict=True):
-        if not (np.isnan(cov).all() or _is_covariance(cov)):
+def _checked_offset_covariances(covs: FloatArray, scans: NDArray[np.intp]) -> FloatArray | None:
+    """``covs`` ``(S, 3, 3)`` of the non-keyframe scans ``scans``: all-NaN or SPD rows.
+
+    None when every row is NaN (no scan carries a covariance).
+    """
+    nan = np.isnan(covs).reshape(-1, 9)
+    given = ~nan.all(axis=1)
+    for cov, scan in zip(covs[given], scans[given].tolist(), strict=True):
+        if not _is_covariance(cov):
             raise InputError(
                 f"scan_offset_covariances: row {scan} is neither all NaN nor a symmetric "
                 "positive-definite covariance"
             )
-    return covs
+    return covs if given.any() else None
 
 
 def write_line_graph_g2o(

@@ -60,8 +60,9 @@ def scan_poses(graph: LineGraph, track: KeyframeTrack) -> tuple[FloatArray, IntA
         return np.zeros((0, 3)), kf, offsets
     poses = pose_compose(g.poses[kf], offsets)
     nxt = kf + 1
-    matched = np.all(np.isfinite(np.asarray(track.scan_offset_cov).reshape(n, 9)), axis=1)
-    has_next = (nxt < g.n_poses) & ~np.asarray(track.scan_is_keyframe, dtype=bool) & ~matched
+    has_next = (
+        (nxt < g.n_poses) & ~np.asarray(track.scan_is_keyframe, dtype=bool) & ~track.scan_matched
+    )
     if np.any(has_next):
         k = kf[has_next]
         d_next = track.keyframe_delta[k + 1]
@@ -143,10 +144,10 @@ def assemble_result(
     if config.pose_covariances == "keyframes" and g.n_poses:
         kf_cov = backend.pose_covariances(g, np.arange(g.n_poses))
         F = adjoint_pose2(pose_inverse(offsets))
-        offset_cov = np.asarray(track.scan_offset_cov).reshape(n, 3, 3)
-        matched = np.all(np.isfinite(offset_cov.reshape(n, 9)), axis=1)
         noise = np.where(
-            matched[:, None, None], offset_cov, (motion or config.motion).covariance(offsets)
+            track.scan_matched[:, None, None],
+            np.asarray(track.scan_offset_cov).reshape(n, 3, 3),
+            (motion or config.motion).covariance(offsets),
         )
         cov = F @ kf_cov[kf] @ np.swapaxes(F, 1, 2) + np.where(
             np.asarray(track.scan_is_keyframe)[:, None, None], 0.0, noise

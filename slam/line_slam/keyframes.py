@@ -159,6 +159,12 @@ class KeyframeTrack:
         return self._kf_path.data
 
     @property
+    def scan_matched(self) -> NDArray[np.bool_]:
+        """Whether each scan's offset is its match against the keyframe (``(n,)``)."""
+        cov = np.asarray(self.scan_offset_cov, dtype=float).reshape(-1, 9)
+        return np.asarray(np.all(np.isfinite(cov), axis=1))
+
+    @property
     def keyframe_delta(self) -> FloatArray:
         """Odometry motion from the previous keyframe to each keyframe, ``(n_keyframes, 3)``."""
         return self._kf_delta.data
