@@ -20,6 +20,7 @@ from slam.experiments.robustness import (
     DecimateScans,
     MoveOdometryToCentre,
     NoisyOdometry,
+    RangeNoise,
     Variant,
     fill_dropped_scans,
     make_variant,
@@ -111,6 +112,47 @@ def test_clipping_changes_exactly_the_readings_above_the_limit(tmp_path):
     assert [x for x in src if x.startswith("ODOM")] == [
         x.rstrip("\n") for x in rewrite_lines(clip, src) if x.startswith("ODOM")
     ]
+
+
+def test_range_noise_has_its_stated_spread_and_keeps_no_returns_and_poses(tmp_path):
+    # 30 scans of 200 beams: returns at 2 m and 7 m, no-returns (50.0) and zeros in between
+    ranges = np.tile([2.0, 7.0, 50.0, 0.0], 50)
+    poses = _wavy_poses(30)
+    src = _log(30, poses, ranges=list(ranges))
+    sigma = 0.02
+    noise = RangeNoise(sigma, 50.0, -math.pi / 2, math.radians(0.5), seed=4)
+    out = rewrite_lines(noise, src)
+    assert out == rewrite_lines(noise, src)
+    assert out != rewrite_lines(RangeNoise(sigma, 50.0, -math.pi / 2, math.radians(0.5)), src)
+    reader = CarmenReader(_write(tmp_path / "noisy.clf", out))
+    scans = list(reader.scans())
+    assert reader.stats.laser_type == "ROBOTLASER1" and len(scans) == 30
+    got = np.array([s.ranges for s in scans])
+    returns = np.broadcast_to(ranges < 50.0, got.shape) & (got > 0)
+    np.testing.assert_array_equal(got[:, ranges == 50.0], 50.0)
+    np.testing.assert_array_equal(got[:, ranges == 0.0], 0.0)
+    err = (got - ranges)[returns]
+    assert err.size == 30 * 100
+    # sample variance of n normal draws (rounded to the millimetre: + 1/12 mm²)
+    var = np.mean(err**2)
+    expected = sigma**2 + 1e-6 / 12
+    assert abs(var / expected - 1.0) < 5 * math.sqrt(2.0 / err.size)
+    assert abs(np.mean(err)) < 5 * sigma / math.sqrt(err.size)
+    for i, scan in enumerate(scans):
+        assert scan.max_range_m == 50.0 and scan.timestamp == 10.0 + i
+        np.testing.assert_allclose(scan.pose_odom_laser, poses[i], atol=1e-6)
+        np.testing.assert_allclose(scan.bearings[:2], np.radians([-90.0, -89.5]))
+
+
+def test_range_noise_of_zero_keeps_every_reading_and_rejects_bad_parameters():
+    src = _log(3, _wavy_poses(3), ranges=[1.25, 3.5, 80.0])
+    out = rewrite_lines(RangeNoise(0.0, 80.0, -math.pi / 2, math.radians(1.0)), src)
+    lasers = [line.split() for line in out if line.startswith("ROBOTLASER1")]
+    assert [t[9:12] for t in lasers] == [["1.250", "3.500", "80.00"]] * 3  # no-return as logged
+    with pytest.raises(ConfigError, match="sigma_m"):
+        RangeNoise(-0.01, 80.0, 0.0, 0.01)
+    with pytest.raises(ConfigError, match="no_return_m"):
+        RangeNoise(0.01, 0.0, 0.0, 0.01)
 
 
 # --------------------------------------------------------------------------------------------
@@ -488,9 +530,10 @@ def test_table_parameters_match_the_catalogue():
     for v, t in rows + steps:
         laser = catalog[v.dataset].laser
         if isinstance(t, ClipRanges):
-            assert t.no_return_m == laser.max_range_m
             assert t.limit_m == 8.0
-        if isinstance(t, ClipRanges | DecimateBeams):
+        if isinstance(t, ClipRanges | RangeNoise):
+            assert t.no_return_m == laser.max_range_m
+        if isinstance(t, ClipRanges | DecimateBeams | RangeNoise):
             assert t.first_angle_rad == pytest.approx(math.radians(laser.first_angle_deg))
             assert t.step_rad == pytest.approx(math.radians(laser.step_deg))
         if isinstance(t, DecimateBeams):

@@ -33,6 +33,10 @@ relations still apply (rewritten only by :class:`MoveOdometryToCentre`):
     The same re-integration with random noise added to every increment: normal, independent,
     of variances proportional to the increment's length and turn (a random walk whose spread
     does not depend on how often the odometry was logged), drawn from a seed.
+:class:`RangeNoise`
+    Normal noise added to every reading that is a return, drawn from a seed (a laser noisier
+    than the one the configuration describes); written as ``ROBOTLASER1`` like
+    :class:`ClipRanges`.
 :class:`MoveOdometryToCentre`
     The laser poses of the ``FLASER`` lines stay; the odometry poses (``FLASER`` ``odom_*`` and
     ``ODOM`` ``x y theta``) move to a robot centre ``pose_laser_centre`` from the laser
@@ -110,6 +114,7 @@ __all__ = [
     "LogTransform",
     "MoveOdometryToCentre",
     "NoisyOdometry",
+    "RangeNoise",
     "RunScore",
     "Variant",
     "VariantFiles",
@@ -304,6 +309,50 @@ class ClipRanges(LogTransform):
         yield _robotlaser(
             tokens, n, readings, self.first_angle_rad, self.step_rad, self.no_return_m
         )
+
+
+@dataclass(frozen=True)
+class RangeNoise(LogTransform):
+    """Normal noise of ``sigma_m`` added to every reading that is a return; ``ROBOTLASER1``.
+
+    A reading at or above ``no_return_m`` (the source's no-return value) or at or below 0 is
+    kept as logged, as is one that the noise would carry to or past either; the others become
+    ``r + n``, ``n ~ N(0, sigma_m²)`` independent per beam, drawn from ``seed`` (one generator
+    per pass over a log), written to the millimetre.  The scans are written as ``ROBOTLASER1``
+    lines with the source's beam layout and ``no_return_m`` as their maximum range, as
+    :class:`ClipRanges` writes them.
+    """
+
+    sigma_m: float
+    no_return_m: float
+    first_angle_rad: float
+    step_rad: float
+    seed: int = 0
+    kind: ClassVar[str] = "range-noise"
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.sigma_m) and self.sigma_m >= 0.0):
+            raise ConfigError(f"RangeNoise.sigma_m must be finite and >= 0, got {self.sigma_m}")
+        if not (self.no_return_m > 0.0 and self.step_rad > 0.0):
+            raise ConfigError(f"need no_return_m > 0 and step_rad > 0, got {self}")
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if tokens[0] != "FLASER":
+            yield _join(tokens)
+            return
+        n = _flaser_beams(tokens, where)
+        if state.rng is None:
+            state.rng = np.random.default_rng(self.seed)
+        readings = tokens[2 : 2 + n]
+        try:
+            ranges = np.array([float(v) for v in readings])
+        except ValueError:
+            raise LogFormatError("range reading is not a number", where) from None
+        noisy = ranges + self.sigma_m * state.rng.standard_normal(n)
+        inside = (ranges > 0.0) & (ranges < self.no_return_m)
+        changed = inside & (noisy > 0.0) & (noisy < self.no_return_m)
+        out = [f"{r:.3f}" if c else v for r, c, v in zip(noisy, changed, readings, strict=True)]
+        yield _robotlaser(tokens, n, out, self.first_angle_rad, self.step_rad, self.no_return_m)
 
 
 class _ReintegratedOdometry(LogTransform):
@@ -648,11 +697,16 @@ _ODOM_NOISE_VAR_THETA_M = 0.05**2
 _ODOM_NOISE_VAR_THETA_RAD = 0.1**2
 _ODOM_NOISE = "odometry noise: σ 5 cm/√m in x and y, heading 0.05 rad/√m + 0.1 rad/√rad, seed 0"
 
+#: Range noise of the ``*-range-noise`` rows: a laser noisier than the configured 5 mm (σ 2 cm
+#: added to every return, as a Hokuyo UTM-30LX's stated ±3 cm).
+_RANGE_NOISE_SIGMA_M = 0.02
+_RANGE_NOISE = "range noise: σ 2 cm added to every return, seed 0, ROBOTLASER1"
+
 #: More rows, never used to choose a default before they were added: the same transforms on
 #: Intel, chains of two or three transforms on the three logs (a lower scan rate together
 #: with a mounted laser, a shorter range, fewer beams or biased odometry), and the three logs
-#: with noisier odometry.  Intel's bar is its own plus 0.02 m; a chain's (and a noise row's)
-#: is its log's bar for the variants.  ``aces-every4-mount-0.22``
+#: with noisier odometry and with a noisier laser.  Intel's bar is its own plus 0.02 m; a
+#: chain's (and a noise row's) is its log's bar for the variants.  ``aces-every4-mount-0.22``
 #: is about 1.35 scans/s with the laser 0.22 m ahead of the robot centre.
 EXTRA_VARIANTS: tuple[Variant, ...] = (
     Variant("intel-every4", "intel", 0.05, DecimateScans(4), "every 4th FLASER line"),
@@ -779,6 +833,27 @@ EXTRA_VARIANTS: tuple[Variant, ...] = (
         0.10,
         NoisyOdometry(_ODOM_NOISE_VAR_XY, _ODOM_NOISE_VAR_THETA_M, _ODOM_NOISE_VAR_THETA_RAD),
         _ODOM_NOISE,
+    ),
+    Variant(
+        "intel-range-noise",
+        "intel",
+        0.05,
+        RangeNoise(_RANGE_NOISE_SIGMA_M, _INTEL_NO_RETURN_M, -_HALF_PI, _ONE_DEG_RAD),
+        _RANGE_NOISE,
+    ),
+    Variant(
+        "aces-range-noise",
+        "aces",
+        0.08,
+        RangeNoise(_RANGE_NOISE_SIGMA_M, _ACES_NO_RETURN_M, -_HALF_PI, _ONE_DEG_RAD),
+        _RANGE_NOISE,
+    ),
+    Variant(
+        "fr079-range-noise",
+        "fr079",
+        0.10,
+        RangeNoise(_RANGE_NOISE_SIGMA_M, _FR079_NO_RETURN_M, -_HALF_PI, _FR079_STEP_RAD),
+        _RANGE_NOISE,
     ),
     Variant(
         "fr079-every4-beams90",
