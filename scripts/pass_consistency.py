@@ -7,16 +7,15 @@ Usage::
 For each ``lineslam slam`` results folder (its ``graph.g2o``) and each ``--gap-s``, prints the
 landmarks and pairs of passes compared, the median of ``t`` over the pairs divided by χ²₂'s
 median (and of its angle part by χ²₁'s), and the fraction of pairs beyond χ²₂'s 95 % quantile
-(:mod:`slam.evaluation.passes`).  The poses are held at the run's estimate, which was fitted to
-these same factors: compare runs with it (a simulated log, where the factors' model is true,
-gives a ratio below 1), not with 1.  Nothing is written.
+(:mod:`slam.line_slam.passes`), each pair's difference judged against its covariance at the
+run's fitted estimate (about 1 where the factors' model holds).  Nothing is written.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from slam.evaluation.passes import pass_consistency_of_results
+from slam.line_slam.passes import pass_consistency_of_results
 
 
 def main() -> None:

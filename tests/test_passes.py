@@ -1,4 +1,4 @@
-"""Between-pass consistency of walls (slam.evaluation.passes): known answers on built graphs."""
+"""Between-pass consistency of walls (slam.line_slam.passes): known answers on built graphs."""
 
 from __future__ import annotations
 
@@ -7,10 +7,20 @@ import math
 import numpy as np
 import pytest
 
-from slam.errors import EvaluationError
-from slam.evaluation.passes import pass_consistency
-from slam.geometry import predict_line_measurement, wrap_angle
+from slam.errors import DegenerateGeometryError, EvaluationError, InputError
+from slam.geometry import pose_between, predict_line_measurement, wrap_angle
+from slam.graph.batch import BatchSolver
+from slam.graph.config import SolverConfig
+from slam.graph.linear import keys_of
 from slam.graph.problem import LineGraph
+from slam.line_slam.passes import (
+    PassError,
+    estimate_pass_error,
+    find_passes,
+    fitted_pair_covariances,
+    pass_consistency,
+    with_pass_links,
+)
 from slam.models.anchored import r_alpha_from_anchored
 
 R = np.diag([0.01**2, 0.005**2])  # each factor's (r, α) covariance
@@ -71,7 +81,7 @@ def _graph(seed: int, pass_scale: float, n_landmarks: int = 300, passes: int = 2
 @pytest.mark.parametrize(("pass_scale", "ratio"), [(0.0, 1.0), (1.0, 2.0), (3.0, 4.0)])
 def test_the_median_ratio_is_the_passes_excess_variance(pass_scale, ratio):
     g, stamps = _graph(5, pass_scale)
-    res = pass_consistency(g, stamps, gap_s=30.0)
+    res = pass_consistency(g, stamps, gap_s=30.0, fitted=False)
     assert res.landmarks == 300 and res.pairs == 300
     # the sample median of 300 χ²₂ values: relative standard deviation about 8 %
     assert res.median_ratio == pytest.approx(ratio, rel=0.25)
@@ -83,23 +93,23 @@ def test_the_median_ratio_is_the_passes_excess_variance(pass_scale, ratio):
 def test_passes_are_split_by_the_time_gap():
     g, stamps = _graph(6, 0.0, n_landmarks=40, passes=3)
     # three passes per landmark: three pairs each
-    assert pass_consistency(g, stamps, gap_s=30.0).pairs == 40 * 3
+    assert pass_consistency(g, stamps, gap_s=30.0, fitted=False).pairs == 40 * 3
     # a gap longer than the passes' separation: one pass, nothing to compare
-    one = pass_consistency(g, stamps, gap_s=PASS_GAP_S + 10.0)
+    one = pass_consistency(g, stamps, gap_s=PASS_GAP_S + 10.0, fitted=False)
     assert one.pairs == 0 and one.landmarks == 0 and math.isnan(one.median_ratio)
     # passes of fewer observations than asked for are left out
-    assert pass_consistency(g, stamps, gap_s=30.0, min_observations=VIEWS + 1).pairs == 0
+    assert pass_consistency(g, stamps, None, 30.0, VIEWS + 1, fitted=False).pairs == 0
 
 
 def test_a_robust_kernel_weighs_down_a_wrong_pass_factor():
     g, stamps = _graph(7, 0.0, n_landmarks=200)
-    plain = pass_consistency(g, stamps)
+    plain = pass_consistency(g, stamps, fitted=False)
     # one factor of every landmark's first pass 20 cm off: the Gaussian t blows up, Cauchy's
     # weights (width 1 in whitened units) leave the median near its value
     z = g.factor_z
     z[:: 2 * VIEWS, 0] += 0.2
-    assert pass_consistency(g, stamps).median_ratio > 5.0 * plain.median_ratio
-    robust = pass_consistency(g, stamps, ("cauchy", 1.0))
+    assert pass_consistency(g, stamps, fitted=False).median_ratio > 5.0 * plain.median_ratio
+    robust = pass_consistency(g, stamps, ("cauchy", 1.0), fitted=False)
     assert robust.median_ratio < 2.0 * plain.median_ratio
 
 
@@ -109,3 +119,117 @@ def test_bad_arguments_are_named():
         pass_consistency(g, stamps, gap_s=0.0)
     with pytest.raises(EvaluationError, match="time stamps"):
         pass_consistency(g, stamps[:-1])
+
+
+# --------------------------------------------------------------------------------------------
+# a solved graph: the fitted covariances, the pass error, the linked graph
+# --------------------------------------------------------------------------------------------
+LAPS = 4
+PER_LAP = 60
+WALLS = 24
+Q = np.diag([0.01**2, 0.01**2, 0.003**2])  # odometry noise per step
+
+
+def _laps(seed: int, sigma_o: float, sigma_a: float):
+    """A robot circling ``LAPS`` times (radius 4 m, one pose a second) inside ``WALLS`` walls
+    tangent to a circle of 7 m; each pose sees the four walls nearest its heading's normal;
+    each lap sees every wall moved by its own ``(σ_o along the normal, σ_a about the foot of
+    the circle's centre)``.  Returns the graph solved from the truth, and its time stamps."""
+    rng = np.random.default_rng(seed)
+    g = LineGraph()
+    n = LAPS * PER_LAP
+    s = 2.0 * np.pi * np.arange(n) / PER_LAP
+    truth = np.column_stack([4.0 * np.cos(s), 4.0 * np.sin(s), s + np.pi / 2])
+    alpha = 2.0 * np.pi * np.arange(WALLS) / WALLS
+    walls = np.column_stack([np.full(WALLS, 7.0), alpha])
+    feet = 7.0 * np.column_stack([np.cos(alpha), np.sin(alpha)])
+    lms = g.add_landmarks(walls, feet)
+    for k in range(n):
+        g.add_pose(truth[k])
+    g.set_prior(truth[0], np.diag([1e-8, 1e-8, 1e-10]))
+    for k in range(1, n):
+        step = pose_between(truth[k - 1], truth[k])
+        g.add_odometry(k - 1, k, step + rng.multivariate_normal(np.zeros(3), Q), Q)
+    shift = rng.normal(0.0, [sigma_o or 1e-12, sigma_a or 1e-12], (LAPS, WALLS, 2))
+    for k in range(n):
+        lap = k // PER_LAP
+        near = np.argsort(np.abs(wrap_angle(alpha - s[k])))[:4]
+        for j in near:
+            seen = np.array([7.0 + shift[lap, j, 0], alpha[j] + shift[lap, j, 1]])
+            z = predict_line_measurement(seen, truth[k])[0] + rng.multivariate_normal(
+                np.zeros(2), R
+            )
+            g.add_line_factors(k, lms[j : j + 1], z[None], R[None], np.zeros((1, 2, 2)))
+    BatchSolver(SolverConfig(max_iterations=20)).solve(g)
+    return g, np.arange(n, dtype=float)
+
+
+def test_the_fitted_ratio_is_about_one_where_the_model_holds():
+    g, stamps = _laps(21, 0.0, 0.0)
+    res = pass_consistency(g, stamps, gap_s=30.0)
+    assert res.pairs >= WALLS * LAPS * (LAPS - 1) // 2 - WALLS  # a wall in view across a lap start
+    # against C_p + C_q alone, the fit pulls the passes together; with it, about χ²₂
+    shrunk = pass_consistency(g, stamps, gap_s=30.0, fitted=False)
+    assert shrunk.median_ratio < 0.8 * res.median_ratio
+    assert 0.7 < res.median_ratio < 1.4
+
+
+def test_the_pass_error_is_found_and_linked():
+    g, stamps = _laps(22, 0.02, 0.005)
+    res = pass_consistency(g, stamps, gap_s=30.0)
+    assert res.median_ratio > 3.0
+    passes = find_passes(g, stamps, gap_s=30.0)
+    err = estimate_pass_error(passes, fitted_pair_covariances(g, passes))
+    # what the fit leaves of the passes' errors: a lower bound, not far below the truth
+    assert 0.6 * 0.02 < err.sigma_offset_m < 1.2 * 0.02
+    assert 0.6 * 0.005 < err.sigma_angle_rad < 1.2 * 0.005
+    linked, k = with_pass_links(g, passes, err)
+    assert k >= WALLS * (LAPS - 1) and linked.n_landmark_links == k
+    assert linked.n_landmarks == g.n_landmarks + k
+    assert linked.observation_counts()[:WALLS].sum() == 0  # the walls hold no factor now
+    # judged on its walls, the linked graph gives the same consistency
+    again = pass_consistency(linked, stamps, gap_s=30.0, fitted=False)
+    assert again.median_ratio == pytest.approx(
+        pass_consistency(g, stamps, gap_s=30.0, fitted=False).median_ratio
+    )
+    # the same estimate minimises the linked graph's cost near where it is (the passes at their
+    # walls): a solve moves the poses by less than the odometry's noise
+    before = linked.poses.copy()
+    BatchSolver(SolverConfig(max_iterations=20, linear_solver="gtsam")).solve(linked)
+    assert np.abs(linked.poses[:, :2] - before[:, :2]).max() < 0.05
+    # the pass error makes the poses of different laps less certain of each other
+    plain = BatchSolver().marginals(g)
+    passed = BatchSolver().marginals(linked)
+    keys = keys_of("x", np.array([10, 10 + 2 * PER_LAP]))
+    var_plain = np.linalg.det(plain.jointMarginalCovariance(keys).fullMatrix())
+    var_passed = np.linalg.det(passed.jointMarginalCovariance(keys).fullMatrix())
+    assert var_passed > 1.5 * var_plain
+
+
+def test_no_pass_error_links_nothing():
+    g, stamps = _laps(23, 0.0, 0.0)
+    passes = find_passes(g, stamps, gap_s=30.0)
+    same, k = with_pass_links(g, passes, PassError(30.0, 0.0, 0.0, 10))
+    assert same is g and k == 0
+
+
+def test_landmark_links_are_checked_and_cost_what_they_say():
+    g = LineGraph()
+    anchor = np.array([[1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
+    lms = g.add_landmarks(np.array([[2.0, 0.1], [2.05, 0.12], [2.0, 0.1]]), anchor)
+    g.add_pose(np.zeros(3))
+    g.set_prior(np.zeros(3), np.eye(3) * 1e-6)
+    solver = BatchSolver()
+    before = solver.cost(g, g.poses, g.landmarks)
+    cov = np.diag([0.01**2, 0.02**2])
+    g.add_landmark_links(lms[:1], lms[1:2], cov[None])
+    d = g.landmarks[0] - g.landmarks[1]
+    expected = 0.5 * (d[0] ** 2 / cov[0, 0] + d[1] ** 2 / cov[1, 1])
+    assert solver.cost(g, g.poses, g.landmarks) - before == pytest.approx(expected, rel=1e-9)
+    assert g.n_landmark_links == 1 and set(solver.active_landmarks(g)) == {0, 1}
+    with pytest.raises(InputError, match="anchor"):
+        g.add_landmark_links(lms[:1], lms[2:], cov[None])
+    with pytest.raises(InputError, match="invalid landmarks"):
+        g.add_landmark_links(lms[:1], lms[:1], cov[None])
+    with pytest.raises(DegenerateGeometryError):
+        g.add_landmark_links(lms[:1], lms[1:2], np.zeros((1, 2, 2)))

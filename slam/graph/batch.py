@@ -51,6 +51,7 @@ from slam.graph.linear import (
     ReusableGraph,
     key_array,
     keys_of,
+    landmark_link_batch,
     landmark_prior_batch,
     line_jacobian_batch,
     odometry_jacobian_batch,
@@ -126,8 +127,11 @@ class BatchSolver:
 
     @staticmethod
     def active_landmarks(graph: LineGraph) -> IntArray:
-        """Landmarks that are alive and have at least one factor (the solved ones)."""
+        """Landmarks that are alive and have at least one factor or link (the solved ones)."""
         counts = graph.observation_counts()
+        if graph.n_landmark_links:
+            np.add.at(counts, graph.link_first, 1)
+            np.add.at(counts, graph.link_second, 1)
         return np.flatnonzero(graph.landmark_alive & (counts > 0))
 
     # -- cost and linearisation ----------------------------------------------------------------
@@ -143,7 +147,7 @@ class BatchSolver:
         """Total cost at the given full-size estimate arrays (poses, anchored landmarks).
 
         ``line_factors`` / ``odometry`` (indices) and ``with_prior`` restrict it to some factors
-        (default: all).
+        (default: all; the landmark links count with ``line_factors = None`` only).
         """
         total = 0.0
         f = np.arange(graph.n_line_factors) if line_factors is None else line_factors
@@ -174,6 +178,11 @@ class BatchSolver:
                     )
                 )
             )
+        if line_factors is None and graph.n_landmark_links:
+            _, r = landmark_link_batch(
+                graph.link_first, graph.link_second, landmarks, graph.link_sqrt_info
+            )
+            total += float(0.5 * np.sum(r * r))
         if with_prior and graph.prior_pose is not None and graph.prior_sqrt_info is not None:
             total += linearize_prior(poses[0], graph.prior_pose, graph.prior_sqrt_info)[2]
         return total
@@ -277,7 +286,16 @@ class BatchSolver:
             if not free.all():
                 fixed = ~free
                 batches.append(landmark_prior_batch(lm[fixed], lin.A_landmark[fixed], lin.b[fixed]))
+        link_cost: float | None = None
+        if graph.n_landmark_links and free_from == 0 and solved is None:
+            batch, r = landmark_link_batch(
+                graph.link_first, graph.link_second, landmarks, graph.link_sqrt_info
+            )
+            batches.append(batch)
+            link_cost = float(0.5 * np.sum(r * r))
         total = 0.0
+        if link_cost is not None:
+            total += link_cost
         if used.size:
             assert lin is not None
             rho = robust_cost(
@@ -523,6 +541,10 @@ class BatchSolver:
             raise EstimationError("the graph has no prior on its first pose (gauge)")
         if not 0 <= free_from < graph.n_poses:
             raise EstimationError(f"free_from={free_from} is not a pose of the graph")
+        if graph.n_landmark_links and (free_from > 0 or cfg.linear_solver == "sparse"):
+            raise EstimationError(
+                "a graph with landmark links is solved whole, with GTSAM's linear solver"
+            )
         lms = self.active_landmarks(graph)
         solved: NDArray[np.bool_] | None = None
         if free_from > 0:

@@ -288,6 +288,28 @@ def landmark_prior_batch(
     return FactorBatch((rows,), np.zeros(len(rows), np.intp))
 
 
+def landmark_link_batch(
+    first: IntArray, second: IntArray, landmarks: FloatArray, sqrt_info: FloatArray
+) -> tuple[FactorBatch, FloatArray]:
+    """Links ``v_first − v_second ~ N(0, Σ)`` between landmarks (one chart), linearised.
+
+    The residual is linear in the chart: ``W (v_first + δ₁ − v_second − δ₂)`` (``φ`` wrapped),
+    so each factor is ``[W, −W]`` with ``b = −W (v_first − v_second)``.  Returns the batch
+    and the whitened residuals ``(k, 2)``.
+    """
+    d = np.asarray(landmarks[first] - landmarks[second], dtype=float).reshape(-1, 2)
+    d[:, 1] = np.remainder(d[:, 1] + np.pi, 2.0 * np.pi) - np.pi
+    W = np.asarray(sqrt_info, dtype=float).reshape(-1, 2, 2)
+    r = np.einsum("kij,kj->ki", W, d)
+    rows = JacobianRows(
+        np.stack([key_array("l", first), key_array("l", second)], axis=1),
+        (2, 2),
+        np.concatenate([W, -W], axis=2),
+        -r,
+    )
+    return FactorBatch((rows,), np.zeros(first.shape[0], dtype=np.intp)), r
+
+
 def odometry_jacobian_factors(
     first: IntArray, second: IntArray, A_first: FloatArray, A_second: FloatArray, b: FloatArray
 ) -> list[gtsam.JacobianFactor]:

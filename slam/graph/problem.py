@@ -174,6 +174,11 @@ class LineGraph:
         self._o_measured = GrowableArray((3,))
         self._o_cov = GrowableArray((3, 3))
         self._o_sqrt_info = GrowableArray((3, 3))
+        # links between two landmarks in one chart (a pass along a wall and the wall)
+        self._k_first = GrowableArray((), dtype=np.intp)
+        self._k_second = GrowableArray((), dtype=np.intp)
+        self._k_cov = GrowableArray((2, 2))
+        self._k_sqrt_info = GrowableArray((2, 2))
         self.prior_pose: FloatArray | None = None
         self.prior_cov: FloatArray | None = None
         self.prior_sqrt_info: FloatArray | None = None
@@ -310,7 +315,58 @@ class LineGraph:
         """Their whitening matrices (``WᵀW = Σ⁻¹``), ``(E, 3, 3)``."""
         return self._o_sqrt_info.data
 
+    @property
+    def n_landmark_links(self) -> int:
+        """Number of landmark links (:meth:`add_landmark_links`)."""
+        return len(self._k_first)
+
+    @property
+    def link_first(self) -> IntArray:
+        """First landmark of each link, ``(K,)``."""
+        return self._k_first.data
+
+    @property
+    def link_second(self) -> IntArray:
+        """Second landmark of each link, ``(K,)``."""
+        return self._k_second.data
+
+    @property
+    def link_cov(self) -> FloatArray:
+        """Covariance of each link's difference ``v_first − v_second``, ``(K, 2, 2)``."""
+        return self._k_cov.data
+
+    @property
+    def link_sqrt_info(self) -> FloatArray:
+        """Their whitening matrices, ``(K, 2, 2)``."""
+        return self._k_sqrt_info.data
+
     # -- building ------------------------------------------------------------------------------
+    def add_landmark_links(self, first: IntArray, second: IntArray, cov: FloatArray) -> IntArray:
+        """Add links ``v_first − v_second ~ N(0, cov)`` between landmarks; return indices.
+
+        The two landmarks of a link must share their anchor, so that the difference of their
+        anchored ``(ρ, φ)`` is the difference of the lines (``φ`` wrapped); ``cov`` ``(k, 2,
+        2)`` is in that chart.  A pass along a wall seen as its own landmark, linked to the
+        wall (:mod:`slam.graph.passes`).
+        """
+        a = np.asarray(first, dtype=np.intp).reshape(-1)
+        b = np.asarray(second, dtype=np.intp).reshape(-1)
+        c = np.asarray(cov, dtype=float).reshape(-1, 2, 2)
+        m = self.n_landmarks
+        if a.shape != b.shape or c.shape[0] != a.shape[0]:
+            raise InputError("landmark links: first, second and cov differ in length")
+        if np.any((a < 0) | (a >= m) | (b < 0) | (b >= m) | (a == b)):
+            raise InputError(f"landmark links between invalid landmarks (have {m})")
+        if not np.allclose(self.anchors[a], self.anchors[b], rtol=0.0, atol=1e-9):
+            raise InputError("linked landmarks must share their anchor")
+        W = sqrt_information_2x2(c, "landmark link covariance")
+        for i, j, ci, wi in zip(a.tolist(), b.tolist(), c, W, strict=True):
+            self._k_first.append(i)
+            self._k_second.append(j)
+            self._k_cov.append(0.5 * (ci + ci.T))
+            self._k_sqrt_info.append(wi)
+        return np.arange(self.n_landmark_links - a.shape[0], self.n_landmark_links, dtype=np.intp)
+
     def add_pose(self, pose_world_laser: FloatArray) -> int:
         """Add a pose variable with its initial estimate; return its index."""
         p = np.asarray(pose_world_laser, dtype=float).reshape(3)

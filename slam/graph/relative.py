@@ -67,7 +67,7 @@ from slam.graph.problem import LineGraph
 from slam.io.g2o import LineGraphFile, read_line_graph_g2o
 from slam.models.motion import MotionNoiseConfig
 
-__all__ = ["DEFAULT_PRIOR_SIGMAS", "RunCovariances", "line_graph_from_file"]
+__all__ = ["DEFAULT_PRIOR_SIGMAS", "RunCovariances", "information_factor", "line_graph_from_file"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -130,6 +130,44 @@ def line_graph_from_file(graph_file: LineGraphFile) -> LineGraph:
             np.zeros((k, 2, 2)),
         )
     return g
+
+
+def information_factor(solver: BatchSolver, graph: LineGraph) -> tuple[Any, Any, dict[int, int]]:
+    """``A``, the sparse LU of ``H = AᵀA`` and each key's first column.
+
+    ``A`` is the whitened Jacobian of ``graph`` linearised at its estimate by ``solver`` (its
+    kernel's IRLS weights in; GTSAM's ``sparseJacobian_``); ``H``'s LU is SciPy's, in a
+    symmetric minimum-degree order with diagonal pivots.
+
+    Raises
+    ------
+    EstimationError
+        ``H`` is singular.
+    """
+    from scipy.sparse import csc_matrix
+    from scipy.sparse.linalg import splu
+
+    gfg = solver.linearize(graph)
+    rows, cols, vals = gfg.sparseJacobian_()
+    key_set = gfg.keys()  # kept alive while it is iterated (pybind11 iterators do not)
+    keys = sorted(int(k) for k in key_set)
+    dims = [2 if chr(gtsam.Symbol(k).chr()) == "l" else 3 for k in keys]
+    offset = dict(zip(keys, np.cumsum([0, *dims[:-1]]).tolist(), strict=True))
+    n = int(sum(dims))
+    a_part = cols <= n  # the last column is the right-hand side
+    rc = (rows[a_part].astype(np.intp) - 1, cols[a_part].astype(np.intp) - 1)
+    A = csc_matrix((vals[a_part], rc), shape=(int(rows.max()), n))
+    try:
+        # symmetric positive definite: a symmetric fill-reducing order, diagonal pivots
+        lu = splu(
+            csc_matrix(A.T @ A),
+            permc_spec="MMD_AT_PLUS_A",
+            diag_pivot_thresh=0.0,
+            options={"SymmetricMode": True},
+        )
+    except RuntimeError as exc:
+        raise EstimationError(f"information matrix of the graph is singular: {exc}") from exc
+    return A, lu, offset
 
 
 class RunCovariances:
@@ -367,35 +405,10 @@ class RunCovariances:
         """``A``, the sparse LU of ``H = AᵀA`` and each key's first column, built once.
 
         ``A`` is the whitened Jacobian of the graph linearised at its estimate
-        (:meth:`relation_error_draws`).
+        (:meth:`relation_error_draws`, :func:`information_factor`).
         """
         if self._information_lu is None:
-            from scipy.sparse import csc_matrix
-            from scipy.sparse.linalg import splu
-
-            gfg = self.solver.linearize(self.graph)
-            rows, cols, vals = gfg.sparseJacobian_()
-            key_set = gfg.keys()  # kept alive while it is iterated (pybind11 iterators do not)
-            keys = sorted(int(k) for k in key_set)
-            dims = [2 if chr(gtsam.Symbol(k).chr()) == "l" else 3 for k in keys]
-            offset = dict(zip(keys, np.cumsum([0, *dims[:-1]]).tolist(), strict=True))
-            n = int(sum(dims))
-            a_part = cols <= n  # the last column is the right-hand side
-            rc = (rows[a_part].astype(np.intp) - 1, cols[a_part].astype(np.intp) - 1)
-            A = csc_matrix((vals[a_part], rc), shape=(int(rows.max()), n))
-            try:
-                # symmetric positive definite: a symmetric fill-reducing order, diagonal pivots
-                lu = splu(
-                    csc_matrix(A.T @ A),
-                    permc_spec="MMD_AT_PLUS_A",
-                    diag_pivot_thresh=0.0,
-                    options={"SymmetricMode": True},
-                )
-            except RuntimeError as exc:
-                raise EstimationError(
-                    f"information matrix of graph.g2o is singular: {exc}"
-                ) from exc
-            self._information_lu = (A, lu, offset)
+            self._information_lu = information_factor(self.solver, self.graph)
         return self._information_lu
 
     def _relative(self, a: int, b: int, joint: dict[tuple[int, int], FloatArray]) -> FloatArray:

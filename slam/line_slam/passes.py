@@ -1,0 +1,507 @@
+"""Passes along the walls: how far they disagree, and the error each pass shares.
+
+A line factor's covariance treats every observation of a wall as independent of the others.
+If the wall's departures from a straight line (or anything else shared by observations from
+nearby poses) make the observations of one *pass* along it err together, a pass averages
+them far less than the factors say, and two passes disagree by more than the factors' own
+covariances allow.  Loop closures join such passes, so this is where a run's relative poses
+across loops would be over-confident.
+
+**Passes.**  Each landmark's factors are split into passes: consecutive observations (in
+time) less than ``gap_s`` apart are one pass (:func:`find_passes`).  Each factor is linearised
+at the estimate with the run's robust kernel (its IRLS weight included), in the landmark's
+anchored chart, ``A_l δ ≈ b`` (:func:`slam.graph.factors.linearize_line_factors`), so a pass
+``p`` with factors ``i`` sees the landmark moved by
+
+``m_p = (Σ A_lᵢᵀ A_lᵢ)⁻¹ Σ A_lᵢᵀ bᵢ``,   ``C_p = (Σ A_lᵢᵀ A_lᵢ)⁻¹``
+
+with the poses held at their estimates.
+
+**Consistency** (:func:`pass_consistency`).  For two passes of one landmark, ``d = m_p − m_q``
+and ``t = dᵀ (C_p + C_q)⁻¹ d``; ``t_angle = d_φ² / (C_p + C_q)_φφ`` is its angle part.  With
+the poses and landmarks at the truth and the factors' covariances true, ``t`` is χ²₂ and
+``t_angle`` χ²₁ (``tests/test_passes.py``).  The report gives their medians over all pairs of
+passes of every landmark, each divided by its χ² median, and the fraction of pairs beyond
+χ²₂'s 95 % quantile.  At a run's estimate the poses have been fitted to these same factors,
+loop closures included, which pulls the passes together: on simulated walls, where the
+factors' model is true, the ratio comes out below 1.  Compare runs with it, not with 1.
+
+**The pass error** (:func:`estimate_pass_error`, :func:`with_pass_links`).  Each pass sees its
+wall moved by an error of its own, shared by all its observations: an offset ``σ_o`` along
+the normal and an angle ``σ_a`` about the pass's place on the line (the foot of its mean
+observing position; in the chart ``[[σ_o² + u²σ_a², uσ_a²], [uσ_a², σ_a²]]``, ``u`` that
+place's tangent coordinate from the anchor).  Both are estimated from the pairs of passes as
+the line factors' model error is (:mod:`slam.line_slam.line_noise`, Huber's Proposal 2): the
+angle from ``d_φ² / 2`` against ``(C_p + C_q)_φφ / 2``, then the offset at the pair's middle
+place ``u_m`` from ``(d_ρ − u_m d_φ)² / 2`` against its variance under ``C_p + C_q`` and the
+angle part, halved.  As the consistency above, the estimate sees the passes pulled together
+by the fit: it is a lower bound.  In the graph each pass of a wall seen in two passes or more
+becomes a landmark of its own, anchored as the wall, holding its factors and linked to the
+wall by ``v_pass − v_wall ~ N(0, B_p)``
+(:meth:`slam.graph.problem.LineGraph.add_landmark_links`): the observations of a pass share
+one error, those of different passes do not.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from slam.errors import EvaluationError
+from slam.graph.batch import BatchSolver
+from slam.graph.config import SolverConfig
+from slam.graph.factors import linearize_line_factors, sqrt_information_2x2
+from slam.graph.linear import keys_of
+from slam.graph.problem import LineGraph
+from slam.graph.relative import information_factor, line_graph_from_file
+from slam.io.g2o import read_line_graph_g2o
+from slam.line_slam.line_noise import _sigma2_for_moment
+from slam.models.anchored import r_alpha_from_anchored
+
+__all__ = [
+    "PassConsistency",
+    "PassError",
+    "Passes",
+    "estimate_pass_error",
+    "find_passes",
+    "fitted_pair_covariances",
+    "pass_consistency",
+    "pass_consistency_of_results",
+    "pass_covariance",
+    "with_pass_links",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+CHI2_2_MEDIAN = 2.0 * math.log(2.0)
+"""Median of χ²₂."""
+CHI2_1_MEDIAN = 0.454936423119572
+"""Median of χ²₁."""
+CHI2_2_95 = -2.0 * math.log(0.05)
+"""95 % quantile of χ²₂."""
+
+
+@dataclass(frozen=True)
+class PassConsistency:
+    """How far passes along the same walls agree (module docstring).
+
+    Attributes
+    ----------
+    gap_s : float
+        Observations of a landmark this far apart in time (s) or more start a new pass.
+    landmarks : int
+        Landmarks with at least two passes of ``min_observations``.
+    pairs : int
+        Pairs of passes compared.
+    median_ratio : float
+        Median of ``t`` over the pairs divided by the χ²₂ median (1 when the model holds).
+    median_ratio_angle : float
+        The same for the angle alone (χ²₁).
+    fraction_beyond_95 : float
+        Pairs with ``t`` above χ²₂'s 95 % quantile (0.05 expected).
+    """
+
+    gap_s: float
+    landmarks: int
+    pairs: int
+    median_ratio: float
+    median_ratio_angle: float
+    fraction_beyond_95: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class Passes:
+    """A graph's line factors grouped into passes along their landmarks (module docstring).
+
+    Attributes
+    ----------
+    gap_s : float
+        Observations of a landmark this far apart in time (s) or more start a new pass.
+    factor_pass : ndarray of int, shape (F,)
+        Pass of each line factor.
+    landmark : ndarray of int, shape (P,)
+        Landmark of each pass (passes of one landmark are consecutive, in time order).
+    count : ndarray of int, shape (P,)
+        Factors in each pass.
+    mean : ndarray, shape (P, 2)
+        ``m_p``, the landmark as the pass sees it, relative to the estimate (chart ``(ρ, φ)``).
+    cov : ndarray, shape (P, 2, 2)
+        ``C_p``; NaN for a pass of fewer than ``min_observations`` factors or one that does
+        not determine the line.
+    place : ndarray, shape (P,)
+        Tangent coordinate ``u`` (m) of the pass's place on its line, from the anchor.
+    factor_pose : ndarray of int, shape (F,)
+        Pose of each factor.
+    factor_gain : ndarray, shape (F, 2, 3)
+        ``∂m_p/∂ξ`` of each factor's pose: ``C_p A_lᵢᵀ A_xᵢ`` (NaN in passes without ``cov``).
+    """
+
+    gap_s: float
+    factor_pass: IntArray
+    landmark: IntArray
+    count: IntArray
+    mean: FloatArray
+    cov: FloatArray
+    place: FloatArray
+    factor_pose: IntArray
+    factor_gain: FloatArray
+
+    def fitted_difference_covariance(
+        self,
+        a: IntArray,
+        b: IntArray,
+        solve: Callable[[FloatArray], FloatArray],
+        pose_column: IntArray,
+        n_columns: int,
+        chunk: int = 256,
+    ) -> FloatArray:
+        """Covariance ``(k, 2, 2)`` of ``m_a − m_b`` at a fitted estimate, under the model.
+
+        The residuals at the estimate are ``(I − A H⁻¹ Aᵀ) z`` (whitened), so ``m_a − m_b``
+        has covariance ``C_a + C_b − J H⁻¹ Jᵀ``, ``J`` its derivative in the poses of the
+        two passes (the landmark's part cancels: both passes see the same landmark).
+        ``solve(M)`` is ``H⁻¹ M`` for ``M`` ``(n, m)`` (the graph's information,
+        :func:`slam.graph.relative.information_factor`), ``n_columns`` its size and
+        ``pose_column`` the first column of each pose in it.
+        """
+        a = np.asarray(a, dtype=np.intp)
+        b = np.asarray(b, dtype=np.intp)
+        out = self.cov[a] + self.cov[b]
+        if a.size == 0:
+            return out
+        order = np.argsort(self.factor_pass, kind="stable")
+        starts = np.searchsorted(self.factor_pass[order], np.arange(self.landmark.shape[0] + 1))
+        size = int(n_columns)
+        for lo in range(0, a.size, chunk):
+            pa, pb = a[lo : lo + chunk], b[lo : lo + chunk]
+            k = pa.size
+            rows_l: list[IntArray] = []
+            cols_l: list[IntArray] = []
+            vals_l: list[FloatArray] = []
+            for sign, passes in ((1.0, pa), (-1.0, pb)):
+                for j, p in enumerate(passes.tolist()):
+                    f = order[starts[p] : starts[p + 1]]
+                    c0 = pose_column[self.factor_pose[f]]
+                    # Jᵀ block of factor i: rows of its pose, columns 2j, 2j+1
+                    r = (c0[:, None, None] + np.arange(3)[None, :, None]) * np.ones((1, 1, 2), int)
+                    c = np.broadcast_to(2 * j + np.arange(2)[None, None, :], r.shape)
+                    rows_l.append(r.ravel())
+                    cols_l.append(c.ravel())
+                    vals_l.append(sign * np.swapaxes(self.factor_gain[f], 1, 2).ravel())
+            M = np.zeros((size, 2 * k))
+            np.add.at(M, (np.concatenate(rows_l), np.concatenate(cols_l)), np.concatenate(vals_l))
+            X = solve(M)
+            Mk = M.reshape(size, k, 2)
+            Xk = np.asarray(X).reshape(size, k, 2)
+            out[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, Xk)
+        return out
+
+    def pairs(self) -> tuple[IntArray, IntArray]:
+        """Every pair ``(a, b)`` of usable passes (finite ``cov``) of one landmark."""
+        kept = np.flatnonzero(np.isfinite(self.cov).all(axis=(1, 2)))
+        lm = self.landmark[kept]
+        bounds = np.flatnonzero(np.r_[True, lm[1:] != lm[:-1]])
+        first: list[IntArray] = []
+        second: list[IntArray] = []
+        for group in np.split(kept, bounds[1:]):
+            if group.size >= 2:
+                a, b = np.triu_indices(group.size, 1)
+                first.append(group[a])
+                second.append(group[b])
+        if not first:
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        return np.concatenate(first), np.concatenate(second)
+
+
+def find_passes(
+    graph: LineGraph,
+    pose_timestamps: ArrayLike,
+    robust_kernel: tuple[str, float] | None = None,
+    gap_s: float = 30.0,
+    min_observations: int = 3,
+) -> Passes:
+    """The passes of a graph's line factors at its estimate (module docstring).
+
+    Parameters
+    ----------
+    graph : LineGraph
+        Poses, landmarks and line factors at the estimate.
+    pose_timestamps : array_like, shape (n_poses,)
+        Time (s) of each pose.
+    robust_kernel : (str, float), optional
+        The kernel on the line factors and its width (default none).
+    gap_s : float
+        Time (s) between two observations of a landmark from which they are separate passes.
+    min_observations : int
+        Least number of factors in a pass for its ``cov`` to be given.
+
+    Raises
+    ------
+    EvaluationError
+        ``gap_s`` is not a positive number, or the time stamps are not one per pose.
+    """
+    if not (math.isfinite(gap_s) and gap_s > 0.0):
+        raise EvaluationError(f"gap_s must be a positive number of seconds, got {gap_s!r}")
+    stamps = np.asarray(pose_timestamps, dtype=float).reshape(-1)
+    g = graph
+    if stamps.shape[0] != g.n_poses:
+        raise EvaluationError(f"{stamps.shape[0]} time stamps for {g.n_poses} poses")
+    n = g.n_line_factors
+    if n == 0:
+        z = np.zeros(0, dtype=np.intp)
+        empty = np.zeros((0, 2, 2))
+        return Passes(gap_s, z, z, z, np.zeros((0, 2)), empty, np.zeros(0), z, np.zeros((0, 2, 3)))
+    kernel, width = robust_kernel or ("none", 1.0)
+    lm = g.factor_landmark[:n]
+    fp = g.factor_pose[:n]
+    lin = linearize_line_factors(
+        g.poses[fp],
+        g.landmarks[lm],
+        g.anchors[lm],
+        g.factor_z[:n],
+        sqrt_information_2x2(g.factor_cov[:n]),
+        kernel,  # type: ignore[arg-type]
+        width,
+    )
+    A = lin.A_landmark
+    info = np.swapaxes(A, 1, 2) @ A
+    rhs = np.einsum("fji,fj->fi", A, lin.b)
+    t_of = stamps[fp]
+    order = np.lexsort((t_of, lm))
+    lm_sorted, t_sorted = lm[order], t_of[order]
+    # a new pass where the landmark changes or its observations are gap_s apart
+    start = np.r_[True, (lm_sorted[1:] != lm_sorted[:-1]) | (np.diff(t_sorted) >= gap_s)]
+    pass_sorted = np.cumsum(start) - 1
+    n_pass = int(pass_sorted[-1]) + 1
+    factor_pass = np.empty(n, dtype=np.intp)
+    factor_pass[order] = pass_sorted
+    count = np.bincount(factor_pass, minlength=n_pass)
+    I_p = np.zeros((n_pass, 2, 2))
+    r_p = np.zeros((n_pass, 2))
+    np.add.at(I_p, factor_pass, info)
+    np.add.at(r_p, factor_pass, rhs)
+    pass_lm = lm_sorted[start]
+    keep = (count >= min_observations) & (np.linalg.det(I_p) > 0.0)
+    C_p = np.full_like(I_p, np.nan)
+    C_p[keep] = np.linalg.inv(I_p[keep])
+    m_p = np.einsum("pij,pj->pi", C_p, r_p)
+    # the place of a pass: the foot of its mean observing position on the line
+    xy = np.zeros((n_pass, 2))
+    np.add.at(xy, factor_pass, g.poses[fp, :2])
+    xy /= count[:, None]
+    phi = g.landmarks[pass_lm, 1]
+    tangent = np.column_stack([-np.sin(phi), np.cos(phi)])
+    place = np.sum(tangent * (xy - g.anchors[pass_lm]), axis=1)
+    gain = np.einsum("fij,fjk->fik", C_p[factor_pass], np.swapaxes(A, 1, 2) @ lin.A_pose)
+    return Passes(gap_s, factor_pass, pass_lm, count, m_p, C_p, place, fp.copy(), gain)
+
+
+def fitted_pair_covariances(
+    graph: LineGraph, passes: Passes, robust_kernel: tuple[str, float] | None = None
+) -> tuple[IntArray, IntArray, FloatArray]:
+    """Every pair of usable passes and the covariance of its ``m_a − m_b`` at the fit.
+
+    :meth:`Passes.fitted_difference_covariance` with the information of ``graph`` linearised
+    at its estimate (:func:`slam.graph.relative.information_factor`, the kernel's weights in).
+    """
+    kernel, width = robust_kernel or ("none", 1.0)
+    solver = BatchSolver(SolverConfig(robust_kernel=kernel, robust_k=width))  # type: ignore[arg-type]
+    a, b = passes.pairs()
+    if a.size == 0:
+        return a, b, np.zeros((0, 2, 2))
+    A, lu, offset = information_factor(solver, graph)
+    pose_column = np.array([offset[k] for k in keys_of("x", np.arange(graph.n_poses))])
+    S = passes.fitted_difference_covariance(a, b, lu.solve, pose_column, A.shape[1])
+    return a, b, S
+
+
+def pass_consistency(
+    graph: LineGraph,
+    pose_timestamps: ArrayLike,
+    robust_kernel: tuple[str, float] | None = None,
+    gap_s: float = 30.0,
+    min_observations: int = 3,
+    fitted: bool = True,
+) -> PassConsistency:
+    """Between-pass consistency of a graph's landmarks at its estimate (module docstring).
+
+    Arguments as :func:`find_passes`; ``min_observations`` is the least number of factors of
+    a pass that is compared.  ``fitted``: each pair's ``t`` against the covariance of its
+    difference at the fitted estimate (:func:`fitted_pair_covariances`: about χ²₂ when the
+    model holds), else against ``C_p + C_q`` (poses as if known).  A graph with pass links
+    (:func:`with_pass_links`) is judged on its walls: each pass landmark's factors count for
+    the wall it is linked to.
+
+    Raises
+    ------
+    EvaluationError
+        ``gap_s`` is not a positive number, or the time stamps are not one per pose.
+    """
+    g = _walls(graph)
+    passes = find_passes(g, pose_timestamps, robust_kernel, gap_s, min_observations)
+    if fitted:
+        a, b, S = fitted_pair_covariances(graph, passes, robust_kernel)
+    else:
+        a, b = passes.pairs()
+        S = passes.cov[a] + passes.cov[b]
+    if a.size == 0:
+        return PassConsistency(gap_s, 0, 0, math.nan, math.nan, math.nan)
+    d = passes.mean[a] - passes.mean[b]
+    t = np.einsum("ki,kij,kj->k", d, np.linalg.inv(S), d)
+    ta = d[:, 1] ** 2 / S[:, 1, 1]
+    return PassConsistency(
+        gap_s=gap_s,
+        landmarks=int(np.unique(passes.landmark[a]).size),
+        pairs=int(t.size),
+        median_ratio=float(np.median(t) / CHI2_2_MEDIAN),
+        median_ratio_angle=float(np.median(ta) / CHI2_1_MEDIAN),
+        fraction_beyond_95=float(np.mean(t > CHI2_2_95)),
+    )
+
+
+def _walls(graph: LineGraph) -> LineGraph:
+    """``graph`` with each pass landmark's factors on the wall it is linked to (a copy)."""
+    if graph.n_landmark_links == 0:
+        return graph
+    g = copy.deepcopy(graph)
+    root = np.arange(g.n_landmarks)
+    root[g.link_first] = g.link_second
+    n = g.n_line_factors
+    g.factor_landmark[:n] = root[g.factor_landmark[:n]]
+    return g
+
+
+def pass_consistency_of_results(directory: str | Path, gap_s: float = 30.0) -> PassConsistency:
+    """:func:`pass_consistency` of a results folder's ``graph.g2o``.
+
+    Raises
+    ------
+    EvaluationError
+        The file states no scan time stamps (``LINESLAM_SCAN`` lines).
+    """
+    f = read_line_graph_g2o(Path(directory) / "graph.g2o")
+    if f.timestamps is None:
+        raise EvaluationError(f"{directory}/graph.g2o states no scan time stamps")
+    return pass_consistency(line_graph_from_file(f), f.timestamps, f.robust_kernel, gap_s)
+
+
+@dataclass(frozen=True)
+class PassError:
+    """The error each pass along a wall shares, estimated (module docstring).
+
+    Attributes
+    ----------
+    gap_s : float
+        The gap (s) that separates passes.
+    sigma_offset_m, sigma_angle_rad : float
+        Offset along the normal and angle about the pass's place.
+    pairs : int
+        Pairs of passes the estimate used.
+    linked_passes : int
+        Passes that became landmarks linked to their wall (0: the model is not used).
+    """
+
+    gap_s: float
+    sigma_offset_m: float
+    sigma_angle_rad: float
+    pairs: int
+    linked_passes: int = 0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (for ``summary.json``)."""
+        return asdict(self)
+
+
+MIN_PAIRS = 20
+"""Fewest pairs of passes for an estimate of the pass error (else none is used)."""
+
+
+def estimate_pass_error(
+    passes: Passes, pairs: tuple[IntArray, IntArray, FloatArray] | None = None
+) -> PassError:
+    """``(σ_o, σ_a)`` of the pass error from every pair of usable passes (module docstring).
+
+    ``pairs``: ``(a, b, S)`` with ``S`` the covariance of each pair's difference without a
+    pass error (:func:`fitted_pair_covariances`); default ``C_a + C_b`` of every pair.  With
+    fewer than :data:`MIN_PAIRS` pairs both σ are 0 (no pass error).
+    """
+    if pairs is None:
+        a, b = passes.pairs()
+        S = passes.cov[a] + passes.cov[b]
+    else:
+        a, b, S = pairs
+    if a.size < MIN_PAIRS:
+        return PassError(passes.gap_s, 0.0, 0.0, int(a.size))
+    d = passes.mean[a] - passes.mean[b]
+    s2_a = _sigma2_for_moment(0.5 * d[:, 1] ** 2, 0.5 * S[:, 1, 1])
+    u_a, u_b = passes.place[a], passes.place[b]
+    u_m = 0.5 * (u_a + u_b)
+    d_o = d[:, 0] - u_m * d[:, 1]
+    var_o = S[:, 0, 0] - 2.0 * u_m * S[:, 0, 1] + u_m**2 * S[:, 1, 1]
+    var_o = var_o + ((u_a - u_m) ** 2 + (u_b - u_m) ** 2) * s2_a
+    s2_o = _sigma2_for_moment(0.5 * d_o**2, 0.5 * var_o)
+    return PassError(passes.gap_s, math.sqrt(s2_o), math.sqrt(s2_a), int(a.size))
+
+
+def pass_covariance(place: FloatArray, sigma_offset_m: float, sigma_angle_rad: float) -> FloatArray:
+    """``B_p`` ``(P, 2, 2)`` in the landmark's chart for passes at tangent places ``u`` ``(P,)``."""
+    u = np.asarray(place, dtype=float).reshape(-1)
+    sa2 = sigma_angle_rad**2
+    out = np.empty((u.shape[0], 2, 2))
+    out[:, 0, 0] = sigma_offset_m**2 + u * u * sa2
+    out[:, 0, 1] = out[:, 1, 0] = u * sa2
+    out[:, 1, 1] = sa2
+    return out
+
+
+MIN_SIGMA_OFFSET_M = 1e-4
+"""Smallest pass offset error a link carries (m): a link needs a positive-definite ``B``."""
+MIN_SIGMA_ANGLE_RAD = 1e-5
+"""Smallest pass angle error a link carries (rad)."""
+
+
+def with_pass_links(graph: LineGraph, passes: Passes, error: PassError) -> tuple[LineGraph, int]:
+    """A copy of ``graph`` with each pass of a multi-pass wall as a linked landmark.
+
+    Every pass of a landmark seen in two passes or more becomes a landmark of its own (the
+    wall's estimate and anchor) holding the pass's factors, linked to the wall with
+    ``B_p`` (:func:`pass_covariance`, each σ at least :data:`MIN_SIGMA_OFFSET_M`,
+    :data:`MIN_SIGMA_ANGLE_RAD`).  The wall keeps its index and holds no factor.  Returns the
+    copy and the number of linked passes; with both σ of ``error`` zero, ``graph`` itself and 0.
+    """
+    if error.sigma_offset_m <= 0.0 and error.sigma_angle_rad <= 0.0:
+        return graph, 0
+    per_landmark = np.bincount(passes.landmark, minlength=graph.n_landmarks)
+    linked = np.flatnonzero(per_landmark[passes.landmark] >= 2)
+    if linked.size == 0:
+        return graph, 0
+    g = copy.deepcopy(graph)
+    wall = passes.landmark[linked]
+    v = g.landmarks[wall].copy()
+    c = g.anchors[wall].copy()
+    new = g.add_landmarks(r_alpha_from_anchored(v, c), c)
+    g.landmarks[new] = v  # the wall's chart values exactly
+    variable = np.full(passes.landmark.shape[0], -1, dtype=np.intp)
+    variable[linked] = new
+    n = g.n_line_factors
+    moved = variable[passes.factor_pass] >= 0
+    g.factor_landmark[:n][moved] = variable[passes.factor_pass[moved]]
+    B = pass_covariance(
+        passes.place[linked],
+        max(error.sigma_offset_m, MIN_SIGMA_OFFSET_M),
+        max(error.sigma_angle_rad, MIN_SIGMA_ANGLE_RAD),
+    )
+    g.add_landmark_links(new, wall, B)
+    return g, int(linked.size)
