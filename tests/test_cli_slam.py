@@ -150,3 +150,39 @@ def test_default_demo_run_is_consistent_with_the_estimated_model_error(tmp_path,
     assert metrics["relations_nees"]["mean"] < 1.0
     assert metrics["nees"]["one_run"]["mean"] < metrics["nees"]["one_run"]["bounds"][0]
     assert metrics["relations"]["abs_trans_m"]["mean"] > 2.0 * error
+
+
+def test_the_pass_error_changes_the_covariances_not_the_estimate(tmp_path, capsys):
+    """A simulated laboratory driven through more than once (``lab``, seed 11): with
+    ``line_pass_error = "estimated"`` the walls seen in several passes get linked passes in
+    ``graph.g2o`` and the covariances of both runs differ, the trajectory and the map do not;
+    ``lineslam evaluate`` reads the linked graph."""
+    sim = tmp_path / "lab"
+    assert run(["simulate", "lab", "--seed", "11", "--out", str(sim), "--quiet"], capsys)[0] == 0
+    option = tmp_path / "passes.toml"
+    option.write_text('[slam]\nline_pass_error = "estimated"\n')
+    runs = {}
+    for name, extra in (("off", []), ("passes", ["--config", str(option)])):
+        out = tmp_path / name
+        args = ["slam", str(sim / "log.clf"), "--out", str(out), "--quiet", *extra]
+        assert run(args, capsys)[0] == 0
+        runs[name] = out
+    summary = json.loads((runs["passes"] / "summary.json").read_text())
+    est = summary["line_pass_error"]
+    assert est["pairs"] >= 20 and est["linked_passes"] > 0
+    assert "line_pass_error" not in json.loads((runs["off"] / "summary.json").read_text())
+    a = read_tum(runs["off"] / "trajectory.tum")
+    b = read_tum(runs["passes"] / "trajectory.tum")
+    np.testing.assert_array_equal(a.poses, b.poses)
+    map_a = read_map_json(runs["off"] / "map.json").lines
+    map_b = read_map_json(runs["passes"] / "map.json").lines
+    assert [(m.r, m.alpha) for m in map_a] == [(m.r, m.alpha) for m in map_b]
+    g2o = (runs["passes"] / "graph.g2o").read_text()
+    assert g2o.count("LINESLAM_EDGE_LINE2D_LINK") == est["linked_passes"]
+    assert "LINESLAM_EDGE_LINE2D_LINK" not in (runs["off"] / "graph.g2o").read_text()
+    cov_a = np.loadtxt(runs["off"] / "trajectory_covariance.txt")
+    cov_b = np.loadtxt(runs["passes"] / "trajectory_covariance.txt")
+    assert not np.allclose(cov_a, cov_b)
+    args = ["evaluate", str(runs["passes"]), "--relations", str(sim / "relations.txt"), "--quiet"]
+    assert run(args, capsys)[0] == 0
+    assert json.loads((runs["passes"] / "metrics.json").read_text())["relations_nees"]["n"] > 0

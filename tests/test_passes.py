@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from slam.errors import DegenerateGeometryError, EvaluationError, InputError
+from slam.errors import DegenerateGeometryError, EvaluationError, InputError, LogFormatError
 from slam.geometry import pose_between, predict_line_measurement, wrap_angle
 from slam.graph.batch import BatchSolver
 from slam.graph.config import SolverConfig
 from slam.graph.linear import keys_of
 from slam.graph.problem import LineGraph
+from slam.graph.relative import line_graph_from_file
+from slam.io.g2o import read_line_graph_g2o, write_line_graph_g2o
 from slam.line_slam.passes import (
     PassError,
     estimate_pass_error,
@@ -22,6 +25,7 @@ from slam.line_slam.passes import (
     with_pass_links,
 )
 from slam.models.anchored import r_alpha_from_anchored
+from slam.models.motion import MotionNoiseConfig
 
 R = np.diag([0.01**2, 0.005**2])  # each factor's (r, α) covariance
 VIEWS = 6  # observations per pass
@@ -233,3 +237,40 @@ def test_landmark_links_are_checked_and_cost_what_they_say():
         g.add_landmark_links(lms[:1], lms[:1], cov[None])
     with pytest.raises(DegenerateGeometryError):
         g.add_landmark_links(lms[:1], lms[1:2], np.zeros((1, 2, 2)))
+
+
+def test_a_linked_graph_round_trips_through_g2o_with_its_covariances(tmp_path):
+    g, stamps = _laps(22, 0.02, 0.005)
+    passes = find_passes(g, stamps, gap_s=30.0)
+    linked, k = with_pass_links(g, passes, estimate_pass_error(passes))
+    assert k > 0
+    result = SimpleNamespace(
+        timestamps=stamps,
+        is_keyframe=np.ones(g.n_poses, bool),
+        keyframe_of_scan=np.arange(g.n_poses),
+    )
+    path = write_line_graph_g2o(
+        tmp_path / "graph.g2o", linked, result, scan_offsets=np.zeros((g.n_poses, 3)),
+        motion_noise=MotionNoiseConfig(), robust_kernel=("none", 1.0),
+    )  # fmt: skip
+    back = read_line_graph_g2o(path)
+    assert back.line_links is not None and back.line_links.shape == (k, 7)
+    again = line_graph_from_file(back)
+    assert again.n_landmark_links == k
+    keys = keys_of("x", np.array([10, 10 + 2 * PER_LAP]))
+    want = BatchSolver().marginals(linked).jointMarginalCovariance(keys).fullMatrix()
+    got = BatchSolver().marginals(again).jointMarginalCovariance(keys).fullMatrix()
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-12)
+    # without the links the file reads back to different covariances
+    plain = BatchSolver().marginals(g).jointMarginalCovariance(keys).fullMatrix()
+    assert not np.allclose(plain, want, rtol=0.1)
+    # a link with information that is not positive definite is refused with its line
+    text = path.read_text().splitlines()
+    i = next(n for n, line in enumerate(text) if line.startswith("LINESLAM_EDGE_LINE2D_LINK"))
+    fields = text[i].split()
+    fields[-3] = "-1"
+    text[i] = " ".join(fields)
+    bad = tmp_path / "bad.g2o"
+    bad.write_text("\n".join(text) + "\n")
+    with pytest.raises(LogFormatError, match=f"{i + 1}"):
+        read_line_graph_g2o(bad)

@@ -103,17 +103,27 @@ def line_graph_from_file(graph_file: LineGraphFile) -> LineGraph:
     if graph_file.factor_pose.size == 0:
         return g
     row_of = {int(k): r for r, k in enumerate(graph_file.line_ids)}
+    links = graph_file.line_links if graph_file.line_links is not None else np.zeros((0, 7))
     try:
         rows = np.array([row_of[int(k)] for k in graph_file.factor_line], dtype=np.intp)
+        link_rows = np.array(
+            [[row_of[int(a)], row_of[int(b)]] for a, b in links[:, :2]], dtype=np.intp
+        ).reshape(-1, 2)
     except KeyError as exc:
-        raise LogFormatError(f"graph.g2o: a line factor names unknown line {exc}") from None
+        raise LogFormatError(f"graph.g2o: a line factor or link names unknown line {exc}") from None
     used, first = np.unique(rows, return_index=True)
     lines = graph_file.lines_r_alpha[used]
     nrm = np.column_stack([np.cos(lines[:, 1]), np.sin(lines[:, 1])])
     seen_from = pg.poses[graph_file.factor_pose[first], :2]
     anchors = seen_from - (np.sum(seen_from * nrm, axis=1) - lines[:, 0])[:, None] * nrm
+    # linked lines share the chart their link is written in (a wall holds no factor)
+    all_rows = np.union1d(used, link_rows.ravel())
+    anchor_of = np.full((graph_file.line_ids.shape[0], 2), np.nan)
+    anchor_of[used] = anchors
+    anchor_of[link_rows[:, 0]] = links[:, 2:4]
+    anchor_of[link_rows[:, 1]] = links[:, 2:4]
     index = np.full(graph_file.line_ids.shape[0], -1, dtype=np.intp)
-    index[used] = g.add_landmarks(lines, anchors)
+    index[all_rows] = g.add_landmarks(graph_file.lines_r_alpha[all_rows], anchor_of[all_rows])
     lm = index[rows]
     inv = np.asarray(np.linalg.inv(graph_file.factor_information), dtype=np.float64)
     cov: FloatArray = 0.5 * (inv + np.swapaxes(inv, 1, 2))
@@ -129,6 +139,11 @@ def line_graph_from_file(graph_file: LineGraphFile) -> LineGraph:
             cov[sel],
             np.zeros((k, 2, 2)),
         )
+    if links.shape[0]:
+        info = np.zeros((links.shape[0], 2, 2))
+        info[:, 0, 0], info[:, 1, 1] = links[:, 4], links[:, 6]
+        info[:, 0, 1] = info[:, 1, 0] = links[:, 5]
+        g.add_landmark_links(index[link_rows[:, 0]], index[link_rows[:, 1]], np.linalg.inv(info))
     return g
 
 

@@ -241,6 +241,7 @@ _PRIOR = "LINESLAM_PRIOR_SE2"
 _ROBUST = "LINESLAM_ROBUST_KERNEL"
 _MOTION = "LINESLAM_MOTION_NOISE"
 _OFFSET = "LINESLAM_SCAN_OFFSET"
+_LINK = "LINESLAM_EDGE_LINE2D_LINK"
 _MOTION_FIELDS = (
     "sigma_xy_min_m",
     "sigma_xy_per_m",
@@ -373,6 +374,17 @@ def write_line_graph_g2o(
     f_id = line_id[f_lm[keep]]
     z = np.asarray(graph.factor_z, dtype=float)[keep]
     f_info = np.linalg.inv(np.asarray(graph.factor_cov, dtype=float)[keep]).reshape(-1, 2, 2)
+    n_links = int(getattr(graph, "n_landmark_links", 0))
+    links = np.zeros((0, 7))
+    if n_links:
+        k_first = np.asarray(graph.link_first, dtype=np.int64)
+        k_second = np.asarray(graph.link_second, dtype=np.int64)
+        k_info = np.linalg.inv(np.asarray(graph.link_cov, dtype=float)).reshape(-1, 2, 2)
+        anchors = np.asarray(graph.anchors, dtype=float)[k_first]
+        links = np.column_stack(
+            [line_id[k_first], line_id[k_second], anchors, k_info[:, 0, 0], k_info[:, 0, 1],
+             k_info[:, 1, 1]]
+        )  # fmt: skip
     path = Path(path)
     with path.open("w", encoding="utf-8") as handle:
         if stamps is not None:
@@ -397,6 +409,8 @@ def write_line_graph_g2o(
             upper = np.column_stack([f_info[:, 0, 0], f_info[:, 0, 1], f_info[:, 1, 1]])
             table = np.column_stack([f_pose, f_id, z, upper])
             np.savetxt(handle, table, fmt=[f"{_LINE_EDGE} %d", "%d"] + ["%.9f"] * 2 + ["%.9g"] * 3)
+        if links.shape[0]:
+            np.savetxt(handle, links, fmt=[f"{_LINK} %d", "%d"] + ["%.9f"] * 2 + ["%.9g"] * 3)
         # after every edge: gtsam.readG2o stops reading edges at some unknown lines
         if offset_rows is not None and offset_rows.shape[0]:
             if offset_covs is None:
@@ -462,6 +476,11 @@ class LineGraphFile:
         The covariance ``Σ_s`` of each of those offsets that is a scan match's estimate, NaN
         for the odometry offsets (whose noise is ``motion_noise``'s); None when no offsets
         are written.
+    line_links : ndarray, shape (K, 7), or None
+        Links between two lines (``LINESLAM_EDGE_LINE2D_LINK``, a pass along a wall and the
+        wall: :meth:`slam.graph.problem.LineGraph.add_landmark_links`): ids of the two lines,
+        the anchor ``(x, y)`` of the chart both share, and the upper triangle of the
+        information of their difference in that chart; None when there are none.
     """
 
     pose_graph: PoseGraph2D
@@ -480,6 +499,7 @@ class LineGraphFile:
     offset_keyframes: NDArray[np.int64] | None = None
     offsets: FloatArray | None = None
     offset_covariances: FloatArray | None = None
+    line_links: FloatArray | None = None
 
 
 def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
@@ -501,7 +521,8 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
     prior: list[float] | None = None
     robust: tuple[str, float] | None = None
     motion: dict[str, float] | None = None
-    ours = (_LINE_VERTEX, _LINE_EDGE, _SCAN, _PRIOR, _ROBUST, _MOTION, _OFFSET)
+    links: list[list[float]] = []
+    ours = (_LINE_VERTEX, _LINE_EDGE, _SCAN, _PRIOR, _ROBUST, _MOTION, _OFFSET, _LINK)
     for line_number, line in iter_text_lines(path):
         tokens = line.split()
         if not tokens:
@@ -511,6 +532,13 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
                 lines_v.append([float(t) for t in tokens[1:]])
             elif tokens[0] == _LINE_EDGE and len(tokens) == 8:
                 lines_e.append([float(t) for t in tokens[1:]])
+            elif tokens[0] == _LINK and len(tokens) == 8:
+                links.append([float(t) for t in tokens[1:]])
+                info_k = np.array([[links[-1][4], links[-1][5]], [links[-1][5], links[-1][6]]])
+                if not _is_covariance(info_k):
+                    raise LogFormatError(
+                        f"{_LINK}: the information is not positive definite", where, line_number
+                    )
             elif tokens[0] == _SCAN and len(tokens) == 3:
                 stamps[int(tokens[1])] = float(tokens[2])
             elif tokens[0] == _OFFSET and len(tokens) in (6, 12):
@@ -581,4 +609,5 @@ def read_line_graph_g2o(path: str | Path) -> LineGraphFile:
         offset_covariances=np.asarray(offset_covs, dtype=float).reshape(-1, 3, 3)
         if written
         else None,
+        line_links=np.asarray(links, dtype=float).reshape(-1, 7) if links else None,
     )

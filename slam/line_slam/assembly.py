@@ -130,19 +130,24 @@ def assemble_result(
     policy: InputPolicy,
     stats: dict[str, Any],
     motion: MotionNoiseConfig | None = None,
+    covariances: tuple[Any, LineGraph] | None = None,
 ) -> SlamResult:
     """The run's :class:`~slam.result.SlamResult` (module docstring).
 
     ``stats`` becomes the result's statistics (the same dict: the caller may complete it);
-    ``motion`` is the odometry noise for non-keyframe scans (default ``config.motion``).
+    ``motion`` is the odometry noise for non-keyframe scans (default ``config.motion``);
+    ``covariances``: the back-end and graph the keyframes' and landmarks' covariances come
+    from (default ``backend`` and ``graph``; a graph with the same poses and landmark
+    indices, e.g. with passes linked to their walls, :mod:`slam.line_slam.passes`).
     """
+    cov_backend, cov_graph = covariances if covariances is not None else (backend, graph)
     g = graph
     n = track.n_scans
     poses, kf, offsets = scan_poses(g, track)
     cov = np.full((n, 3, 3), np.nan)
     kf_cov = None
     if config.pose_covariances == "keyframes" and g.n_poses:
-        kf_cov = backend.pose_covariances(g, np.arange(g.n_poses))
+        kf_cov = cov_backend.pose_covariances(cov_graph, np.arange(g.n_poses))
         F = adjoint_pose2(pose_inverse(offsets))
         noise = np.where(
             track.scan_matched[:, None, None],
@@ -158,7 +163,7 @@ def assemble_result(
     counts = g.observation_counts()
     ids = np.flatnonzero(g.landmark_alive & (counts >= config.map_min_observations))
     la = g.landmarks_r_alpha[ids]
-    lcov = backend.landmark_covariances(g, ids) if ids.size else np.zeros((0, 2, 2))
+    lcov = cov_backend.landmark_covariances(cov_graph, ids) if ids.size else np.zeros((0, 2, 2))
     J = anchored_jacobian(g.landmarks[ids], g.anchors[ids])
     lcov = J @ lcov @ np.swapaxes(J, 1, 2)
     interrupts.check()

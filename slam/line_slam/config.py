@@ -150,6 +150,16 @@ class SlamConfig:
         mid-point (:func:`slam.models.anchored.model_error_covariance`): real walls are not
         the fit's straight lines.  With ``line_model_error = "estimated"`` (the default) the
         values used until the first estimate.
+    line_pass_error : {"estimated", "off"}
+        ``"estimated"``: the observations of one pass along a wall share an error of their
+        own (:mod:`slam.line_slam.passes`): estimated at the end of the run from how far the
+        passes along the same walls disagree, and, where it is not zero, each pass of a wall
+        seen in several passes becomes a landmark linked to the wall for the covariances
+        (``trajectory_covariance.txt``, the landmarks' and ``graph.g2o``; the estimate is
+        not changed).  ``summary.json`` ``line_pass_error``.  ``"off"``: every observation's
+        error is independent of the others'.
+    line_pass_gap_s : float
+        Observations of a wall this far apart in time (s) or more are separate passes.
     min_line_points : int
         Lines with fewer supporting points are ignored (neither matched nor new landmarks).
         Default 3, the fewest with a residual: how much wall a usable line covers is
@@ -182,6 +192,8 @@ class SlamConfig:
     line_model_error: Literal["estimated", "fixed"] = "estimated"
     line_model_sigma_r_m: float = 0.02
     line_model_sigma_alpha_rad: float = 0.01
+    line_pass_error: Literal["estimated", "off"] = "off"
+    line_pass_gap_s: float = 30.0
     min_line_points: int = 3
     min_line_length_m: float = 0.3
     pose_covariances: Literal["keyframes", "none"] = "keyframes"
@@ -207,6 +219,11 @@ class SlamConfig:
             "line_model_error must be estimated or fixed",
         )
         nonneg("map_segment_gap_m", self.map_segment_gap_m)
+        require(
+            self.line_pass_error in ("estimated", "off"),
+            f"line_pass_error must be estimated or off: {self.line_pass_error!r}",
+        )
+        positive("line_pass_gap_s", self.line_pass_gap_s)
         require(self.map_min_observations >= 1, "map_min_observations must be >= 1")
 
     @property

@@ -309,16 +309,25 @@ def find_passes(
 
 
 def fitted_pair_covariances(
-    graph: LineGraph, passes: Passes, robust_kernel: tuple[str, float] | None = None
+    graph: LineGraph,
+    passes: Passes,
+    robust_kernel: tuple[str, float] | None = None,
+    max_pairs: int | None = None,
+    seed: int = 0,
 ) -> tuple[IntArray, IntArray, FloatArray]:
-    """Every pair of usable passes and the covariance of its ``m_a − m_b`` at the fit.
+    """Pairs of usable passes and the covariance of each one's ``m_a − m_b`` at the fit.
 
     :meth:`Passes.fitted_difference_covariance` with the information of ``graph`` linearised
     at its estimate (:func:`slam.graph.relative.information_factor`, the kernel's weights in).
+    Every pair, or ``max_pairs`` of them drawn without replacement with ``seed`` (each pair
+    costs two solves with the information).
     """
     kernel, width = robust_kernel or ("none", 1.0)
     solver = BatchSolver(SolverConfig(robust_kernel=kernel, robust_k=width))  # type: ignore[arg-type]
     a, b = passes.pairs()
+    if max_pairs is not None and a.size > max_pairs:
+        pick = np.sort(np.random.default_rng(seed).choice(a.size, max_pairs, replace=False))
+        a, b = a[pick], b[pick]
     if a.size == 0:
         return a, b, np.zeros((0, 2, 2))
     A, lu, offset = information_factor(solver, graph)

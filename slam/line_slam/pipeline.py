@@ -45,6 +45,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -82,10 +83,20 @@ from slam.line_slam.local_map import LocalMap, build_local_map
 from slam.line_slam.loop_closer import LoopCloser
 from slam.line_slam.observations import usable_lines
 from slam.line_slam.odometry_noise import MotionNoiseEstimator
+from slam.line_slam.passes import (
+    PassError,
+    estimate_pass_error,
+    find_passes,
+    fitted_pair_covariances,
+    with_pass_links,
+)
 from slam.line_slam.report import COUNTERS, ScanReport, SlamWarning, degradation
 from slam.result import SlamResult
 from slam.types import Scan, check_lines, check_scan
 from slam.validate import check_config
+
+PASS_PAIRS = 300
+"""Most pairs of passes the pass error is estimated from (each costs two solves)."""
 
 FloatArray = NDArray[np.float64]
 
@@ -150,6 +161,8 @@ class LineSlam:
             cfg.line_model_sigma_r_m, cfg.line_model_sigma_alpha_rad
         )
         self.line_weights = LineReweighting(self.line_noise, cfg.line_model_error == "estimated")
+        self.pass_error: PassError | None = None  # with line_pass_error = "estimated"
+        self.covariance_graph = self.graph  # the graph the covariances come from (result())
         self.book = LandmarkBook(self.graph, cfg.frontend)
         self.audit = MergeAudit(self.book, cfg.fusion, self.counters)
         self.fusion = LandmarkFusion(
@@ -446,6 +459,24 @@ class LineSlam:
         self.clock.time_s["optimize"] += time.perf_counter() - t0
         return stats
 
+    def _pass_model(self) -> tuple[PassError, LineGraph]:
+        """The pass error estimated at the estimate, and the graph the covariances come from.
+
+        :mod:`slam.line_slam.passes`: from at most :data:`PASS_PAIRS` pairs of passes; where
+        the error is not zero, a copy of the graph with each pass of a multi-pass wall linked
+        to it, else the graph itself.
+        """
+        cfg = self.config
+        g = self.graph
+        keyframe = np.asarray(self.track.scan_is_keyframe, dtype=bool)
+        stamps = np.asarray(self.track.timestamps, dtype=float)[keyframe]
+        kernel = (cfg.solver.robust_kernel, cfg.solver.robust_k)
+        passes = find_passes(g, stamps, kernel, cfg.line_pass_gap_s)
+        pairs = fitted_pair_covariances(g, passes, kernel, max_pairs=PASS_PAIRS)
+        error = estimate_pass_error(passes, pairs)
+        linked, n_linked = with_pass_links(g, passes, error)
+        return replace(error, linked_passes=n_linked), linked
+
     def write_graph_g2o(self, path: str | Path, result: SlamResult | None = None) -> Path:
         """Write the factor graph as ``graph.g2o`` (:func:`slam.io.g2o.write_line_graph_g2o`).
 
@@ -458,7 +489,7 @@ class LineSlam:
         solver = self.config.solver
         return write_line_graph_g2o(
             path,
-            self.graph,
+            self.covariance_graph,
             result,
             scan_offsets=np.array(self.track.scan_offset).reshape(-1, 3),
             scan_offset_covariances=np.array(self.track.scan_offset_cov).reshape(-1, 3, 3),
@@ -470,6 +501,12 @@ class LineSlam:
         """The current estimate of every scan's pose and the map, with covariances."""
         stats: dict[str, Any] = {}
         with self.clock("covariances"):
+            covariances = None
+            self.covariance_graph = self.graph
+            if self.config.line_pass_error == "estimated":
+                self.pass_error, self.covariance_graph = self._pass_model()
+                if self.covariance_graph is not self.graph:
+                    covariances = (BatchBackend(self.config.solver), self.covariance_graph)
             result = assemble_result(
                 self.graph,
                 self.backend,
@@ -478,6 +515,7 @@ class LineSlam:
                 self.policy,
                 stats,
                 self.odometry_noise.model,
+                covariances,
             )
         time_s = self.clock.time_s
         stats.update(self.counters)
@@ -486,6 +524,8 @@ class LineSlam:
         stats["odometry_noise"] = self.odometry_noise.summary()
         if self.config.line_model_error == "estimated":
             stats["line_model_error"] = self.line_noise.summary()
+        if self.pass_error is not None:
+            stats["line_pass_error"] = self.pass_error.to_dict()
         stats["drift_scale"] = {"xy": self.drift.scale_xy, "theta": self.drift.scale_theta}
         stats["runtime_s"] = {
             "total": float(np.sum(self.track.scan_runtime_s)) + time_s["optimize"],
