@@ -31,11 +31,11 @@ wall moved by an error of its own, shared by all its observations: an offset ``�
 the normal and an angle ``σ_a`` about the pass's place on the line (the foot of its mean
 observing position; in the chart ``[[σ_o² + u²σ_a², uσ_a²], [uσ_a², σ_a²]]``, ``u`` that
 place's tangent coordinate from the anchor).  Both are estimated from the pairs of passes as
-the line factors' model error is (:mod:`slam.line_slam.line_noise`, Huber's Proposal 2): the
-angle from ``d_φ² / 2`` against ``(C_p + C_q)_φφ / 2``, then the offset at the pair's middle
-place ``u_m`` from ``(d_ρ − u_m d_φ)² / 2`` against its variance under ``C_p + C_q`` and the
-angle part, halved.  As the consistency above, the estimate sees the passes pulled together
-by the fit: it is a lower bound.  In the graph each pass of a wall seen in two passes or more
+the line factors' model error is (:mod:`slam.line_slam.line_noise`, Huber's Proposal 2), on
+the angle part of each pair's difference and on its offset at the pair's middle place, with
+the difference's covariance at the fit (:meth:`Passes.fitted_pair_terms`: the measurement
+noise's part, and the part of each pass's own error the fit leaves in it)
+(:func:`estimate_pass_error`).  In the graph each pass of a wall seen in two passes or more
 becomes a landmark of its own, anchored as the wall, holding its factors and linked to the
 wall by ``v_pass − v_wall ~ N(0, B_p)``
 (:meth:`slam.graph.problem.LineGraph.add_landmark_links`): the observations of a pass share
@@ -66,12 +66,13 @@ from slam.line_slam.line_noise import _sigma2_for_moment
 from slam.models.anchored import r_alpha_from_anchored
 
 __all__ = [
+    "FittedPairs",
     "PassConsistency",
     "PassError",
     "Passes",
     "estimate_pass_error",
     "find_passes",
-    "fitted_pair_covariances",
+    "fitted_pairs",
     "pass_consistency",
     "pass_consistency_of_results",
     "pass_covariance",
@@ -158,55 +159,86 @@ class Passes:
     factor_pose: IntArray
     factor_gain: FloatArray
 
-    def fitted_difference_covariance(
+    def _pose_rows(
+        self, p: int, blocks: FloatArray, pose_column: IntArray
+    ) -> tuple[IntArray, IntArray, FloatArray]:
+        """Rows, columns (0, 1) and values of ``(3, 2)`` blocks at the poses of pass ``p``."""
+        f = self._factors_of(p)
+        c0 = pose_column[self.factor_pose[f]]
+        rows = (c0[:, None, None] + np.arange(3)[None, :, None]) * np.ones((1, 1, 2), np.intp)
+        cols = np.broadcast_to(np.arange(2)[None, None, :], rows.shape)
+        return rows.ravel(), cols.ravel(), blocks.ravel()
+
+    def _factors_of(self, p: int) -> IntArray:
+        if not hasattr(self, "_order"):
+            order = np.argsort(self.factor_pass, kind="stable")
+            starts = np.searchsorted(self.factor_pass[order], np.arange(self.landmark.size + 1))
+            object.__setattr__(self, "_order", (order, starts))
+        order, starts = self._order  # type: ignore[attr-defined]
+        return np.asarray(order[starts[p] : starts[p + 1]])
+
+    def fitted_pair_terms(
         self,
         a: IntArray,
         b: IntArray,
         solve: Callable[[FloatArray], FloatArray],
         pose_column: IntArray,
+        landmark_column: IntArray,
         n_columns: int,
         chunk: int = 256,
-    ) -> FloatArray:
-        """Covariance ``(k, 2, 2)`` of ``m_a − m_b`` at a fitted estimate, under the model.
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(S, T_a, T_b)``, each ``(k, 2, 2)``: how ``m_a − m_b`` behaves at a fitted estimate.
 
-        The residuals at the estimate are ``(I − A H⁻¹ Aᵀ) z`` (whitened), so ``m_a − m_b``
-        has covariance ``C_a + C_b − J H⁻¹ Jᵀ``, ``J`` its derivative in the poses of the
-        two passes (the landmark's part cancels: both passes see the same landmark).
-        ``solve(M)`` is ``H⁻¹ M`` for ``M`` ``(n, m)`` (the graph's information,
-        :func:`slam.graph.relative.information_factor`), ``n_columns`` its size and
-        ``pose_column`` the first column of each pose in it.
+        The residuals at the estimate are ``(I − A H⁻¹ Aᵀ) z`` (whitened), so the measurement
+        noise gives ``m_a − m_b`` the covariance ``S = C_a + C_b − J H⁻¹ Jᵀ``, ``J`` its
+        derivative in the poses of the two passes (the landmark's part cancels: both passes
+        see the same landmark).  A pass's own error ``δ_p`` enters as ``T_a δ_a + T_b δ_b``
+        with ``T_a = I − J H⁻¹ F_a`` and ``T_b = −I − J H⁻¹ F_b``, ``F_p = Aᵀ`` of the pass's
+        factor rows moved by ``δ_p`` (the fit absorbs part of it).  ``solve(M)`` is ``H⁻¹ M``
+        for ``M`` ``(n, m)`` (the graph's information,
+        :func:`slam.graph.relative.information_factor`), ``n_columns`` its size;
+        ``pose_column`` the first column of each pose in it, ``landmark_column`` that of each
+        pass's landmark ``(P,)``.
         """
         a = np.asarray(a, dtype=np.intp)
         b = np.asarray(b, dtype=np.intp)
-        out = self.cov[a] + self.cov[b]
+        n = int(n_columns)
+        S = self.cov[a] + self.cov[b]
+        T_a = np.broadcast_to(np.eye(2), S.shape).copy()
+        T_b = -T_a
         if a.size == 0:
-            return out
-        order = np.argsort(self.factor_pass, kind="stable")
-        starts = np.searchsorted(self.factor_pass[order], np.arange(self.landmark.shape[0] + 1))
-        size = int(n_columns)
+            return S, T_a, T_b
+        # H⁻¹ F_p of every pass of the pairs
+        used = np.unique(np.r_[a, b])
+        slot = np.full(self.landmark.size, -1, dtype=np.intp)
+        slot[used] = np.arange(used.size)
+        HF = np.zeros((n, 2 * used.size))
+        for lo in range(0, used.size, chunk):
+            part = used[lo : lo + chunk]
+            F = np.zeros((n, 2 * part.size))
+            for j, p in enumerate(part.tolist()):
+                info = np.linalg.inv(self.cov[p])
+                blocks = np.swapaxes(info[None] @ self.factor_gain[self._factors_of(p)], 1, 2)
+                r, c, v = self._pose_rows(p, blocks, pose_column)
+                np.add.at(F, (r, c + 2 * j), v)
+                F[landmark_column[p] : landmark_column[p] + 2, 2 * j : 2 * j + 2] += info
+            HF[:, 2 * lo : 2 * (lo + part.size)] = solve(F)
+        HFk = HF.reshape(n, used.size, 2)
         for lo in range(0, a.size, chunk):
             pa, pb = a[lo : lo + chunk], b[lo : lo + chunk]
             k = pa.size
-            rows_l: list[IntArray] = []
-            cols_l: list[IntArray] = []
-            vals_l: list[FloatArray] = []
-            for sign, passes in ((1.0, pa), (-1.0, pb)):
-                for j, p in enumerate(passes.tolist()):
-                    f = order[starts[p] : starts[p + 1]]
-                    c0 = pose_column[self.factor_pose[f]]
-                    # Jᵀ block of factor i: rows of its pose, columns 2j, 2j+1
-                    r = (c0[:, None, None] + np.arange(3)[None, :, None]) * np.ones((1, 1, 2), int)
-                    c = np.broadcast_to(2 * j + np.arange(2)[None, None, :], r.shape)
-                    rows_l.append(r.ravel())
-                    cols_l.append(c.ravel())
-                    vals_l.append(sign * np.swapaxes(self.factor_gain[f], 1, 2).ravel())
-            M = np.zeros((size, 2 * k))
-            np.add.at(M, (np.concatenate(rows_l), np.concatenate(cols_l)), np.concatenate(vals_l))
-            X = solve(M)
-            Mk = M.reshape(size, k, 2)
-            Xk = np.asarray(X).reshape(size, k, 2)
-            out[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, Xk)
-        return out
+            M = np.zeros((n, 2 * k))  # Jᵀ of each pair
+            for j in range(k):
+                for sign, p in ((1.0, int(pa[j])), (-1.0, int(pb[j]))):
+                    blocks = sign * np.swapaxes(self.factor_gain[self._factors_of(p)], 1, 2)
+                    r, c, v = self._pose_rows(p, blocks, pose_column)
+                    np.add.at(M, (r, c + 2 * j), v)
+            Mk = M.reshape(n, k, 2)
+            X = np.asarray(solve(M)).reshape(n, k, 2)
+            S[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, X)
+            T_a[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, HFk[:, slot[pa]])
+            T_b[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, HFk[:, slot[pb]])
+        return S, T_a, T_b
 
     def pairs(self) -> tuple[IntArray, IntArray]:
         """Every pair ``(a, b)`` of usable passes (finite ``cov``) of one landmark."""
@@ -308,19 +340,34 @@ def find_passes(
     return Passes(gap_s, factor_pass, pass_lm, count, m_p, C_p, place, fp.copy(), gain)
 
 
-def fitted_pair_covariances(
+@dataclass(frozen=True)
+class FittedPairs:
+    """Pairs of passes ``(a, b)`` and how their difference behaves at the fit (``(k, 2, 2)``).
+
+    ``S``: covariance from the measurement noise; ``T_a``, ``T_b``: how each pass's own error
+    enters (:meth:`Passes.fitted_pair_terms`).
+    """
+
+    a: IntArray
+    b: IntArray
+    S: FloatArray
+    T_a: FloatArray
+    T_b: FloatArray
+
+
+def fitted_pairs(
     graph: LineGraph,
     passes: Passes,
     robust_kernel: tuple[str, float] | None = None,
     max_pairs: int | None = None,
     seed: int = 0,
-) -> tuple[IntArray, IntArray, FloatArray]:
-    """Pairs of usable passes and the covariance of each one's ``m_a − m_b`` at the fit.
+) -> FittedPairs:
+    """Pairs of usable passes and how their differences behave at the graph's fit.
 
-    :meth:`Passes.fitted_difference_covariance` with the information of ``graph`` linearised
-    at its estimate (:func:`slam.graph.relative.information_factor`, the kernel's weights in).
+    :meth:`Passes.fitted_pair_terms` with the information of ``graph`` linearised at its
+    estimate (:func:`slam.graph.relative.information_factor`, the kernel's weights in).
     Every pair, or ``max_pairs`` of them drawn without replacement with ``seed`` (each pair
-    costs two solves with the information).
+    and each pass in one costs two solves with the information).
     """
     kernel, width = robust_kernel or ("none", 1.0)
     solver = BatchSolver(SolverConfig(robust_kernel=kernel, robust_k=width))  # type: ignore[arg-type]
@@ -329,11 +376,15 @@ def fitted_pair_covariances(
         pick = np.sort(np.random.default_rng(seed).choice(a.size, max_pairs, replace=False))
         a, b = a[pick], b[pick]
     if a.size == 0:
-        return a, b, np.zeros((0, 2, 2))
+        empty = np.zeros((0, 2, 2))
+        return FittedPairs(a, b, empty, empty, empty)
     A, lu, offset = information_factor(solver, graph)
     pose_column = np.array([offset[k] for k in keys_of("x", np.arange(graph.n_poses))])
-    S = passes.fitted_difference_covariance(a, b, lu.solve, pose_column, A.shape[1])
-    return a, b, S
+    landmark_column = np.zeros(passes.landmark.size, dtype=np.intp)
+    used = np.unique(np.r_[a, b])
+    landmark_column[used] = [offset[k] for k in keys_of("l", passes.landmark[used])]
+    S, T_a, T_b = passes.fitted_pair_terms(a, b, lu.solve, pose_column, landmark_column, A.shape[1])
+    return FittedPairs(a, b, S, T_a, T_b)
 
 
 def pass_consistency(
@@ -348,7 +399,7 @@ def pass_consistency(
 
     Arguments as :func:`find_passes`; ``min_observations`` is the least number of factors of
     a pass that is compared.  ``fitted``: each pair's ``t`` against the covariance of its
-    difference at the fitted estimate (:func:`fitted_pair_covariances`: about χ²₂ when the
+    difference at the fitted estimate (:func:`fitted_pairs`: about χ²₂ when the
     model holds), else against ``C_p + C_q`` (poses as if known).  A graph with pass links
     (:func:`with_pass_links`) is judged on its walls: each pass landmark's factors count for
     the wall it is linked to.
@@ -361,7 +412,8 @@ def pass_consistency(
     g = _walls(graph)
     passes = find_passes(g, pose_timestamps, robust_kernel, gap_s, min_observations)
     if fitted:
-        a, b, S = fitted_pair_covariances(graph, passes, robust_kernel)
+        fit = fitted_pairs(graph, passes, robust_kernel)
+        a, b, S = fit.a, fit.b, fit.S
     else:
         a, b = passes.pairs()
         S = passes.cov[a] + passes.cov[b]
@@ -437,30 +489,50 @@ MIN_PAIRS = 20
 """Fewest pairs of passes for an estimate of the pass error (else none is used)."""
 
 
-def estimate_pass_error(
-    passes: Passes, pairs: tuple[IntArray, IntArray, FloatArray] | None = None
-) -> PassError:
-    """``(σ_o, σ_a)`` of the pass error from every pair of usable passes (module docstring).
+ESTIMATE_ROUNDS = 6
+"""Rounds of the alternating estimate of the pass error's angle and offset."""
 
-    ``pairs``: ``(a, b, S)`` with ``S`` the covariance of each pair's difference without a
-    pass error (:func:`fitted_pair_covariances`); default ``C_a + C_b`` of every pair.  With
-    fewer than :data:`MIN_PAIRS` pairs both σ are 0 (no pass error).
+
+def estimate_pass_error(passes: Passes, pairs: FittedPairs | None = None) -> PassError:
+    """``(σ_o, σ_a)`` of the pass error from pairs of usable passes (module docstring).
+
+    Each pair's difference ``d`` has covariance ``S + T_a B_a T_aᵀ + T_b B_b T_bᵀ``
+    (:class:`FittedPairs`; default every pair with the poses as if known: ``S = C_a + C_b``,
+    ``T_a = I``, ``T_b = −I``), linear in ``σ_o²`` and ``σ_a²``.  They are found in turn, each
+    holding the other, by the moment of :mod:`slam.line_slam.line_noise` (Huber's Proposal 2)
+    on the angle part of ``d`` and on its offset at the pair's middle place.  With fewer than
+    :data:`MIN_PAIRS` pairs both σ are 0 (no pass error).
     """
     if pairs is None:
         a, b = passes.pairs()
         S = passes.cov[a] + passes.cov[b]
+        T_a = np.broadcast_to(np.eye(2), S.shape)
+        T_b = -T_a
     else:
-        a, b, S = pairs
+        a, b, S, T_a, T_b = pairs.a, pairs.b, pairs.S, pairs.T_a, pairs.T_b
     if a.size < MIN_PAIRS:
         return PassError(passes.gap_s, 0.0, 0.0, int(a.size))
     d = passes.mean[a] - passes.mean[b]
-    s2_a = _sigma2_for_moment(0.5 * d[:, 1] ** 2, 0.5 * S[:, 1, 1])
     u_a, u_b = passes.place[a], passes.place[b]
     u_m = 0.5 * (u_a + u_b)
-    d_o = d[:, 0] - u_m * d[:, 1]
-    var_o = S[:, 0, 0] - 2.0 * u_m * S[:, 0, 1] + u_m**2 * S[:, 1, 1]
-    var_o = var_o + ((u_a - u_m) ** 2 + (u_b - u_m) ** 2) * s2_a
-    s2_o = _sigma2_for_moment(0.5 * d_o**2, 0.5 * var_o)
+    h = np.column_stack([np.ones_like(u_m), -u_m])  # the offset at u_m
+
+    def spread(T: FloatArray, B: FloatArray) -> FloatArray:
+        return np.asarray(T @ B @ np.swapaxes(T, 1, 2))
+
+    K_o = spread(T_a, pass_covariance(u_a, 1.0, 0.0)) + spread(T_b, pass_covariance(u_b, 1.0, 0.0))
+    K_a = spread(T_a, pass_covariance(u_a, 0.0, 1.0)) + spread(T_b, pass_covariance(u_b, 0.0, 1.0))
+
+    def along_h(V: FloatArray) -> FloatArray:
+        return np.asarray(np.einsum("ki,kij,kj->k", h, V, h))
+
+    d_o = np.einsum("ki,ki->k", h, d)
+    s2_o = s2_a = 0.0
+    for _ in range(ESTIMATE_ROUNDS):
+        k = K_a[:, 1, 1]
+        s2_a = _sigma2_for_moment(d[:, 1] ** 2 / k, (S[:, 1, 1] + s2_o * K_o[:, 1, 1]) / k)
+        k = along_h(K_o)
+        s2_o = _sigma2_for_moment(d_o**2 / k, (along_h(S) + s2_a * along_h(K_a)) / k)
     return PassError(passes.gap_s, math.sqrt(s2_o), math.sqrt(s2_a), int(a.size))
 
 

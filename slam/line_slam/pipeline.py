@@ -87,7 +87,7 @@ from slam.line_slam.passes import (
     PassError,
     estimate_pass_error,
     find_passes,
-    fitted_pair_covariances,
+    fitted_pairs,
     with_pass_links,
 )
 from slam.line_slam.report import COUNTERS, ScanReport, SlamWarning, degradation
@@ -472,7 +472,7 @@ class LineSlam:
         stamps = np.asarray(self.track.timestamps, dtype=float)[keyframe]
         kernel = (cfg.solver.robust_kernel, cfg.solver.robust_k)
         passes = find_passes(g, stamps, kernel, cfg.line_pass_gap_s)
-        pairs = fitted_pair_covariances(g, passes, kernel, max_pairs=PASS_PAIRS)
+        pairs = fitted_pairs(g, passes, kernel, max_pairs=PASS_PAIRS)
         error = estimate_pass_error(passes, pairs)
         linked, n_linked = with_pass_links(g, passes, error)
         return replace(error, linked_passes=n_linked), linked
