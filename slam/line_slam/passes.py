@@ -48,6 +48,7 @@ import copy
 import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -169,12 +170,15 @@ class Passes:
         cols = np.broadcast_to(np.arange(2)[None, None, :], rows.shape)
         return rows.ravel(), cols.ravel(), blocks.ravel()
 
+    @cached_property
+    def _by_pass(self) -> tuple[IntArray, IntArray]:
+        """The factors sorted by pass, and where each pass's start (``P + 1``)."""
+        order = np.argsort(self.factor_pass, kind="stable")
+        starts = np.searchsorted(self.factor_pass[order], np.arange(self.landmark.size + 1))
+        return order, starts
+
     def _factors_of(self, p: int) -> IntArray:
-        if not hasattr(self, "_order"):
-            order = np.argsort(self.factor_pass, kind="stable")
-            starts = np.searchsorted(self.factor_pass[order], np.arange(self.landmark.size + 1))
-            object.__setattr__(self, "_order", (order, starts))
-        order, starts = self._order  # type: ignore[attr-defined]
+        order, starts = self._by_pass
         return np.asarray(order[starts[p] : starts[p + 1]])
 
     def fitted_pair_terms(
