@@ -347,7 +347,7 @@ class LineGraph:
         The two landmarks of a link must share their anchor, so that the difference of their
         anchored ``(ρ, φ)`` is the difference of the lines (``φ`` wrapped); ``cov`` ``(k, 2,
         2)`` is in that chart.  A pass along a wall seen as its own landmark, linked to the
-        wall (:mod:`slam.graph.passes`).
+        wall (:mod:`slam.line_slam.passes`).
         """
         a = np.asarray(first, dtype=np.intp).reshape(-1)
         b = np.asarray(second, dtype=np.intp).reshape(-1)

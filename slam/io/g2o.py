@@ -39,6 +39,7 @@ g2o and GTSAM skip as unknown tags)::
     LINESLAM_MOTION_NOISE sxy_min sxy_per_m sxy_per_rad sth_min sth_per_m sth_per_rad
     LINESLAM_SCAN_OFFSET i timestamp dx dy dtheta
     LINESLAM_SCAN_OFFSET i timestamp dx dy dtheta C11 C12 C13 C22 C23 C33
+    LINESLAM_EDGE_LINE2D_LINK k l x y I11 I12 I22
 
 A ``LINESLAM_EDGE_SE2_LINE2D`` is a line measurement: the line ``(r, α)`` measured in the
 laser frame of pose ``i`` (``{p : p·(cos α, sin α) = r}``), predicted from landmark ``k`` by
@@ -60,7 +61,10 @@ the odometry's and its noise the motion model's at the offset, ``LINESLAM_MOTION
 of :class:`slam.models.motion.MotionNoiseConfig`: m, m/√m, m/√rad, rad, rad/√m, rad/√rad);
 with twelve it is a scan match's estimate against the keyframe and ``C`` its covariance
 ``Σ_s`` (upper triangle, row by row; right perturbation of the offset, the motion model's
-convention).
+convention).  A ``LINESLAM_EDGE_LINE2D_LINK`` links landmark ``k`` (a pass along a wall) to
+landmark ``l`` (the wall): both are read in the chart anchored at ``(x, y)``
+(:mod:`slam.models.anchored`), and their difference ``v_k − v_l`` has that information
+(:meth:`slam.graph.problem.LineGraph.add_landmark_links`).
 """
 
 from __future__ import annotations
