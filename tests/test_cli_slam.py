@@ -143,6 +143,10 @@ def test_default_demo_run_is_consistent_with_the_estimated_model_error(tmp_path,
     assert pose["one_run"]["effective_dof"] < 0.1 * 3 * pose["n"]  # far from independent
     error = metrics["relations"]["abs_trans_m"]["mean"]
     assert error < 0.003
+    # simulated walls are the fits' straight lines: passes along them agree as the factors say
+    walls = metrics["walls_between_passes"]
+    assert walls["pairs"] >= 10 and walls["fraction_beyond_95"] < 0.2
+    assert 0.2 < walls["median_ratio"] < 2.5
     fixed = tmp_path / "fixed.toml"
     fixed.write_text('[slam]\nline_model_error = "fixed"\n')
     summary, metrics = _demo_metrics(tmp_path, capsys, "fixed", ["--config", str(fixed)])

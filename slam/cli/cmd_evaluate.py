@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import partial as bind
 from pathlib import Path
 from typing import Annotated, Any
@@ -9,7 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from slam.cli._app import app
-from slam.errors import DatasetError, EvaluationError, LineslamError
+from slam.errors import DatasetError, EstimationError, EvaluationError, LineslamError
 from slam.evaluation.report import evaluate_results
 from slam.io.carmen import scan_trajectory
 from slam.io.catalog import resolve_log
@@ -53,6 +54,26 @@ def _log_odometry(summary: dict[str, Any], frame: str) -> Trajectory | None:
     except (OSError, LineslamError) as exc:
         typer.echo(f"lineslam: warning: {log}: no relations' scatter: {exc}", err=True)
         return None
+
+
+WALL_PAIRS = 300
+"""Most pairs of passes the walls' between-pass consistency is judged on (seeded draw)."""
+
+
+def _walls_between_passes(run_cov: Any, graph_file: Path) -> dict[str, Any] | None:
+    """:func:`slam.line_slam.passes.pass_consistency` of the run's graph (None: not computed)."""
+    from slam.line_slam.passes import pass_consistency
+
+    f = run_cov.graph_file
+    try:
+        result = pass_consistency(
+            run_cov.graph, f.timestamps, f.robust_kernel, max_pairs=WALL_PAIRS
+        ).to_dict()
+    except (EstimationError, EvaluationError) as exc:
+        typer.echo(f"lineslam: warning: {graph_file}: no between-pass consistency: {exc}", err=True)
+        return None
+    # no pairs: the medians are not numbers
+    return {k: (None if isinstance(v, float) and v != v else v) for k, v in result.items()}
 
 
 @app.command("evaluate")
@@ -111,6 +132,7 @@ def evaluate(
         sources["relations_file"] = str(rel_path)
     covariances = joint = draws = None
     odometry = keyframe_timestamps = None
+    walls: dict[str, Any] | None = None
     graph_file = results_dir / "graph.g2o"
     want_relations_nees = rel is not None and relations_nees
     if graph_file.is_file() and (want_relations_nees or ground_truth is not None):
@@ -126,6 +148,7 @@ def evaluate(
             )
         else:
             sources["graph_file"] = str(graph_file)
+            walls = _walls_between_passes(run_cov, graph_file)
             joint = bind(run_cov.joint_scan_covariance, tolerance_s=tolerance)
             if want_relations_nees:
                 covariances = bind(run_cov.relative_covariances, tolerance_s=tolerance)
@@ -153,6 +176,8 @@ def evaluate(
         joint_covariance=joint if ground_truth is not None else None,
         relation_error_draws=draws,
     )
+    if walls is not None:
+        report = replace(report, walls_between_passes=walls)
     path = write_metrics(results_dir, report.to_dict())  # whole or not at all
     if not quiet:
         typer.echo(report.format_table())

@@ -53,6 +53,9 @@ class EvaluationReport:
     relations_noise: RelationNoise | None = None
     relations_nees_with_relations_noise: RelationsNees | None = None
     relations_noise_skipped: str | None = None
+    #: How far passes along the same walls disagree (:func:`slam.line_slam.passes.pass_consistency`,
+    #: as its ``to_dict``), when the results folder has a ``graph.g2o``.
+    walls_between_passes: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The content of ``metrics.json``."""
@@ -81,6 +84,8 @@ class EvaluationReport:
         bracket = self.relations_nees_bracket()
         if bracket is not None:
             out["relations_nees_bracket"] = bracket
+        if self.walls_between_passes is not None:
+            out["walls_between_passes"] = dict(self.walls_between_passes)
         return out
 
     def relations_nees_bracket(self) -> dict[str, Any] | None:
@@ -228,6 +233,18 @@ class EvaluationReport:
                     "relations NEES bracket",
                     f"[{bracket['lower']:.3f}, {bracket['upper']:.3f}] (with the relations' own "
                     f"scatter, without): {_BRACKET_TEXT[bracket['verdict']]}",
+                )
+            )
+        w = self.walls_between_passes
+        if w is not None and w.get("pairs"):
+            rows.append(
+                (
+                    "walls between passes",
+                    f"median t {w['median_ratio']:.2f} x chi2_2's (angle "
+                    f"{w['median_ratio_angle']:.2f} x chi2_1's; about 1 where the line factors "
+                    f"hold), {w['pairs']} pairs of "
+                    f"passes {w['gap_s']:g} s apart on {w['landmarks']} walls, "
+                    f"{w['fraction_beyond_95']:.2f} beyond chi2_2's 95 %",
                 )
             )
         width = max(len(k) for k, _ in rows)

@@ -190,6 +190,7 @@ class Passes:
         landmark_column: IntArray,
         n_columns: int,
         chunk: int = 256,
+        pass_terms: bool = True,
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(S, T_a, T_b)``, each ``(k, 2, 2)``: how ``m_a − m_b`` behaves at a fitted estimate.
 
@@ -202,7 +203,8 @@ class Passes:
         for ``M`` ``(n, m)`` (the graph's information,
         :func:`slam.graph.relative.information_factor`), ``n_columns`` its size;
         ``pose_column`` the first column of each pose in it, ``landmark_column`` that of each
-        pass's landmark ``(P,)``.
+        pass's landmark ``(P,)``.  ``pass_terms = False``: ``S`` only (``T_a = I``, ``T_b =
+        −I``).
         """
         a = np.asarray(a, dtype=np.intp)
         b = np.asarray(b, dtype=np.intp)
@@ -213,7 +215,7 @@ class Passes:
         if a.size == 0:
             return S, T_a, T_b
         # H⁻¹ F_p of every pass of the pairs
-        used = np.unique(np.r_[a, b])
+        used = np.unique(np.r_[a, b]) if pass_terms else np.zeros(0, dtype=np.intp)
         slot = np.full(self.landmark.size, -1, dtype=np.intp)
         slot[used] = np.arange(used.size)
         HF = np.zeros((n, 2 * used.size))
@@ -240,8 +242,9 @@ class Passes:
             Mk = M.reshape(n, k, 2)
             X = np.asarray(solve(M)).reshape(n, k, 2)
             S[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, X)
-            T_a[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, HFk[:, slot[pa]])
-            T_b[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, HFk[:, slot[pb]])
+            if pass_terms:
+                T_a[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, HFk[:, slot[pa]])
+                T_b[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, HFk[:, slot[pb]])
         return S, T_a, T_b
 
     def pairs(self) -> tuple[IntArray, IntArray]:
@@ -365,13 +368,15 @@ def fitted_pairs(
     robust_kernel: tuple[str, float] | None = None,
     max_pairs: int | None = None,
     seed: int = 0,
+    pass_terms: bool = True,
 ) -> FittedPairs:
     """Pairs of usable passes and how their differences behave at the graph's fit.
 
     :meth:`Passes.fitted_pair_terms` with the information of ``graph`` linearised at its
     estimate (:func:`slam.graph.relative.information_factor`, the kernel's weights in).
     Every pair, or ``max_pairs`` of them drawn without replacement with ``seed`` (each pair
-    and each pass in one costs two solves with the information).
+    and each pass in one costs two solves with the information).  ``pass_terms = False``:
+    ``S`` only (``T_a = I``, ``T_b = −I``), which halves the solves.
     """
     kernel, width = robust_kernel or ("none", 1.0)
     solver = BatchSolver(SolverConfig(robust_kernel=kernel, robust_k=width))  # type: ignore[arg-type]
@@ -387,7 +392,9 @@ def fitted_pairs(
     landmark_column = np.zeros(passes.landmark.size, dtype=np.intp)
     used = np.unique(np.r_[a, b])
     landmark_column[used] = [offset[k] for k in keys_of("l", passes.landmark[used])]
-    S, T_a, T_b = passes.fitted_pair_terms(a, b, lu.solve, pose_column, landmark_column, A.shape[1])
+    S, T_a, T_b = passes.fitted_pair_terms(
+        a, b, lu.solve, pose_column, landmark_column, A.shape[1], pass_terms=pass_terms
+    )
     return FittedPairs(a, b, S, T_a, T_b)
 
 
@@ -398,6 +405,7 @@ def pass_consistency(
     gap_s: float = 30.0,
     min_observations: int = 3,
     fitted: bool = True,
+    max_pairs: int | None = None,
 ) -> PassConsistency:
     """Between-pass consistency of a graph's landmarks at its estimate (module docstring).
 
@@ -406,7 +414,8 @@ def pass_consistency(
     difference at the fitted estimate (:func:`fitted_pairs`: about χ²₂ when the
     model holds), else against ``C_p + C_q`` (poses as if known).  A graph with pass links
     (:func:`with_pass_links`) is judged on its walls: each pass landmark's factors count for
-    the wall it is linked to.
+    the wall it is linked to.  ``max_pairs``: at most that many pairs, drawn with a fixed seed
+    (:func:`fitted_pairs`).
 
     Raises
     ------
@@ -416,10 +425,13 @@ def pass_consistency(
     g = _walls(graph)
     passes = find_passes(g, pose_timestamps, robust_kernel, gap_s, min_observations)
     if fitted:
-        fit = fitted_pairs(graph, passes, robust_kernel)
+        fit = fitted_pairs(graph, passes, robust_kernel, max_pairs, pass_terms=False)
         a, b, S = fit.a, fit.b, fit.S
     else:
         a, b = passes.pairs()
+        if max_pairs is not None and a.size > max_pairs:
+            pick = np.sort(np.random.default_rng(0).choice(a.size, max_pairs, replace=False))
+            a, b = a[pick], b[pick]
         S = passes.cov[a] + passes.cov[b]
     if a.size == 0:
         return PassConsistency(gap_s, 0, 0, math.nan, math.nan, math.nan)
