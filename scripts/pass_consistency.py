@@ -2,13 +2,15 @@
 
 Usage::
 
-    python scripts/pass_consistency.py RESULTS_DIR [RESULTS_DIR ...] [--gap-s 10 30]
+    python scripts/pass_consistency.py RESULTS_DIR [RESULTS_DIR ...] [--gap-s 10 30] [--max-pairs N]
 
 For each ``lineslam slam`` results folder (its ``graph.g2o``) and each ``--gap-s``, prints the
 landmarks and pairs of passes compared, the median of ``t`` over the pairs divided by χ²₂'s
 median (and of its angle part by χ²₁'s), and the fraction of pairs beyond χ²₂'s 95 % quantile
 (:mod:`slam.line_slam.passes`), each pair's difference judged against its covariance at the
-run's fitted estimate (about 1 where the factors' model holds).  Nothing is written.
+run's fitted estimate (about 1 where the factors' model holds), on at most ``--max-pairs``
+pairs drawn with a fixed seed (default 300, as ``lineslam evaluate``; 0: every pair).  Nothing
+is written.
 """
 
 from __future__ import annotations
@@ -24,12 +26,13 @@ def main() -> None:
     parser.add_argument(
         "--gap-s", type=float, nargs="+", default=[10.0, 30.0], help="pass gaps (s)"
     )
+    parser.add_argument("--max-pairs", type=int, default=300, help="0: every pair")
     args = parser.parse_args()
     print("| results | gap (s) | landmarks | pairs | median t / χ²₂ | angle / χ²₁ | beyond 95 % |")
     print("|---|---|---|---|---|---|---|")
     for directory in args.results:
         for gap in args.gap_s:
-            r = pass_consistency_of_results(directory, gap)
+            r = pass_consistency_of_results(directory, gap, args.max_pairs or None)
             print(
                 f"| {directory} | {gap:g} | {r.landmarks} | {r.pairs} | {r.median_ratio:.2f} | "
                 f"{r.median_ratio_angle:.2f} | {r.fraction_beyond_95:.2f} |"

@@ -460,7 +460,9 @@ def _walls(graph: LineGraph) -> LineGraph:
     return g
 
 
-def pass_consistency_of_results(directory: str | Path, gap_s: float = 30.0) -> PassConsistency:
+def pass_consistency_of_results(
+    directory: str | Path, gap_s: float = 30.0, max_pairs: int | None = None
+) -> PassConsistency:
     """:func:`pass_consistency` of a results folder's ``graph.g2o``.
 
     Raises
@@ -471,7 +473,9 @@ def pass_consistency_of_results(directory: str | Path, gap_s: float = 30.0) -> P
     f = read_line_graph_g2o(Path(directory) / "graph.g2o")
     if f.timestamps is None:
         raise EvaluationError(f"{directory}/graph.g2o states no scan time stamps")
-    return pass_consistency(line_graph_from_file(f), f.timestamps, f.robust_kernel, gap_s)
+    return pass_consistency(
+        line_graph_from_file(f), f.timestamps, f.robust_kernel, gap_s, max_pairs=max_pairs
+    )
 
 
 @dataclass(frozen=True)
