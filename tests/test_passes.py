@@ -14,7 +14,7 @@ from slam.graph.batch import BatchSolver
 from slam.graph.config import SolverConfig
 from slam.graph.linear import keys_of
 from slam.graph.problem import LineGraph
-from slam.graph.relative import line_graph_from_file
+from slam.graph.relative import RunCovariances, line_graph_from_file
 from slam.io.g2o import read_line_graph_g2o, write_line_graph_g2o
 from slam.line_slam.passes import (
     PassError,
@@ -273,6 +273,13 @@ def test_a_linked_graph_round_trips_through_g2o_with_its_covariances(tmp_path):
     want = BatchSolver().marginals(linked).jointMarginalCovariance(keys).fullMatrix()
     got = BatchSolver().marginals(again).jointMarginalCovariance(keys).fullMatrix()
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-12)
+    # the relative covariances of a linked graph come from the information's LU: the same
+    # joint marginals as GTSAM's
+    rc = RunCovariances.from_file(path)
+    pairs = np.array([[3, 70], [10, 130], [5, 6], [40, 200]])
+    fast = rc.joint_covariances_from_information(pairs)
+    for a, b in pairs.tolist():
+        np.testing.assert_allclose(fast[(a, b)], rc._joint(a, b), rtol=1e-6, atol=1e-14)
     # without the links the file reads back to different covariances
     plain = BatchSolver().marginals(g).jointMarginalCovariance(keys).fullMatrix()
     assert not np.allclose(plain, want, rtol=0.1)

@@ -287,6 +287,12 @@ class RunCovariances:
         s2 = self.scans_of(t2, tolerance_s)
         out = np.zeros((s1.shape[0], 3, 3))
         joint: dict[tuple[int, int], FloatArray] = {}
+        if self.graph.n_landmark_links:
+            # GTSAM's joint marginals pass through the links: from the information's LU instead
+            k1, k2 = self.scan_keyframe[s1], self.scan_keyframe[s2]
+            other = k1 != k2
+            pairs = np.unique(np.sort(np.column_stack([k1[other], k2[other]]), axis=1), axis=0)
+            joint = self.joint_covariances_from_information(pairs)
         for m, (a, b) in enumerate(zip(s1.tolist(), s2.tolist(), strict=True)):
             out[m] = self._relative(a, b, joint)
         if self.mount is not None:
@@ -463,6 +469,49 @@ class RunCovariances:
         rho = pose_between(pa, pb)
         A = np.hstack([-adjoint_pose2(pose_inverse(rho)), np.eye(3)])
         return np.asarray(A @ P @ A.T)
+
+    def joint_covariances_from_information(
+        self, pairs: ArrayLike, chunk: int = 200
+    ) -> dict[tuple[int, int], FloatArray]:
+        """Joint covariances ``(6, 6)`` of keyframe pairs ``(k₁ < k₂)`` from ``H⁻¹`` columns.
+
+        The same numbers as :meth:`_joint` (the information at the estimate, kernel weights
+        in), from solves with the sparse LU of :func:`information_factor`: three columns of
+        ``H⁻¹`` per keyframe, ``chunk`` keyframes at a time.  Used for a graph with landmark
+        links, whose joint marginals GTSAM computes slowly.
+        """
+        p = np.asarray(pairs, dtype=np.intp).reshape(-1, 2)
+        if p.shape[0] == 0:
+            return {}
+        A, lu, offset = self._information()
+        n = A.shape[1]
+        kfs = np.unique(p)
+        col = np.array([offset[k] for k in keys_of("x", kfs)], dtype=np.intp)
+        where = {int(k): i for i, k in enumerate(kfs.tolist())}
+        diag = np.zeros((kfs.size, 3, 3))
+        cross: dict[tuple[int, int], FloatArray] = {}
+        first_of = np.array([where[int(k)] for k in p[:, 0]])
+        for lo in range(0, kfs.size, chunk):
+            part = np.arange(lo, min(lo + chunk, kfs.size))
+            E = np.zeros((n, 3 * part.size))
+            rows = (col[part][:, None] + np.arange(3)[None, :]).ravel()
+            E[rows, np.arange(3 * part.size)] = 1.0
+            X = np.asarray(lu.solve(E)).reshape(n, part.size, 3)
+            for j, i in enumerate(part.tolist()):
+                diag[i] = X[col[i] : col[i] + 3, j, :]
+            for m in np.flatnonzero((first_of >= lo) & (first_of < lo + part.size)).tolist():
+                a, b = int(p[m, 0]), int(p[m, 1])
+                j = where[a] - lo
+                cross[(a, b)] = X[col[where[b]] : col[where[b]] + 3, j, :].T  # Cov(x_a, x_b)
+        out: dict[tuple[int, int], FloatArray] = {}
+        for (a, b), C_ab in cross.items():
+            J = np.zeros((6, 6))
+            J[:3, :3] = diag[where[a]]
+            J[3:, 3:] = diag[where[b]]
+            J[:3, 3:] = C_ab
+            J[3:, :3] = C_ab.T
+            out[(a, b)] = 0.5 * (J + J.T)
+        return out
 
     def _own_noise(self, scan: int) -> FloatArray:
         """Covariance of a scan's noise ``w_s`` from its keyframe: 0, ``Σ_s`` or ``Q(δ_s)``."""
