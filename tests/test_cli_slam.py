@@ -190,3 +190,24 @@ def test_the_pass_error_changes_the_covariances_not_the_estimate(tmp_path, capsy
     args = ["evaluate", str(runs["passes"]), "--relations", str(sim / "relations.txt"), "--quiet"]
     assert run(args, capsys)[0] == 0
     assert json.loads((runs["passes"] / "metrics.json").read_text())["relations_nees"]["n"] > 0
+
+
+def test_a_pass_error_that_cannot_be_estimated_leaves_the_run_as_without(
+    tmp_path, capsys, monkeypatch
+):
+    from slam.errors import EstimationError
+    from slam.line_slam import pipeline
+
+    def fail(self):
+        raise EstimationError("information matrix of the graph is singular: test")
+
+    monkeypatch.setattr(pipeline.LineSlam, "_pass_model", fail)
+    option = tmp_path / "passes.toml"
+    option.write_text('[slam]\nline_pass_error = "estimated"\n')
+    out = tmp_path / "run"
+    args = ["slam", str(DEMO / "log.clf"), "--out", str(out), "--quiet", "--config", str(option)]
+    assert run(args, capsys)[0] == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert "singular: test" in summary["line_pass_error"]["skipped"]
+    assert "LINESLAM_EDGE_LINE2D_LINK" not in (out / "graph.g2o").read_text()
+    assert np.isfinite(np.loadtxt(out / "trajectory_covariance.txt")).all()

@@ -55,6 +55,7 @@ from numpy.typing import NDArray
 from linefit.config import LineFitConfig
 from linefit.line import Line
 from slam import interrupts
+from slam.errors import EstimationError
 from slam.extraction import extract_lines_of_scans, extract_scan_lines
 from slam.frontend.scan_match import (
     ScanMatch,
@@ -503,20 +504,25 @@ class LineSlam:
         with self.clock("covariances"):
             covariances = None
             self.covariance_graph = self.graph
+            pass_skipped = None
             if self.config.line_pass_error == "estimated":
-                self.pass_error, self.covariance_graph = self._pass_model()
+                try:
+                    self.pass_error, self.covariance_graph = self._pass_model()
+                except EstimationError as exc:
+                    # the back-end's covariances stand; summary.json says why
+                    pass_skipped = f"not estimated: {exc}"
                 if self.covariance_graph is not self.graph:
                     covariances = (BatchBackend(self.config.solver), self.covariance_graph)
-            result = assemble_result(
-                self.graph,
-                self.backend,
-                self.track,
-                self.config,
-                self.policy,
-                stats,
-                self.odometry_noise.model,
-                covariances,
-            )
+            args = (self.track, self.config, self.policy, stats, self.odometry_noise.model)
+            try:
+                result = assemble_result(self.graph, self.backend, *args, covariances)
+            except EstimationError as exc:
+                if covariances is None:
+                    raise
+                # the linked graph's marginals failed: the back-end's covariances stand
+                pass_skipped = f"covariances of the linked graph: {exc}"
+                self.pass_error, self.covariance_graph = None, self.graph
+                result = assemble_result(self.graph, self.backend, *args)
         time_s = self.clock.time_s
         stats.update(self.counters)
         stats["backend"] = self.backend.stats()
@@ -526,6 +532,8 @@ class LineSlam:
             stats["line_model_error"] = self.line_noise.summary()
         if self.pass_error is not None:
             stats["line_pass_error"] = self.pass_error.to_dict()
+        elif pass_skipped is not None:
+            stats["line_pass_error"] = {"skipped": pass_skipped}
         stats["drift_scale"] = {"xy": self.drift.scale_xy, "theta": self.drift.scale_theta}
         stats["runtime_s"] = {
             "total": float(np.sum(self.track.scan_runtime_s)) + time_s["optimize"],
