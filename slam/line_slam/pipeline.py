@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 from linefit.config import LineFitConfig
 from linefit.line import Line
 from slam import interrupts
-from slam.errors import EstimationError
+from slam.errors import EstimationError, EvaluationError
 from slam.extraction import extract_lines_of_scans, extract_scan_lines
 from slam.frontend.scan_match import (
     ScanMatch,
@@ -508,7 +508,7 @@ class LineSlam:
             if self.config.line_pass_error == "estimated":
                 try:
                     self.pass_error, self.covariance_graph = self._pass_model()
-                except EstimationError as exc:
+                except (EstimationError, EvaluationError) as exc:
                     # the back-end's covariances stand; summary.json says why
                     pass_skipped = f"not estimated: {exc}"
                 if self.covariance_graph is not self.graph:
