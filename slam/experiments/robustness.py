@@ -168,6 +168,15 @@ def _join(tokens: list[str]) -> str:
     return " ".join(tokens) + "\n"
 
 
+def _readings(tokens: list[str], n: int, where: str) -> tuple[list[str], FloatArray]:
+    """A ``FLASER`` line's ``n`` readings as logged and as numbers (else LogFormatError)."""
+    readings = tokens[2 : 2 + n]
+    try:
+        return readings, np.array([float(v) for v in readings])
+    except ValueError:
+        raise LogFormatError("range reading is not a number", where) from None
+
+
 def _robotlaser(
     tokens: list[str], n: int, readings: list[str], first_rad: float, step_rad: float, max_m: float
 ) -> str:
@@ -300,11 +309,7 @@ class ClipRanges(LogTransform):
         token = f"{self.no_return_m:.2f}"
         if float(token) != self.no_return_m:
             token = repr(self.no_return_m)
-        readings = tokens[2 : 2 + n]
-        try:
-            ranges = [float(v) for v in readings]
-        except ValueError:
-            raise LogFormatError("range reading is not a number", where) from None
+        readings, ranges = _readings(tokens, n, where)
         readings = [token if r > self.limit_m else v for r, v in zip(ranges, readings, strict=True)]
         yield _robotlaser(
             tokens, n, readings, self.first_angle_rad, self.step_rad, self.no_return_m
@@ -343,11 +348,7 @@ class RangeNoise(LogTransform):
         n = _flaser_beams(tokens, where)
         if state.rng is None:
             state.rng = np.random.default_rng(self.seed)
-        readings = tokens[2 : 2 + n]
-        try:
-            ranges = np.array([float(v) for v in readings])
-        except ValueError:
-            raise LogFormatError("range reading is not a number", where) from None
+        readings, ranges = _readings(tokens, n, where)
         noisy = ranges + self.sigma_m * state.rng.standard_normal(n)
         inside = (ranges > 0.0) & (ranges < self.no_return_m)
         changed = inside & (noisy > 0.0) & (noisy < self.no_return_m)

@@ -247,8 +247,12 @@ class Passes:
                 T_b[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, HFk[:, slot[pb]])
         return S, T_a, T_b
 
-    def pairs(self) -> tuple[IntArray, IntArray]:
-        """Every pair ``(a, b)`` of usable passes (finite ``cov``) of one landmark."""
+    def pairs(self, max_pairs: int | None = None, seed: int = 0) -> tuple[IntArray, IntArray]:
+        """Every pair ``(a, b)`` of usable passes (finite ``cov``) of one landmark.
+
+        With ``max_pairs``: at most that many of them, drawn without replacement with ``seed``
+        (in their order).
+        """
         kept = np.flatnonzero(np.isfinite(self.cov).all(axis=(1, 2)))
         lm = self.landmark[kept]
         bounds = np.flatnonzero(np.r_[True, lm[1:] != lm[:-1]])
@@ -261,7 +265,11 @@ class Passes:
                 second.append(group[b])
         if not first:
             return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
-        return np.concatenate(first), np.concatenate(second)
+        a, b = np.concatenate(first), np.concatenate(second)
+        if max_pairs is not None and a.size > max_pairs:
+            pick = np.sort(np.random.default_rng(seed).choice(a.size, max_pairs, replace=False))
+            a, b = a[pick], b[pick]
+        return a, b
 
 
 def find_passes(
@@ -380,10 +388,7 @@ def fitted_pairs(
     """
     kernel, width = robust_kernel or ("none", 1.0)
     solver = BatchSolver(SolverConfig(robust_kernel=kernel, robust_k=width))  # type: ignore[arg-type]
-    a, b = passes.pairs()
-    if max_pairs is not None and a.size > max_pairs:
-        pick = np.sort(np.random.default_rng(seed).choice(a.size, max_pairs, replace=False))
-        a, b = a[pick], b[pick]
+    a, b = passes.pairs(max_pairs, seed)
     if a.size == 0:
         empty = np.zeros((0, 2, 2))
         return FittedPairs(a, b, empty, empty, empty)
@@ -428,10 +433,7 @@ def pass_consistency(
         fit = fitted_pairs(graph, passes, robust_kernel, max_pairs, pass_terms=False)
         a, b, S = fit.a, fit.b, fit.S
     else:
-        a, b = passes.pairs()
-        if max_pairs is not None and a.size > max_pairs:
-            pick = np.sort(np.random.default_rng(0).choice(a.size, max_pairs, replace=False))
-            a, b = a[pick], b[pick]
+        a, b = passes.pairs(max_pairs)
         S = passes.cov[a] + passes.cov[b]
     if a.size == 0:
         return PassConsistency(gap_s, 0, 0, math.nan, math.nan, math.nan)
