@@ -30,8 +30,9 @@ say, and :attr:`ScanMatch.slip` tells the caller that the odometry's rotation di
 expectation under the noise model (``A = E[ψ'] Σ JᵀJ/σ²``; in ``B`` the model error is one
 offset shared by the points on one piece of reference wall, so that many points on one wall
 weigh as one wall); it is combined with the prior's information.  A known limit
-(``tests/test_scan_match.py``): with noisy ranges the tilt of the five-point local lines
-reads as information along a corridor's axis, so the covariance there is too small.
+(``tests/test_scan_match.py``): with noisy ranges the tilt of the short local lines reads as
+information along a corridor's axis, so the covariance there is too small;
+``normal_length_m`` extends the lines along the walls and removes it (not the default).
 
 :func:`scan_points` makes the points of a scan; :func:`match_scans` matches two.
 """
@@ -87,6 +88,18 @@ class ScanMatchConfig:
         of beam steps to half the angle, at least one (the 2° default: five points at 0.5°
         beam spacing, three at 1° and coarser), so that it covers the same piece of wall
         whatever the scanner's beam density.
+    normal_length_m : float
+        A reference point's local line is then extended, point by point on either side, to
+        the points within half this distance of it (m), as long as no two consecutive ones
+        are further apart than ``max_neighbour_gap_m``, the longer line stays thin
+        (``max_line_thickness``) and its points lie on it within their Eq. 8 noise (χ², 99 %;
+        the noise scaled up where the scan's short lines show it larger than Eq. 8 says);
+        else half the distance is tried, down to the short line.  The tilt of a line through a
+        few noisy points otherwise reads as information along the wall: in a corridor the
+        posterior along its axis is then a fraction of the odometry's.  0 (default): the
+        short line alone; 1 m makes the corridor's posterior the odometry's
+        (``tests/test_scan_match.py``), but on the real logs' rows it loses fr079's last loop
+        more often (docs/real-logs.md, Tried and rejected).
     max_neighbour_gap_m : float
         A reference point's local line is used only when its neighbours are within this of
         each other (m; no line across a depth jump).
@@ -130,6 +143,7 @@ class ScanMatchConfig:
     enabled: bool = True
     model_sigma_m: float = 0.02
     normal_span_rad: float = math.radians(2.0)
+    normal_length_m: float = 0.0
     max_neighbour_gap_m: float = 0.3
     max_line_thickness: float = 0.05
     max_correspondence_m: float = 0.5
@@ -146,6 +160,7 @@ class ScanMatchConfig:
     def __post_init__(self) -> None:
         nonneg("model_sigma_m", self.model_sigma_m)
         positive("normal_span_rad", self.normal_span_rad)
+        nonneg("normal_length_m", self.normal_length_m)
         positive("max_neighbour_gap_m", self.max_neighbour_gap_m)
         require(0.0 < self.max_line_thickness < 1.0, "max_line_thickness must be in (0, 1)")
         positive("max_correspondence_m", self.max_correspondence_m)
@@ -205,7 +220,12 @@ def normal_half_window(bearings: FloatArray, config: ScanMatchConfig) -> int:
 
 
 def _local_lines(
-    xy: FloatArray, h: int, config: ScanMatchConfig
+    xy: FloatArray,
+    q11: FloatArray,
+    q12: FloatArray,
+    q22: FloatArray,
+    h: int,
+    config: ScanMatchConfig,
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Normals of each point's local line (``2h + 1`` consecutive points centred on it)."""
     n = xy.shape[0]
@@ -237,7 +257,176 @@ def _local_lines(
     normals[centre, 1] = np.cos(phi)
     ok[centre] = good
     normals[~ok] = 0.0
+    straight = (gaps <= config.max_neighbour_gap_m) & (lam_max > 0.0)
+    if config.normal_length_m > 0.0 and straight.any():
+        # the scan's own noise against Eq. 8's: the short lines' spread about themselves
+        # (every window without a depth jump, thin or not; the median, robust to corners and
+        # clutter) against the median of χ² with k − 2 degrees of freedom
+        nx, ny = -np.sin(phi), np.cos(phi)
+        var = (
+            nx**2 * q11[idx].mean(axis=1)
+            + 2.0 * nx * ny * q12[idx].mean(axis=1)
+            + ny**2 * q22[idx].mean(axis=1)
+        )
+        ratio = lam_min[straight] / np.maximum(var[straight], 1e-12)
+        noise_scale = max(1.0, float(np.median(ratio)) / _chi2_median(k - 2))
+        _extend_lines(
+            xy,
+            q11,
+            q12,
+            q22,
+            h,
+            ok,
+            normals,
+            noise_scale,
+            0.5 * config.normal_length_m,
+            config.max_neighbour_gap_m,
+            config.max_line_thickness,
+        )
     return normals, ok
+
+
+def _chi2_median(dof: int) -> float:
+    """Median of χ² with ``dof`` degrees of freedom.
+
+    Wilson-Hilferty, within 1 % from 3 degrees of freedom on; exact values below.
+    """
+    if dof == 1:
+        return 0.4549
+    if dof == 2:
+        return 1.3863
+    c = 2.0 / (9.0 * dof)
+    return dof * (1.0 - c) ** 3
+
+
+@njit(cache=True, nogil=True)
+def _chi2_99(dof: int) -> float:
+    """99 % quantile of χ² with ``dof`` degrees of freedom.
+
+    Wilson-Hilferty, within 1 % from 3 degrees of freedom on; exact values below.
+    """
+    if dof <= 0:
+        return math.inf
+    if dof == 1:
+        return 6.635
+    if dof == 2:
+        return 9.210
+    c = 2.0 / (9.0 * dof)
+    return dof * (1.0 - c + 2.3263 * math.sqrt(c)) ** 3
+
+
+@njit(cache=True, nogil=True)
+def _extend_lines(
+    xy: FloatArray,
+    q11: FloatArray,
+    q12: FloatArray,
+    q22: FloatArray,
+    h: int,
+    ok: NDArray[np.bool_],
+    normals: FloatArray,
+    noise_scale: float,
+    reach_m: float,
+    max_gap_m: float,
+    max_thickness: float,
+) -> None:
+    """Refit the local line of every point with one over the points within ``reach_m`` of it.
+
+    The window grows from the point's ``2h + 1`` on each side while the next point is within
+    ``reach_m`` of the centre and ``max_gap_m`` of its neighbour; the normal of the longer
+    window replaces the short one's where that window is thin (smaller eigenvalue of its
+    scatter at most ``max_thickness`` times the larger) and its points lie on its line as
+    their own noise allows (the sum of their squared distances to it over their Eq. 8
+    variances along its normal, times ``noise_scale``, within the 99 % quantile of χ² with
+    ``k − 2`` degrees of freedom; a point counts at most 9, three standard deviations), in
+    place.  Where it does not (a corner, a bend, a rough or cluttered wall
+    within reach), the reach is halved until it does, or until the window is the short one.
+    """
+    n = xy.shape[0]
+    gap2 = max_gap_m * max_gap_m
+    for i in range(n):
+        if not ok[i]:
+            continue
+        cx, cy = xy[i, 0], xy[i, 1]
+        reach = reach_m
+        while True:
+            reach2 = reach * reach
+            lo, hi = i - h, i + h
+            while lo > 0:
+                ex, ey = xy[lo - 1, 0] - cx, xy[lo - 1, 1] - cy
+                gx, gy = xy[lo - 1, 0] - xy[lo, 0], xy[lo - 1, 1] - xy[lo, 1]
+                if ex * ex + ey * ey > reach2 or gx * gx + gy * gy > gap2:
+                    break
+                lo -= 1
+            while hi < n - 1:
+                ex, ey = xy[hi + 1, 0] - cx, xy[hi + 1, 1] - cy
+                gx, gy = xy[hi + 1, 0] - xy[hi, 0], xy[hi + 1, 1] - xy[hi, 1]
+                if ex * ex + ey * ey > reach2 or gx * gx + gy * gy > gap2:
+                    break
+                hi += 1
+            if lo == i - h and hi == i + h:
+                break  # no longer than the short line: it stays
+            k = hi - lo + 1
+            mx = 0.0
+            my = 0.0
+            for j in range(lo, hi + 1):
+                mx += xy[j, 0] - cx
+                my += xy[j, 1] - cy
+            mx /= k
+            my /= k
+            sxx = 0.0
+            sxy = 0.0
+            syy = 0.0
+            for j in range(lo, hi + 1):
+                dx = xy[j, 0] - cx - mx
+                dy = xy[j, 1] - cy - my
+                sxx += dx * dx
+                sxy += dx * dy
+                syy += dy * dy
+            disc = math.sqrt(max((sxx - syy) ** 2 + 4.0 * sxy * sxy, 0.0))
+            lam_max = 0.5 * (sxx + syy + disc)
+            lam_min = 0.5 * (sxx + syy - disc)
+            if lam_max > 0.0 and lam_min <= max_thickness * lam_max:
+                phi = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+                nx, ny = -math.sin(phi), math.cos(phi)
+                # refitted with each point weighted by its Eq. 8 variance along the normal
+                # (near and far points of one wall are not equally precise along it), then
+                # the points' spread about the line against that noise
+                for _ in range(2):
+                    sw = 0.0
+                    mx = 0.0
+                    my = 0.0
+                    for j in range(lo, hi + 1):
+                        var = nx * nx * q11[j] + 2.0 * nx * ny * q12[j] + ny * ny * q22[j]
+                        w = 1.0 / max(var, 1e-12)
+                        sw += w
+                        mx += w * (xy[j, 0] - cx)
+                        my += w * (xy[j, 1] - cy)
+                    mx /= sw
+                    my /= sw
+                    sxx = 0.0
+                    sxy = 0.0
+                    syy = 0.0
+                    for j in range(lo, hi + 1):
+                        var = nx * nx * q11[j] + 2.0 * nx * ny * q12[j] + ny * ny * q22[j]
+                        w = 1.0 / max(var, 1e-12)
+                        dx = xy[j, 0] - cx - mx
+                        dy = xy[j, 1] - cy - my
+                        sxx += w * dx * dx
+                        sxy += w * dx * dy
+                        syy += w * dy * dy
+                    phi = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+                    nx, ny = -math.sin(phi), math.cos(phi)
+                chi2 = 0.0
+                for j in range(lo, hi + 1):
+                    r = nx * (xy[j, 0] - cx - mx) + ny * (xy[j, 1] - cy - my)
+                    var = nx * nx * q11[j] + 2.0 * nx * ny * q12[j] + ny * ny * q22[j]
+                    # one stray point weighs as 3 σ at most: a bend or a corner is many
+                    chi2 += min(r * r / max(noise_scale * var, 1e-12), 9.0)
+                if chi2 <= _chi2_99(k - 2):
+                    normals[i, 0] = nx
+                    normals[i, 1] = ny
+                    break
+            reach *= 0.5  # a corner or a bend within reach: a shorter line
 
 
 def scan_points(
@@ -265,7 +454,7 @@ def scan_points(
         return ScanPoints(
             xy, q11, q12, q22, np.zeros((n, 2)), np.zeros(n, dtype=bool), np.full(n, -1)
         )
-    normals, ok = _local_lines(xy, normal_half_window(b, config), config)
+    normals, ok = _local_lines(xy, q11, q12, q22, normal_half_window(b, config), config)
     return ScanPoints(xy, q11, q12, q22, normals, ok, _segments(xy, ok, config))
 
 
