@@ -34,6 +34,7 @@ Usage::
     .venv/bin/python scripts/robustness.py --workers 2 --json after.json
     .venv/bin/python scripts/robustness.py --config new.toml --baseline before.json
     .venv/bin/python scripts/robustness.py --list                        # rows and bars
+    .venv/bin/python scripts/robustness.py --summary after.json          # the README's table
 
 Options: ``--only NAME...`` runs a subset; ``--extra`` also runs the extra rows
 (:data:`slam.experiments.robustness.EXTRA_VARIANTS`: the same transforms on Intel, chains
@@ -189,6 +190,38 @@ def table(records: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def summary_table(records: list[dict[str, Any]]) -> str:
+    """The short Markdown table of the README: error, bar, odometry, short relations, closures."""
+    lines = [
+        "| variant | bar (m) | lineslam (m) | within | odometry (m)"
+        " | < 10 s: lineslam / odometry (m; deg) | closures accepted / attempts |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in records:
+        if r["error"] is not None:
+            lines.append(f"| {r['name']} | {r['bar_m']:.3f} | failed: {r['error']} | ✗ | | | |")
+            continue
+        s = r["score"]
+        d = r["diagnostics"]
+        short = (
+            f"{_f(_mean(s, 'lineslam_short', 'abs_trans_m'), 3)} / "
+            f"{_f(_mean(s, 'odometry_short', 'abs_trans_m'), 3)}; "
+            f"{_f(_mean(s, 'lineslam_short', 'abs_rot_deg'), 2)} / "
+            f"{_f(_mean(s, 'odometry_short', 'abs_rot_deg'), 2)}"
+        )
+        cells = [
+            f"{r['name']} ({r['description']})",
+            f"{r['bar_m']:.3f}",
+            f"{r['trans_m']:.3f}",
+            "✓" if r["within_bar"] else "✗",
+            _f(_mean(s, "odometry", "abs_trans_m"), 3),
+            short,
+            f"{d['loop_closures']} / {d['loop_closure_attempts']}",
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def baseline_table(records: list[dict[str, Any]], baseline: dict[str, Any]) -> str:
     """Before (``baseline``) / after (``records``) mean translation error per row."""
     before = {r["name"]: r for r in baseline.get("runs", [])}
@@ -252,7 +285,16 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None, help="write every number here")
     parser.add_argument("--baseline", type=Path, default=None, help="a previous --json")
     parser.add_argument("--list", action="store_true", help="list the rows and exit")
+    parser.add_argument(
+        "--summary",
+        type=Path,
+        default=None,
+        help="print the README's short table of a previous --json and exit",
+    )
     args = parser.parse_args()
+    if args.summary is not None:
+        print(summary_table(json.loads(args.summary.read_text(encoding="utf-8"))["runs"]))
+        return
     if args.list:
         for v in VARIANTS + EXTRA_VARIANTS:
             print(f"{v.name:<22} {v.dataset:<6} bar {v.bar_m:.3f} m  {v.description}")
