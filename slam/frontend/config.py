@@ -256,14 +256,6 @@ class LoopClosureConfig:
     max_updates : int
         Most iSAM2 updates (``Isam2Solver.optimize``) run to settle the back-end after an
         accepted closure.
-    reconsider_keyframes : int
-        A closure accepted at most this many keyframes ago is reconsidered when a later
-        hypothesis is rejected that agrees with the front end's own trajectory better than
-        that closure did (``correction_chi2`` within the ``consistency_probability`` quantile
-        and below the closure's) and disagrees with the closure (pairwise, as
-        ``confirmations``): the closure's merges are undone and the hypothesis is judged
-        again; if it is accepted the earlier closure stays dropped (its pairs vetoed), else
-        both are as before.  0: never.
     large_correction_m, large_correction_rad : float
         A correction larger than either is large: it is spread along the loop before the
         judgement (a starting point near the closed loop), and once accepted the back-end
@@ -375,11 +367,9 @@ class LoopClosureConfig:
     judge_hopeless_after: int = 5
     large_correction_m: float = 0.1
     large_correction_rad: float = 0.01
-    reconsider_keyframes: int = 20
 
     def __post_init__(self) -> None:
         require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
-        require(self.reconsider_keyframes >= 0, "reconsider_keyframes must be >= 0")
         require(self.judge_iterations >= 1, "judge_iterations must be >= 1")
         require(self.judge_hopeless_after >= 0, "judge_hopeless_after must be >= 0")
         require(self.local_keyframes >= 1, "local_keyframes must be >= 1")

@@ -28,11 +28,6 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    ``judge_robust_cost``), else the landmark book is restored to its snapshot and the
    back-end never sees it.  An accepted closure with a large correction
    restarts the back-end from the judged estimate; a small one reaches it incrementally.
-5. **Reconsider.**  A rejected hypothesis that agrees with the front end's own trajectory
-   better than a closure accepted within the last ``reconsider_keyframes`` did, and disagrees
-   with that closure (pairwise, as in 3), is judged again with the closure's merges undone;
-   accepted, it replaces the closure (whose pairs are vetoed), else both stay as they were.
-   An early wrong closure can so give way to later evidence.
 
 Every attempt is recorded as a :class:`ClosureAttempt` (``summary.json``:
 ``loop_closures_log``).
@@ -52,7 +47,6 @@ from slam.frontend.loop_closure import LoopClosure, same_correction, search_loop
 from slam.geometry import pose_between, pose_compose, pose_inverse, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend
 from slam.graph.batch import BatchSolver
-from slam.graph.problem import MergeRecord
 from slam.graph.robust import RobustKernel
 from slam.line_slam.audit import MergeAudit, residual_chi2
 from slam.line_slam.clock import StageClock
@@ -90,7 +84,6 @@ _ORDER = {
         "agreeing_hypotheses",
         "correction_chi2",
         *_WHERE,
-        "reconsidered_closure",
         "accepted",
         "backend_restarted",
     ),
@@ -123,16 +116,6 @@ class Hypothesis:
         return self.normal is not None
 
 
-@dataclass(frozen=True, eq=False)
-class _Accepted:
-    """An accepted closure: where, its hypothesis, its chain χ² and the merges it made."""
-
-    keyframe: int
-    hypothesis: Hypothesis
-    chain_chi2: float
-    records: list[MergeRecord]
-
-
 @dataclass
 class ClosureAttempt:
     """One loop-closure attempt that found a hypothesis or searched in vain.
@@ -144,8 +127,7 @@ class ClosureAttempt:
     ``correction_chi2`` its squared Mahalanobis distance under the joint marginal;
     ``pose_before``/``old_pose_before`` the two keyframes' estimates before the attempt;
     ``consistent_pairs`` of ``pairs`` were explained by the judge, whose worst pair left
-    ``worst_pair_chi2``; ``reconsidered_closure`` is the keyframe of an accepted closure whose
-    merges were undone for this judgement (accepted: that closure is dropped).
+    ``worst_pair_chi2``.
     """
 
     kind: str
@@ -170,7 +152,6 @@ class ClosureAttempt:
     f_statistic: float | None = None
     f_statistic_robust: float | None = None
     agreeing_hypotheses: int | None = None
-    reconsidered_closure: int | None = None
     where: dict[str, Any] = field(default_factory=dict)
 
     def as_log(self) -> dict[str, Any]:
@@ -264,8 +245,6 @@ class LoopCloser:
         self._rejected: list[tuple[int, FloatArray, int]] = []
         # recent hypotheses that passed the drift test (for confirmation)
         self._recent: list[Hypothesis] = []
-        # accepted closures that a later hypothesis may still overturn
-        self._accepted: list[_Accepted] = []
         self._every = EveryKeyframes()
         self._judge = BatchSolver(
             replace(config.solver, relative_tolerance=config.loop_closure.judge_relative_tolerance)
@@ -373,7 +352,7 @@ class LoopCloser:
             self.counters["loop_closures_gated"] += 1
             return 0
         self.counters["loop_closure_candidates"] += 1
-        return self.apply(local, near, found, pose, chi2_t, agree, hyp)
+        return self.apply(local, near, found, pose, chi2_t, agree)
 
     # -- the rules ---------------------------------------------------------------------------
     def repeated_rejection(self, found: LoopClosure, pose: int) -> int | None:
@@ -511,8 +490,6 @@ class LoopCloser:
         pose: int,
         chi2_t: float = float("nan"),
         agree: int = 0,
-        hyp: Hypothesis | None = None,
-        reconsidering: _Accepted | None = None,
     ) -> int:
         """Spread the correction, merge the verified pairs, judge; keep only if explained.
 
@@ -523,9 +500,8 @@ class LoopCloser:
         back-end never sees it; an accepted one with a large correction restarts the back-end
         from the judged estimate, a small one reaches it incrementally
         (``large_correction_*``).  ``agree`` is the number of recent hypotheses that agree
-        with this one (:meth:`agreement`; the robust second chance needs one).  A rejected
-        ``hyp`` may overturn a recent closure (:meth:`reconsider`; ``reconsidering``: the
-        closure whose merges are undone for this judgement).  Returns 1 when accepted, else 0.
+        with this one (:meth:`agreement`; the robust second chance needs one).  Returns 1
+        when accepted, else 0.
         """
         book = self.book
         g = book.graph
@@ -610,8 +586,6 @@ class LoopCloser:
         attempt.f_statistic = float(f_stat)
         attempt.f_statistic_robust = float(f_robust)
         attempt.agreeing_hypotheses = int(agree)
-        if reconsidering is not None:
-            attempt.reconsidered_closure = reconsidering.keyframe
         self.attempts.append(attempt)
         explained = (
             good >= max(lcc.min_matches - 1, 2)
@@ -638,10 +612,6 @@ class LoopCloser:
             attempt.accepted = True
             attempt.backend_restarted = big
             self.counters["loop_closures"] += 1
-            if hyp is not None:
-                self._accepted.append(
-                    _Accepted(int(pose), hyp, float(chi2_t), [r for r in records if not r.undo])
-                )
             return 1
         # not explained: the back-end never saw it; the book goes back to its snapshot
         book.restore(before)
@@ -650,75 +620,6 @@ class LoopCloser:
         self._rejected.append(
             (int(pose), np.asarray(found.correction, dtype=float), len(found.pairs))
         )
-        if hyp is not None and reconsidering is None:
-            rival = self.rival(hyp, chi2_t)
-            if rival is not None:
-                return self.reconsider(rival, local, old, found, pose, chi2_t, agree, hyp)
-        return 0
-
-    def rival(self, h: Hypothesis, chi2_t: float) -> _Accepted | None:
-        """The most recent accepted closure that a rejected ``h`` may overturn, if any.
-
-        Within ``reconsider_keyframes``, at another keyframe, inconsistent with ``h``
-        (:meth:`pair_chi2` beyond the ``consistency_probability`` quantile of χ²₃), while ``h``
-        agrees with the front end's own trajectory (:meth:`chain_chi2` within that quantile)
-        better than the closure did.
-        """
-        lcc = self.config.loop_closure
-        if lcc.reconsider_keyframes == 0 or not np.isfinite(chi2_t):
-            return None
-        if chi2_t > self._chi2_limit(2 if h.single else 3):
-            return None
-        self._accepted = [
-            a for a in self._accepted if a.keyframe >= h.keyframe - lcc.reconsider_keyframes
-        ]
-        for a in reversed(self._accepted):
-            if a.keyframe == h.keyframe or not chi2_t < a.chain_chi2:
-                continue
-            if self.pair_chi2(a.hypothesis, h) > self._chi2_limit(3):
-                return a
-        return None
-
-    def reconsider(
-        self,
-        rival: _Accepted,
-        local: IntArray,
-        old: IntArray,
-        found: LoopClosure,
-        pose: int,
-        chi2_t: float,
-        agree: int,
-        hyp: Hypothesis,
-    ) -> int:
-        """Judge ``found`` again with ``rival``'s merges undone; keep whichever explains.
-
-        Accepted: ``rival`` stays dropped (its undone pairs vetoed, so fusion does not redo
-        them).  Rejected: the book goes back to its state with ``rival``, the back-end never
-        having seen the difference.  Returns 1 when accepted, else 0.
-        """
-        book = self.book
-        g = book.graph
-        undone = [
-            r
-            for r in rival.records
-            if g.landmark_alive[r.keep]
-            and not g.landmark_alive[r.drop]
-            and np.all(g.factor_landmark[r.factors] == r.keep)
-        ]
-        if not undone:
-            return 0
-        before = book.snapshot()
-        for r in undone:
-            g.unmerge(r)
-        book.recompute_info(np.array(sorted({r.keep for r in undone} | {r.drop for r in undone})))
-        book.refresh_extents()
-        if self.apply(local, old, found, pose, chi2_t, agree, hyp, reconsidering=rival):
-            self.audit.vetoed.update((min(r.keep, r.drop), max(r.keep, r.drop)) for r in undone)
-            self._accepted.remove(rival)
-            self.counters["loop_closures_dropped"] += 1
-            return 1
-        book.restore(before)  # the undone merges are merged again
-        book.refresh_extents()
         return 0
 
     def _judge_kernel(self) -> tuple[RobustKernel, float]:
