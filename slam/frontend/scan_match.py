@@ -316,6 +316,52 @@ def _chi2_99(dof: int) -> float:
 
 
 @njit(cache=True, nogil=True)
+def _window_scatter(
+    xy: FloatArray,
+    q11: FloatArray,
+    q12: FloatArray,
+    q22: FloatArray,
+    lo: int,
+    hi: int,
+    cx: float,
+    cy: float,
+    nx: float,
+    ny: float,
+) -> tuple[float, float, float, float, float]:
+    """Mean and scatter ``(mx, my, sxx, sxy, syy)`` of the points ``lo..hi`` about ``(cx, cy)``.
+
+    Each point weighted by the inverse of its Eq. 8 variance along the normal ``(nx, ny)``;
+    unweighted when the normal is zero.
+    """
+    weighted = nx != 0.0 or ny != 0.0
+    sw = 0.0
+    mx = 0.0
+    my = 0.0
+    for j in range(lo, hi + 1):
+        w = 1.0
+        if weighted:
+            w = 1.0 / max(nx * nx * q11[j] + 2.0 * nx * ny * q12[j] + ny * ny * q22[j], 1e-12)
+        sw += w
+        mx += w * (xy[j, 0] - cx)
+        my += w * (xy[j, 1] - cy)
+    mx /= sw
+    my /= sw
+    sxx = 0.0
+    sxy = 0.0
+    syy = 0.0
+    for j in range(lo, hi + 1):
+        w = 1.0
+        if weighted:
+            w = 1.0 / max(nx * nx * q11[j] + 2.0 * nx * ny * q12[j] + ny * ny * q22[j], 1e-12)
+        dx = xy[j, 0] - cx - mx
+        dy = xy[j, 1] - cy - my
+        sxx += w * dx * dx
+        sxy += w * dx * dy
+        syy += w * dy * dy
+    return mx, my, sxx, sxy, syy
+
+
+@njit(cache=True, nogil=True)
 def _extend_lines(
     xy: FloatArray,
     q11: FloatArray,
@@ -366,22 +412,7 @@ def _extend_lines(
             if lo == i - h and hi == i + h:
                 break  # no longer than the short line: it stays
             k = hi - lo + 1
-            mx = 0.0
-            my = 0.0
-            for j in range(lo, hi + 1):
-                mx += xy[j, 0] - cx
-                my += xy[j, 1] - cy
-            mx /= k
-            my /= k
-            sxx = 0.0
-            sxy = 0.0
-            syy = 0.0
-            for j in range(lo, hi + 1):
-                dx = xy[j, 0] - cx - mx
-                dy = xy[j, 1] - cy - my
-                sxx += dx * dx
-                sxy += dx * dy
-                syy += dy * dy
+            mx, my, sxx, sxy, syy = _window_scatter(xy, q11, q12, q22, lo, hi, cx, cy, 0.0, 0.0)
             disc = math.sqrt(max((sxx - syy) ** 2 + 4.0 * sxy * sxy, 0.0))
             lam_max = 0.5 * (sxx + syy + disc)
             lam_min = 0.5 * (sxx + syy - disc)
@@ -392,28 +423,9 @@ def _extend_lines(
                 # (near and far points of one wall are not equally precise along it), then
                 # the points' spread about the line against that noise
                 for _ in range(2):
-                    sw = 0.0
-                    mx = 0.0
-                    my = 0.0
-                    for j in range(lo, hi + 1):
-                        var = nx * nx * q11[j] + 2.0 * nx * ny * q12[j] + ny * ny * q22[j]
-                        w = 1.0 / max(var, 1e-12)
-                        sw += w
-                        mx += w * (xy[j, 0] - cx)
-                        my += w * (xy[j, 1] - cy)
-                    mx /= sw
-                    my /= sw
-                    sxx = 0.0
-                    sxy = 0.0
-                    syy = 0.0
-                    for j in range(lo, hi + 1):
-                        var = nx * nx * q11[j] + 2.0 * nx * ny * q12[j] + ny * ny * q22[j]
-                        w = 1.0 / max(var, 1e-12)
-                        dx = xy[j, 0] - cx - mx
-                        dy = xy[j, 1] - cy - my
-                        sxx += w * dx * dx
-                        sxy += w * dx * dy
-                        syy += w * dy * dy
+                    mx, my, sxx, sxy, syy = _window_scatter(
+                        xy, q11, q12, q22, lo, hi, cx, cy, nx, ny
+                    )
                     phi = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
                     nx, ny = -math.sin(phi), math.cos(phi)
                 chi2 = 0.0
