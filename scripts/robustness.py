@@ -142,6 +142,16 @@ def _mean(score: dict[str, Any], key: str, what: str) -> float | None:
     return None if metric is None else float(metric[what]["mean"])
 
 
+def _short(score: dict[str, Any], digits: int) -> str:
+    """Relations shorter than 10 s: lineslam / odometry translation (m); rotation (deg)."""
+    return (
+        f"{_f(_mean(score, 'lineslam_short', 'abs_trans_m'), digits)} / "
+        f"{_f(_mean(score, 'odometry_short', 'abs_trans_m'), digits)}; "
+        f"{_f(_mean(score, 'lineslam_short', 'abs_rot_deg'), 2)} / "
+        f"{_f(_mean(score, 'odometry_short', 'abs_rot_deg'), 2)}"
+    )
+
+
 def table(records: list[dict[str, Any]]) -> str:
     """The Markdown table of the records and a summary line."""
     lines = [
@@ -158,12 +168,7 @@ def table(records: list[dict[str, Any]]) -> str:
         s = r["score"]
         d = r["diagnostics"]
         within += r["within_bar"]
-        short = (
-            f"{_f(_mean(s, 'lineslam_short', 'abs_trans_m'), 4)} / "
-            f"{_f(_mean(s, 'odometry_short', 'abs_trans_m'), 4)}; "
-            f"{_f(_mean(s, 'lineslam_short', 'abs_rot_deg'), 2)} / "
-            f"{_f(_mean(s, 'odometry_short', 'abs_rot_deg'), 2)}"
-        )
+        short = _short(s, 4)
         cells = [
             r["name"],
             f"{r['scans']:,}",
@@ -203,12 +208,7 @@ def summary_table(records: list[dict[str, Any]]) -> str:
             continue
         s = r["score"]
         d = r["diagnostics"]
-        short = (
-            f"{_f(_mean(s, 'lineslam_short', 'abs_trans_m'), 3)} / "
-            f"{_f(_mean(s, 'odometry_short', 'abs_trans_m'), 3)}; "
-            f"{_f(_mean(s, 'lineslam_short', 'abs_rot_deg'), 2)} / "
-            f"{_f(_mean(s, 'odometry_short', 'abs_rot_deg'), 2)}"
-        )
+        short = _short(s, 3)
         cells = [
             f"{r['name']} ({r['description']})",
             f"{r['bar_m']:.3f}",
