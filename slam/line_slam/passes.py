@@ -214,22 +214,6 @@ class Passes:
         T_b = -T_a
         if a.size == 0:
             return S, T_a, T_b
-        # H⁻¹ F_p of every pass of the pairs
-        used = np.unique(np.r_[a, b]) if pass_terms else np.zeros(0, dtype=np.intp)
-        slot = np.full(self.landmark.size, -1, dtype=np.intp)
-        slot[used] = np.arange(used.size)
-        HF = np.zeros((n, 2 * used.size))
-        for lo in range(0, used.size, chunk):
-            part = used[lo : lo + chunk]
-            F = np.zeros((n, 2 * part.size))
-            for j, p in enumerate(part.tolist()):
-                info = np.linalg.inv(self.cov[p])
-                blocks = np.swapaxes(info[None] @ self.factor_gain[self._factors_of(p)], 1, 2)
-                r, c, v = self._pose_rows(p, blocks, pose_column)
-                np.add.at(F, (r, c + 2 * j), v)
-                F[landmark_column[p] : landmark_column[p] + 2, 2 * j : 2 * j + 2] += info
-            HF[:, 2 * lo : 2 * (lo + part.size)] = solve(F)
-        HFk = HF.reshape(n, used.size, 2)
         for lo in range(0, a.size, chunk):
             pa, pb = a[lo : lo + chunk], b[lo : lo + chunk]
             k = pa.size
@@ -240,12 +224,31 @@ class Passes:
                     r, c, v = self._pose_rows(p, blocks, pose_column)
                     np.add.at(M, (r, c + 2 * j), v)
             Mk = M.reshape(n, k, 2)
-            X = np.asarray(solve(M)).reshape(n, k, 2)
+            X = np.asarray(solve(M)).reshape(n, k, 2)  # H⁻¹ Jᵀ
             S[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, X)
             if pass_terms:
-                T_a[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, HFk[:, slot[pa]])
-                T_b[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, HFk[:, slot[pb]])
+                # J H⁻¹ F_p = (H⁻¹ Jᵀ)ᵀ F_p (H symmetric): no solve for F_p
+                for T, passes in ((T_a, pa), (T_b, pb)):
+                    F = self._moved_normal_equations(passes, pose_column, landmark_column, n)
+                    T[lo : lo + k] -= np.einsum("nki,nkj->kij", X, F.reshape(n, k, 2))
         return S, T_a, T_b
+
+    def _moved_normal_equations(
+        self, passes: IntArray, pose_column: IntArray, landmark_column: IntArray, n: int
+    ) -> FloatArray:
+        """``F_p`` ``(n, 2)`` of each pass side by side, ``(n, 2·len(passes))``.
+
+        What a pass's own error ``δ_p`` does to the normal equations: ``Aᵀ`` of the pass's
+        factor rows moved by ``δ_p`` (:meth:`fitted_pair_terms`).
+        """
+        F = np.zeros((n, 2 * passes.size))
+        for j, p in enumerate(passes.tolist()):
+            info = np.linalg.inv(self.cov[p])
+            blocks = np.swapaxes(info[None] @ self.factor_gain[self._factors_of(p)], 1, 2)
+            r, c, v = self._pose_rows(p, blocks, pose_column)
+            np.add.at(F, (r, c + 2 * j), v)
+            F[landmark_column[p] : landmark_column[p] + 2, 2 * j : 2 * j + 2] += info
+        return F
 
     def pairs(self, max_pairs: int | None = None, seed: int = 0) -> tuple[IntArray, IntArray]:
         """Every pair ``(a, b)`` of usable passes (finite ``cov``) of one landmark.
