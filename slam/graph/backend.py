@@ -243,6 +243,14 @@ class BatchBackend:
             raise EstimationError(f"marginals failed: {exc}") from exc
         return np.asarray(jm.fullMatrix(), dtype=float)
 
+    def _marginal(self, key: int) -> FloatArray:
+        """Marginal covariance of one variable of the last solve."""
+        assert self._marginals is not None
+        try:
+            return np.asarray(self._marginals.marginalCovariance(key), dtype=float)
+        except RuntimeError as exc:
+            raise EstimationError(f"marginals failed: {exc}") from exc
+
     def _chain_to(self, graph: LineGraph, pose: int) -> tuple[int, list[int]]:
         """Newest pose in the marginals and the odometry factors leading from it to ``pose``."""
         chain: list[int] = []
@@ -334,8 +342,14 @@ class BatchBackend:
         return np.asarray(P)
 
     def pose_covariances(self, graph: LineGraph, poses: IntArray) -> FloatArray:
-        """Marginals of each pose."""
-        out = [self.joint_covariance(graph, i, np.zeros(0, np.intp)) for i in _checked(poses)]
+        """Marginals of each pose (newer poses than the last solve compounded)."""
+        self._ensure_marginals(graph)
+        out = []
+        for i in _checked(poses):
+            if i < self._marg_poses:
+                out.append(self._marginal(keys_of("x", np.array([i]))[0]))
+            else:
+                out.append(self.joint_covariance(graph, i, np.zeros(0, np.intp)))
         return np.array(out).reshape(-1, 3, 3)
 
     def landmark_covariances(self, graph: LineGraph, landmarks: IntArray) -> FloatArray:
@@ -344,8 +358,7 @@ class BatchBackend:
         out = []
         for j in _checked(landmarks):
             if j in self._marg_landmarks:
-                assert self._marginals is not None
-                out.append(self._marginals.marginalCovariance(keys_of("l", np.array([j]))[0]))
+                out.append(self._marginal(keys_of("l", np.array([j]))[0]))
             else:
                 out.append(self._new_landmark_cov(graph, int(j)))
         return np.array(out).reshape(-1, 2, 2)
