@@ -158,15 +158,15 @@ def test_default_demo_run_is_consistent_with_the_estimated_model_error(tmp_path,
 
 def test_the_pass_error_changes_the_covariances_not_the_estimate(tmp_path, capsys):
     """A simulated laboratory driven through more than once (``lab``, seed 11): with
-    ``line_pass_error = "estimated"`` the walls seen in several passes get linked passes in
-    ``graph.g2o`` and the covariances of both runs differ, the trajectory and the map do not;
-    ``lineslam evaluate`` reads the linked graph."""
+    ``line_pass_error = "estimated"`` (the default) the walls seen in several passes get
+    linked passes in ``graph.g2o`` and the covariances differ from those with ``"off"``, the
+    trajectory and the map do not; ``lineslam evaluate`` reads the linked graph."""
     sim = tmp_path / "lab"
     assert run(["simulate", "lab", "--seed", "11", "--out", str(sim), "--quiet"], capsys)[0] == 0
-    option = tmp_path / "passes.toml"
-    option.write_text('[slam]\nline_pass_error = "estimated"\n')
+    option = tmp_path / "off.toml"
+    option.write_text('[slam]\nline_pass_error = "off"\n')
     runs = {}
-    for name, extra in (("off", []), ("passes", ["--config", str(option)])):
+    for name, extra in (("off", ["--config", str(option)]), ("passes", [])):
         out = tmp_path / name
         args = ["slam", str(sim / "log.clf"), "--out", str(out), "--quiet", *extra]
         assert run(args, capsys)[0] == 0
@@ -202,10 +202,8 @@ def test_a_pass_error_that_cannot_be_estimated_leaves_the_run_as_without(
         raise EstimationError("information matrix of the graph is singular: test")
 
     monkeypatch.setattr(pipeline.LineSlam, "_pass_model", fail)
-    option = tmp_path / "passes.toml"
-    option.write_text('[slam]\nline_pass_error = "estimated"\n')
     out = tmp_path / "run"
-    args = ["slam", str(DEMO / "log.clf"), "--out", str(out), "--quiet", "--config", str(option)]
+    args = ["slam", str(DEMO / "log.clf"), "--out", str(out), "--quiet"]
     assert run(args, capsys)[0] == 0
     summary = json.loads((out / "summary.json").read_text())
     assert "singular: test" in summary["line_pass_error"]["skipped"]

@@ -151,13 +151,14 @@ class SlamConfig:
         the fit's straight lines.  With ``line_model_error = "estimated"`` (the default) the
         values used until the first estimate.
     line_pass_error : {"estimated", "off"}
-        ``"estimated"``: the observations of one pass along a wall share an error of their
-        own (:mod:`slam.line_slam.passes`): estimated at the end of the run from how far the
-        passes along the same walls disagree, and, where it is not zero, each pass of a wall
-        seen in several passes becomes a landmark linked to the wall for the covariances
-        (``trajectory_covariance.txt``, the landmarks' and ``graph.g2o``; the estimate is
-        not changed).  ``summary.json`` ``line_pass_error``.  ``"off"``: every observation's
-        error is independent of the others'.
+        ``"estimated"`` (default): the observations of one pass along a wall share an error
+        of their own (:mod:`slam.line_slam.passes`): estimated at the end of the run from how
+        far the passes along the same walls disagree, and, where it is not zero, each pass of
+        a wall seen in several passes becomes a landmark linked to the wall for the
+        covariances (``trajectory_covariance.txt``, the landmarks' and ``graph.g2o``; the
+        estimate is not changed).  With fewer than 20 pairs of passes there is no estimate
+        and the covariances are the back-end's.  ``summary.json`` ``line_pass_error``.
+        ``"off"``: every observation's error is independent of the others'.
     line_pass_gap_s : float
         Observations of a wall this far apart in time (s) or more are separate passes.
     min_line_points : int
@@ -192,7 +193,7 @@ class SlamConfig:
     line_model_error: Literal["estimated", "fixed"] = "estimated"
     line_model_sigma_r_m: float = 0.02
     line_model_sigma_alpha_rad: float = 0.01
-    line_pass_error: Literal["estimated", "off"] = "off"
+    line_pass_error: Literal["estimated", "off"] = "estimated"
     line_pass_gap_s: float = 30.0
     min_line_points: int = 3
     min_line_length_m: float = 0.3
