@@ -176,12 +176,18 @@ def test_the_fitted_ratio_is_about_one_where_the_model_holds():
     shrunk = pass_consistency(g, stamps, gap_s=30.0, fitted=False)
     assert shrunk.median_ratio < 0.8 * res.median_ratio
     assert 0.7 < res.median_ratio < 1.4
+    # no pass error to find: judged with the one estimated, about the same
+    assert res.pass_error_sigma_offset_m < 0.005 and res.pass_error_sigma_angle_rad < 0.002
+    assert 0.6 < res.median_ratio_with_pass_error <= res.median_ratio
 
 
 def test_the_pass_error_is_found_and_linked():
     g, stamps = _laps(22, 0.02, 0.005)
     res = pass_consistency(g, stamps, gap_s=30.0)
     assert res.median_ratio > 3.0
+    # judged with the pass error estimated from the same pairs, about χ²₂ again
+    assert 0.7 < res.median_ratio_with_pass_error < 1.4
+    assert res.fraction_beyond_95_with_pass_error < 0.12
     passes = find_passes(g, stamps, gap_s=30.0)
     err = estimate_pass_error(passes, fitted_pairs(g, passes))
     # the part of the passes' errors the fit absorbs is allowed for: the truth comes back
@@ -195,11 +201,15 @@ def test_the_pass_error_is_found_and_linked():
     assert k >= WALLS * (LAPS - 1) and linked.n_landmark_links == k
     assert linked.n_landmarks == g.n_landmarks + k
     assert linked.observation_counts()[:WALLS].sum() == 0  # the walls hold no factor now
-    # judged on its walls, the linked graph gives the same consistency
+    # judged on its walls, the linked graph gives the same consistency, with the poses as if
+    # known and at the walls' fit alike
     again = pass_consistency(linked, stamps, gap_s=30.0, fitted=False)
     assert again.median_ratio == pytest.approx(
         pass_consistency(g, stamps, gap_s=30.0, fitted=False).median_ratio
     )
+    fitted = pass_consistency(linked, stamps, gap_s=30.0)
+    assert fitted.median_ratio == pytest.approx(res.median_ratio)
+    assert fitted.median_ratio_angle == pytest.approx(res.median_ratio_angle)
     # the same estimate minimises the linked graph's cost near where it is (the passes at their
     # walls): a solve moves the poses by less than the odometry's noise
     before = linked.poses.copy()

@@ -247,6 +247,17 @@ class EvaluationReport:
                     f"{w['fraction_beyond_95']:.2f} beyond chi2_2's 95 %",
                 )
             )
+            if w.get("median_ratio_with_pass_error") is not None:
+                rows.append(
+                    (
+                        "  with the pass error",
+                        f"median t {w['median_ratio_with_pass_error']:.2f} x chi2_2's, "
+                        f"{w['fraction_beyond_95_with_pass_error']:.2f} beyond its 95 % (the "
+                        f"error each pass shares, estimated from these pairs: "
+                        f"{1e3 * w['pass_error_sigma_offset_m']:.1f} mm, "
+                        f"{1e3 * w['pass_error_sigma_angle_rad']:.1f} mrad)",
+                    )
+                )
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 

@@ -109,6 +109,13 @@ class PassConsistency:
         The same for the angle alone (χ²₁).
     fraction_beyond_95 : float
         Pairs with ``t`` above χ²₂'s 95 % quantile (0.05 expected).
+    pass_error_sigma_offset_m, pass_error_sigma_angle_rad : float
+        The pass error estimated from the same pairs (:func:`estimate_pass_error`; NaN when
+        not judged at the fit).
+    median_ratio_with_pass_error, fraction_beyond_95_with_pass_error : float
+        ``median_ratio`` and ``fraction_beyond_95`` with that pass error in each pair's
+        covariance (``S + T_a B_a T_aᵀ + T_b B_b T_bᵀ``): how well the pass error explains
+        the differences (NaN when not judged at the fit).
     """
 
     gap_s: float
@@ -117,6 +124,10 @@ class PassConsistency:
     median_ratio: float
     median_ratio_angle: float
     fraction_beyond_95: float
+    pass_error_sigma_offset_m: float = math.nan
+    pass_error_sigma_angle_rad: float = math.nan
+    median_ratio_with_pass_error: float = math.nan
+    fraction_beyond_95_with_pass_error: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
@@ -386,8 +397,8 @@ def fitted_pairs(
     :meth:`Passes.fitted_pair_terms` with the information of ``graph`` linearised at its
     estimate (:func:`slam.graph.relative.information_factor`, the kernel's weights in).
     Every pair, or ``max_pairs`` of them drawn without replacement with ``seed`` (each pair
-    and each pass in one costs two solves with the information).  ``pass_terms = False``:
-    ``S`` only (``T_a = I``, ``T_b = −I``), which halves the solves.
+    costs two solves with the information).  ``pass_terms = False``: ``S`` only (``T_a =
+    I``, ``T_b = −I``).
     """
     kernel, width = robust_kernel or ("none", 1.0)
     solver = BatchSolver(SolverConfig(robust_kernel=kernel, robust_k=width))  # type: ignore[arg-type]
@@ -420,9 +431,11 @@ def pass_consistency(
     Arguments as :func:`find_passes`; ``min_observations`` is the least number of factors of
     a pass that is compared.  ``fitted``: each pair's ``t`` against the covariance of its
     difference at the fitted estimate (:func:`fitted_pairs`: about χ²₂ when the
-    model holds), else against ``C_p + C_q`` (poses as if known).  A graph with pass links
-    (:func:`with_pass_links`) is judged on its walls: each pass landmark's factors count for
-    the wall it is linked to.  ``max_pairs``: at most that many pairs, drawn with a fixed seed
+    model holds), else against ``C_p + C_q`` (poses as if known); at the fit the pass error
+    is estimated from the same pairs too and the pairs judged with it as well.  A graph with
+    pass links (:func:`with_pass_links`) is judged on its walls: each pass landmark's factors
+    count for the wall it is linked to, at the walls' fit (the same numbers as the graph
+    without links).  ``max_pairs``: at most that many pairs, drawn with a fixed seed
     (:func:`fitted_pairs`).
 
     Raises
@@ -432,8 +445,9 @@ def pass_consistency(
     """
     g = _walls(graph)
     passes = find_passes(g, pose_timestamps, robust_kernel, gap_s, min_observations)
+    fit = None
     if fitted:
-        fit = fitted_pairs(graph, passes, robust_kernel, max_pairs, pass_terms=False)
+        fit = fitted_pairs(g, passes, robust_kernel, max_pairs)
         a, b, S = fit.a, fit.b, fit.S
     else:
         a, b = passes.pairs(max_pairs)
@@ -441,8 +455,30 @@ def pass_consistency(
     if a.size == 0:
         return PassConsistency(gap_s, 0, 0, math.nan, math.nan, math.nan)
     d = passes.mean[a] - passes.mean[b]
-    t = np.einsum("ki,kij,kj->k", d, np.linalg.inv(S), d)
+
+    def judged(S: FloatArray) -> FloatArray:
+        return np.asarray(np.einsum("ki,kij,kj->k", d, np.linalg.inv(S), d))
+
+    t = judged(S)
     ta = d[:, 1] ** 2 / S[:, 1, 1]
+    with_error: dict[str, float] = {}
+    if fit is not None:
+        error = estimate_pass_error(passes, fit)
+        B_a, B_b = (
+            pass_covariance(passes.place[p], error.sigma_offset_m, error.sigma_angle_rad)
+            for p in (a, b)
+        )
+        t_p = judged(
+            S
+            + fit.T_a @ B_a @ np.swapaxes(fit.T_a, 1, 2)
+            + fit.T_b @ B_b @ np.swapaxes(fit.T_b, 1, 2)
+        )
+        with_error = {
+            "pass_error_sigma_offset_m": error.sigma_offset_m,
+            "pass_error_sigma_angle_rad": error.sigma_angle_rad,
+            "median_ratio_with_pass_error": float(np.median(t_p) / CHI2_2_MEDIAN),
+            "fraction_beyond_95_with_pass_error": float(np.mean(t_p > CHI2_2_95)),
+        }
     return PassConsistency(
         gap_s=gap_s,
         landmarks=int(np.unique(passes.landmark[a]).size),
@@ -450,6 +486,7 @@ def pass_consistency(
         median_ratio=float(np.median(t) / CHI2_2_MEDIAN),
         median_ratio_angle=float(np.median(ta) / CHI2_1_MEDIAN),
         fraction_beyond_95=float(np.mean(t > CHI2_2_95)),
+        **with_error,
     )
 
 
