@@ -17,6 +17,7 @@ from slam.graph.problem import LineGraph
 from slam.graph.relative import RunCovariances, line_graph_from_file
 from slam.io.g2o import read_line_graph_g2o, write_line_graph_g2o
 from slam.line_slam.passes import (
+    MIN_PAIRS,
     PassError,
     estimate_pass_error,
     find_passes,
@@ -188,6 +189,9 @@ def test_the_pass_error_is_found_and_linked():
     # judged with the pass error estimated from the same pairs, about χ²₂ again
     assert 0.7 < res.median_ratio_with_pass_error < 1.4
     assert res.fraction_beyond_95_with_pass_error < 0.12
+    # too few pairs for a pass error: none is reported
+    few = pass_consistency(g, stamps, gap_s=30.0, max_pairs=MIN_PAIRS - 1)
+    assert few.pairs == MIN_PAIRS - 1 and math.isnan(few.median_ratio_with_pass_error)
     passes = find_passes(g, stamps, gap_s=30.0)
     err = estimate_pass_error(passes, fitted_pairs(g, passes))
     # the part of the passes' errors the fit absorbs is allowed for: the truth comes back

@@ -111,11 +111,11 @@ class PassConsistency:
         Pairs with ``t`` above χ²₂'s 95 % quantile (0.05 expected).
     pass_error_sigma_offset_m, pass_error_sigma_angle_rad : float
         The pass error estimated from the same pairs (:func:`estimate_pass_error`; NaN when
-        not judged at the fit).
+        not judged at the fit or with fewer than :data:`MIN_PAIRS` pairs).
     median_ratio_with_pass_error, fraction_beyond_95_with_pass_error : float
         ``median_ratio`` and ``fraction_beyond_95`` with that pass error in each pair's
         covariance (``S + T_a B_a T_aᵀ + T_b B_b T_bᵀ``): how well the pass error explains
-        the differences (NaN when not judged at the fit).
+        the differences (NaN as the pass error).
     """
 
     gap_s: float
@@ -462,7 +462,7 @@ def pass_consistency(
     t = judged(S)
     ta = d[:, 1] ** 2 / S[:, 1, 1]
     with_error: dict[str, float] = {}
-    if fit is not None:
+    if fit is not None and a.size >= MIN_PAIRS:
         error = estimate_pass_error(passes, fit)
         B_a, B_b = (
             pass_covariance(passes.place[p], error.sigma_offset_m, error.sigma_angle_rad)
