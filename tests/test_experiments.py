@@ -80,6 +80,8 @@ def test_batch_graph_nees_is_that_of_its_smoothed_trajectory_and_lands_in_the_re
     world, truth = world_and_trajectory(cfg.world, cfg.loops)
     run = simulate_line_run(world, truth, cfg.linesim, seed=task_seed(cfg.seed, 0))
     rc = matched_run_config(RunConfig(), cfg.linesim)
+    assert RunConfig().slam.line_pass_error == "estimated"
+    assert rc.slam.line_pass_error == "off"  # the simulator's observations err independently
     est = run_estimator("graph-batch", run.scans, run.lines, rc, truth[0])
     assert est.pose_covariances is not None
     expected = pose_nees_values(est.poses_world_laser, est.pose_covariances, truth)

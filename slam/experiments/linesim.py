@@ -533,12 +533,16 @@ def matched_run_config(run_config: RunConfig, sim: LineSimConfig) -> RunConfig:
     """The run configuration with the estimators told the line simulator's true noise models.
 
     Both estimators get the simulator's odometry noise (``ekf.odometry``, ``slam.motion``) and
-    no model-error floor on the lines (the simulated fits' covariances are exact), so that a
-    consistency study measures the estimators and not a mismatched model.  Everything else
-    (gates, keyframes, association, ...) stays as configured.
+    no model-error floor on the lines (the simulated fits' covariances are exact), and the
+    graph no pass error (``slam.line_pass_error = "off"``: the simulator draws every
+    observation's error on its own), so that a consistency study measures the estimators and
+    not a mismatched model.  Everything else (gates, keyframes, association, ...) stays as
+    configured.
     """
     ekf = replace(run_config.ekf, odometry=sim.odometry, line_sigma_extra=(0.0, 0.0))
     slam_cfg = replace(run_config.slam, motion=sim.odometry)
+    if hasattr(slam_cfg, "line_pass_error"):
+        slam_cfg = replace(slam_cfg, line_pass_error="off")
     floors: dict[str, Any] = {
         name: 0.0
         for name in ("line_model_sigma_r_m", "line_model_sigma_alpha_rad")
