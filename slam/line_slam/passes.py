@@ -239,8 +239,8 @@ class Passes:
             S[lo : lo + k] -= np.einsum("nki,nkj->kij", Mk, X)
             if pass_terms:
                 # J H⁻¹ F_p = (H⁻¹ Jᵀ)ᵀ F_p (H symmetric): no solve for F_p
-                for T, passes in ((T_a, pa), (T_b, pb)):
-                    F = self._moved_normal_equations(passes, pose_column, landmark_column, n)
+                for T, side in ((T_a, pa), (T_b, pb)):
+                    F = self._moved_normal_equations(side, pose_column, landmark_column, n)
                     T[lo : lo + k] -= np.einsum("nki,nkj->kij", X, F.reshape(n, k, 2))
         return S, T_a, T_b
 
