@@ -540,9 +540,7 @@ def matched_run_config(run_config: RunConfig, sim: LineSimConfig) -> RunConfig:
     configured.
     """
     ekf = replace(run_config.ekf, odometry=sim.odometry, line_sigma_extra=(0.0, 0.0))
-    slam_cfg = replace(run_config.slam, motion=sim.odometry)
-    if hasattr(slam_cfg, "line_pass_error"):
-        slam_cfg = replace(slam_cfg, line_pass_error="off")
+    slam_cfg = replace(run_config.slam, motion=sim.odometry, line_pass_error="off")
     floors: dict[str, Any] = {
         name: 0.0
         for name in ("line_model_sigma_r_m", "line_model_sigma_alpha_rad")
