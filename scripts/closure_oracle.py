@@ -6,8 +6,9 @@ Every candidate that reached the gate or the judgement is in ``summary.json``'s
 relative pose between those two scans says where the current pose should be, the old one held;
 the candidate's correction says where it would be.  The distance between the two classifies
 the candidate: right (< ``--right`` m), wrong (> ``--wrong`` m), or in between (``?``).
-Corridor closures (all paired lines parallel) are not classified: their correction's
-component along the corridor is arbitrary.
+A corridor closure (all paired lines parallel) is classified by the component across the
+corridor only (its ``corridor_normal``; the component along it is arbitrary and not used):
+``right|``, ``?|`` or ``wrong|``; an entry without the normal is ``corridor``.
 
     .venv/bin/python scripts/closure_oracle.py results/fr079 --reference other/trajectory.tum
 
@@ -36,11 +37,17 @@ def classify(entry: dict, reference: np.ndarray, right_m: float, wrong_m: float)
     target = pose_compose(x_old, rel)
     t = np.asarray(entry["correction"], dtype=float)
     need = float(np.hypot(*(target[:2] - x_now[:2])))
+    suffix = ""
     if entry.get("single_direction"):
-        return "corridor", need, float("nan")
-    err = float(np.hypot(*(x_now[:2] + t[:2] - target[:2])))
+        if "corridor_normal" not in entry:
+            return "corridor", need, float("nan")
+        n = np.asarray(entry["corridor_normal"], dtype=float)
+        err = float(abs((x_now[:2] + (t[:2] @ n) * n - target[:2]) @ n))
+        suffix = "|"
+    else:
+        err = float(np.hypot(*(x_now[:2] + t[:2] - target[:2])))
     cls = "right" if err < right_m else ("wrong" if err > wrong_m else "?")
-    return cls, need, err
+    return cls + suffix, need, err
 
 
 def main() -> None:
@@ -70,11 +77,15 @@ def main() -> None:
     tally: Counter[tuple[str, str]] = Counter()
     for e in entries:
         cls, need, err = classify(e, ref.poses, args.right, args.wrong)
-        outcome = (
-            "accepted"
-            if e["accepted"]
-            else ("gated" if "gate" in str(e.get("reason", "")) else "rejected")
-        )
+        reason = str(e.get("reason", ""))
+        if e["accepted"]:
+            outcome = "accepted"
+        elif "contradicts" in reason:
+            outcome = "contra"  # contradicted a recent closure (consistent_with_accepted)
+        elif "gate" in reason or "awaiting" in reason:
+            outcome = "gated"
+        else:
+            outcome = "rejected"
         tally[(outcome, cls)] += 1
         t = np.asarray(e["correction"], dtype=float)
         print(
@@ -84,10 +95,10 @@ def main() -> None:
             f"{e.get('correction_chi2', float('nan')):10.1f}"
         )
     print()
-    for outcome in ("accepted", "rejected", "gated"):
+    for outcome in ("accepted", "rejected", "gated", "contra"):
         row = ", ".join(
             f"{cls} {tally[(outcome, cls)]}"
-            for cls in ("right", "?", "wrong", "corridor")
+            for cls in ("right", "?", "wrong", "right|", "?|", "wrong|", "corridor")
             if tally[(outcome, cls)]
         )
         if row:

@@ -483,3 +483,43 @@ def test_estimated_model_error_finds_the_line_worlds_exact_lines():
     assert "line_model_error" not in fixed.stats
     # re-weighted with the smaller model error, the poses are more certain than with the default
     assert np.median(res.pose_covariances[:, 2, 2]) < np.median(fixed.pose_covariances[:, 2, 2])
+
+
+def test_a_hypothesis_contradicting_a_recent_closure_is_turned_away():
+    """``consistent_with_accepted``: along a straight corridor, a closure accepted at keyframe
+    30 ties it to keyframe 5.  A hypothesis at keyframe 35 onto keyframe 6 that moves the
+    robot 25 cm across the corridor (a parallel wall matched) contradicts it beyond χ²'s
+    quantile; 2 cm across, or metres along the corridor (not measured there), does not; nor
+    does anything once the accepted closure is ``local_keyframes`` old."""
+    from slam.frontend.loop_closure import LoopLines, correction_covariance
+    from slam.geometry import pose_compose
+    from slam.line_slam.clock import StageClock
+    from slam.line_slam.drift import DriftAccumulator
+    from slam.line_slam.loop_closer import Hypothesis, LoopCloser
+
+    config = SlamConfig()
+    lcc = config.loop_closure
+    drift = DriftAccumulator()
+    for k in range(60):  # 0.2 m steps along x, 1 cm and 1 mrad of drift each
+        drift.add_step(np.diag([1e-4, 1e-4, 1e-6]), 0.2 * k, np.array([0.2, 0.0, 0.0]))
+    closer = LoopCloser(None, None, drift, None, None, config, {}, StageClock())  # type: ignore[arg-type]
+    walls = LoopLines(
+        np.array([np.pi / 2, -np.pi / 2, np.pi / 2]),
+        np.array([1.0, 1.0, 1.4]),
+        np.array([[[-3.0, y], [3.0, y]] for y in (1.0, -1.0, 1.4)]),
+    )
+    cov = correction_covariance(
+        walls, walls, [(0, 0), (1, 1), (2, 2)], np.zeros(2), np.zeros(3), lcc, (1.0, 0.1)
+    )
+    normal = np.array([0.0, 1.0])  # keyframe frames are the world's here (heading 0)
+    closer._accepted.append(Hypothesis(30, 5, drift.relative(5, 30), normal, cov))
+
+    def hypothesis(keyframe: int, old: int, offset: tuple[float, float]) -> Hypothesis:
+        z = pose_compose(drift.relative(old, keyframe), np.array([*offset, 0.0]))
+        return Hypothesis(keyframe, old, z, normal, cov)
+
+    reason = closer.contradiction(hypothesis(35, 6, (0.0, 0.25)))
+    assert reason is not None and "keyframe 30" in reason and "2 dof" in reason
+    assert closer.contradiction(hypothesis(35, 6, (0.0, 0.02))) is None
+    assert closer.contradiction(hypothesis(35, 6, (2.0, 0.0))) is None
+    assert closer.contradiction(hypothesis(30 + lcc.local_keyframes, 6, (0.0, 0.25))) is None

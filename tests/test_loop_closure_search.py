@@ -14,6 +14,7 @@ from slam.frontend.loop_closure import (
     _samples_near_grid,
     _top_cells,
     correction_chi2,
+    correction_covariance,
     search_loop_closure,
 )
 
@@ -297,3 +298,33 @@ def test_compiled_votes_equal_the_sorted_count():
     ref = np.bincount(key_s[first] % (nc * nc), weights=wt[order][first], minlength=nc * nc)
     assert inside == np.count_nonzero(ok) > 0
     np.testing.assert_array_equal(votes, ref)
+
+
+def test_correction_covariance_known_answers():
+    """Each pair is one offset and one angle measurement with a third of the search's
+    tolerances as standard deviations, the window the prior: two walls across x, two across y
+    (through the centre, so the rotation does not move the offsets) give ``σ_r²/2`` on each
+    translation and ``σ_a²/4`` on the rotation (with the window's prior); three parallel walls
+    (a corridor) leave the position along them at the window's variance."""
+    cfg = LoopClosureConfig()
+    s_r, s_a = cfg.offset_tolerance_m / 3.0, cfg.angle_tolerance_rad / 3.0
+    W, T = 0.8, 0.1
+    box = LoopLines(
+        np.array([0.0, np.pi, np.pi / 2, -np.pi / 2]),
+        np.array([2.0, 2.0, 1.0, 1.0]),
+        np.array([[[2, -1], [2, 1]], [[-2, -1], [-2, 1]], [[-2, 1], [2, 1]], [[-2, -1], [2, -1]]]),
+    )
+    pairs = [(k, k) for k in range(4)]
+    got = correction_covariance(box, box, pairs, np.zeros(2), np.zeros(3), cfg, (W, T))
+    want = np.diag(1.0 / np.array([2 / s_r**2 + W**-2, 2 / s_r**2 + W**-2, 4 / s_a**2 + T**-2]))
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-18)
+    corridor = LoopLines(
+        np.full(3, np.pi / 2),
+        np.array([1.0, 1.3, 1.6]),
+        np.array([[[-3.0, y], [3.0, y]] for y in (1.0, 1.3, 1.6)]),
+    )
+    pairs = [(k, k) for k in range(3)]
+    got = correction_covariance(corridor, corridor, pairs, np.zeros(2), np.zeros(3), cfg, (W, T))
+    assert got[0, 0] == pytest.approx(W**2, rel=1e-12)  # along the walls: the window's
+    assert got[1, 1] == pytest.approx(1.0 / (3 / s_r**2 + W**-2), rel=1e-12)
+    assert got[2, 2] == pytest.approx(1.0 / (3 / s_a**2 + T**-2), rel=1e-12)

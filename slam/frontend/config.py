@@ -284,6 +284,18 @@ class LoopClosureConfig:
         between them is logged as ``correction_chi2``; it is not a gate: closures that the
         final trajectory confirms score far beyond its quantile on the catalogued logs (on
         ACES up to ~150 against 16.3; the drift model is not that accurate).
+    consistent_with_accepted : bool
+        A hypothesis must be consistent with every closure accepted within the last
+        ``local_keyframes`` keyframes: the cycle through the two hypotheses and the front
+        end's chains between their keyframes (as for ``confirmations``), with each
+        hypothesis' own covariance instead of the tolerances (its paired lines',
+        :func:`slam.frontend.loop_closure.correction_covariance`, plus the drift across the
+        local submap that it lays onto the old lines), within the ``consistency_probability``
+        quantile of χ² (the directions along a corridor left out).  One that is not is turned
+        away before the judge (``gated``, ``contradicts``): right after a closure the two
+        places are tied, and another hypothesis between them that moves the robot by more
+        than its pairs and the drift allow matched other walls (a parallel wall a few
+        decimetres off along a corridor).
     judge_max_f : float
         A judged closure is rejected when it raises the loop's cost per merged degree of
         freedom more than this many times the loop's cost per residual degree of freedom before
@@ -360,6 +372,7 @@ class LoopClosureConfig:
     judge_max_pair_chi2: float = float("inf")
     consistency_probability: float = 0.999
     confirmations: int = 0
+    consistent_with_accepted: bool = True
     judge_max_f: float = 100.0
     judge_robust_cost: bool = True
     min_consistent_fraction: float = 0.6

@@ -47,6 +47,7 @@ __all__ = [
     "LoopLines",
     "LoopSearch",
     "correction_chi2",
+    "correction_covariance",
     "same_correction",
     "search_loop_closure",
 ]
@@ -376,6 +377,40 @@ class _Hypothesis:
             return True
         dt = other.corr[:2] - self.corr[:2]
         return bool(abs(dt @ self.normal) > 2.0 * config.offset_tolerance_m)
+
+
+def correction_covariance(
+    local: LoopLines,
+    old: LoopLines,
+    pairs: list[tuple[int, int]],
+    center: FloatArray,
+    correction: FloatArray,
+    config: LoopConfig,
+    window: tuple[float, float],
+) -> FloatArray:
+    """Covariance of a correction ``(t_x, t_y, dθ)`` from its paired lines.
+
+    The least squares of :func:`_refine` at the correction, each pair's offset and angle with
+    the search's own standard deviations (a third of ``offset_tolerance_m`` and of
+    ``angle_tolerance_rad``, one pair one measurement, not weighted by its overlap) and the
+    window ``(W, Θ)`` as the prior: ``(AᵀWA + diag(W⁻², W⁻², Θ⁻²))⁻¹``.  Along a corridor the
+    position along the walls keeps the window's variance.
+    """
+    c = np.asarray(center, dtype=float).reshape(2)
+    corr = np.asarray(correction, dtype=float)
+    i = np.array([a for a, _ in pairs], dtype=np.intp)
+    moved = local.transformed(corr, c)
+    n = np.stack([np.cos(moved.alpha[i]), np.sin(moved.alpha[i])], -1)
+    tdir = np.stack([-n[:, 1], n[:, 0]], -1)
+    A = np.zeros((2 * i.size, 3))
+    A[0::2, :2] = n
+    A[0::2, 2] = tdir @ (c + corr[:2])
+    A[1::2, 2] = 1.0
+    W = np.empty(2 * i.size)
+    W[0::2] = (config.offset_tolerance_m / 3.0) ** -2
+    W[1::2] = (config.angle_tolerance_rad / 3.0) ** -2
+    prior = np.diag([window[0] ** -2, window[0] ** -2, window[1] ** -2])
+    return np.asarray(np.linalg.inv(A.T @ (A * W[:, None]) + prior), dtype=float)
 
 
 def same_correction(a: FloatArray, b: FloatArray, config: LoopConfig) -> bool:

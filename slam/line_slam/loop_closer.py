@@ -43,7 +43,12 @@ from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
 from slam.association import candidate_landmarks
-from slam.frontend.loop_closure import LoopClosure, same_correction, search_loop_closure
+from slam.frontend.loop_closure import (
+    LoopClosure,
+    correction_covariance,
+    same_correction,
+    search_loop_closure,
+)
 from slam.geometry import pose_between, pose_compose, pose_inverse, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend
 from slam.graph.batch import BatchSolver
@@ -74,6 +79,7 @@ _ORDER = {
         "worst_pair_chi2",
         "correction",
         "single_direction",
+        "corridor_normal",
         "score",
         "runner_up",
         "judge_iterations",
@@ -103,12 +109,17 @@ class Hypothesis:
     normal : ndarray, shape (2,) or None
         Along a corridor, the walls' normal in ``keyframe``'s frame (the component of ``z``
         along the walls is not measured); None otherwise.
+    cov : ndarray, shape (3, 3) or None
+        Covariance of the correction, in ``keyframe``'s frame: its paired lines'
+        (:func:`slam.frontend.loop_closure.correction_covariance`) plus the front end's drift
+        across the local submap; None when not computed.
     """
 
     keyframe: int
     k_old: int
     z: FloatArray
     normal: FloatArray | None = None
+    cov: FloatArray | None = None
 
     @property
     def single(self) -> bool:
@@ -127,7 +138,8 @@ class ClosureAttempt:
     ``correction_chi2`` its squared Mahalanobis distance under the joint marginal;
     ``pose_before``/``old_pose_before`` the two keyframes' estimates before the attempt;
     ``consistent_pairs`` of ``pairs`` were explained by the judge, whose worst pair left
-    ``worst_pair_chi2``.
+    ``worst_pair_chi2``; along a corridor (``single_direction``) ``corridor_normal`` is the
+    walls' unit normal in the world frame (only the correction's component along it is used).
     """
 
     kind: str
@@ -143,6 +155,7 @@ class ClosureAttempt:
     consistent_pairs: int | None = None
     worst_pair_chi2: float | None = None
     single_direction: bool | None = None
+    corridor_normal: list[float] | None = None
     score: float | None = None
     runner_up: float | None = None
     judge_iterations: int | None = None
@@ -245,6 +258,8 @@ class LoopCloser:
         self._rejected: list[tuple[int, FloatArray, int]] = []
         # recent hypotheses that passed the drift test (for confirmation)
         self._recent: list[Hypothesis] = []
+        # recently accepted closures (consistent_with_accepted)
+        self._accepted: list[Hypothesis] = []
         self._every = EveryKeyframes()
         self._judge = BatchSolver(
             replace(config.solver, relative_tolerance=config.loop_closure.judge_relative_tolerance)
@@ -331,12 +346,28 @@ class LoopCloser:
             return 0
         # consistency: with the front end's own trajectory, then with an earlier hypothesis
         k_old = int(np.median(last[near[[j for _, j in found.pairs]]]))
-        hyp = self.hypothesis(found, near, pose, k_old)
+        # the correction's covariance: its pairs, and the drift across the local submap (the
+        # correction lays the whole submap, seen over the last local_keyframes, onto the old
+        # lines; the current pose is at one end of it)
+        cov = correction_covariance(
+            book.loop_lines(local),
+            book.loop_lines(near),
+            found.pairs,
+            x[:2],
+            found.correction,
+            lcc,
+            (wxy, wth),
+        )
+        dxy, dth = self.drift.between(max(pose - lcc.local_keyframes, 0), pose)
+        cov = cov + np.diag([float(dxy) ** 2, float(dxy) ** 2, float(dth) ** 2])
+        hyp = self.hypothesis(found, near, pose, k_old, cov)
         chi2_t = self.chain_chi2(hyp)
         reason = None
         agree = self.agreement(hyp)
         if agree < lcc.confirmations:
             reason = "awaiting a consistent second hypothesis"
+        elif lcc.consistent_with_accepted:
+            reason = self.contradiction(hyp)
         if reason is not None:
             self.attempts.append(
                 ClosureAttempt(
@@ -352,7 +383,7 @@ class LoopCloser:
             self.counters["loop_closures_gated"] += 1
             return 0
         self.counters["loop_closure_candidates"] += 1
-        return self.apply(local, near, found, pose, chi2_t, agree)
+        return self.apply(local, near, found, pose, chi2_t, agree, hyp)
 
     # -- the rules ---------------------------------------------------------------------------
     def repeated_rejection(self, found: LoopClosure, pose: int) -> int | None:
@@ -370,22 +401,36 @@ class LoopCloser:
                 return kf
         return None
 
+    def corridor_normal(self, found: LoopClosure, old: IntArray) -> FloatArray | None:
+        """Along a corridor, the walls' unit normal (world frame); None otherwise."""
+        if not found.single_direction:
+            return None
+        a = self.book.loop_lines(old[[found.pairs[0][1]]]).alpha[0]
+        return np.array([np.cos(a), np.sin(a)])
+
     def effective_correction(self, found: LoopClosure, old: IntArray) -> FloatArray:
         """The hypothesis' correction; along a corridor without its arbitrary along-component."""
         corr = np.asarray(found.correction, dtype=float).copy()
-        if found.single_direction:
-            a = self.book.loop_lines(old[[found.pairs[0][1]]]).alpha[0]
-            n = np.array([np.cos(a), np.sin(a)])
+        n = self.corridor_normal(found, old)
+        if n is not None:
             corr[:2] = (corr[:2] @ n) * n
         return corr
 
-    def hypothesis(self, found: LoopClosure, old: IntArray, pose: int, k_old: int) -> Hypothesis:
+    def hypothesis(
+        self,
+        found: LoopClosure,
+        old: IntArray,
+        pose: int,
+        k_old: int,
+        cov: FloatArray | None = None,
+    ) -> Hypothesis:
         """A found closure as a relative-pose measurement from keyframe ``k_old`` to ``pose``.
 
         The correction moves the current keyframe by ``(t, dθ)`` (it rotates about its
         position), so it measures ``z = x_old⁻¹ ∘ (x_k + (t, dθ))`` with the estimates at the
         time.  Along a corridor the correction's component along the walls is arbitrary: the
-        hypothesis then carries the walls' normal (in the current keyframe's frame).
+        hypothesis then carries the walls' normal (in the current keyframe's frame).  ``cov``
+        (world frame, the correction's) is carried in the current keyframe's frame.
         """
         g = self.book.graph
         x = g.poses[pose]
@@ -396,7 +441,12 @@ class LoopCloser:
         if found.single_direction:
             a = float(self.book.loop_lines(old[[found.pairs[0][1]]]).alpha[0]) - float(moved[2])
             normal = np.array([np.cos(a), np.sin(a)])
-        return Hypothesis(int(pose), int(k_old), z, normal)
+        cov_k = None
+        if cov is not None:
+            c, s = np.cos(moved[2]), np.sin(moved[2])
+            R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            cov_k = R.T @ cov @ R
+        return Hypothesis(int(pose), int(k_old), z, normal, cov_k)
 
     def _z_cov(self) -> FloatArray:
         lcc = self.config.loop_closure
@@ -409,6 +459,11 @@ class LoopCloser:
 
     def _mahalanobis(self, e: FloatArray, cov: FloatArray, normals: list[FloatArray]) -> float:
         """``eᵀ S⁻¹ e`` with the components along any corridor (``normals``' tangents) left out."""
+        return self._projected(e, cov, normals)[0]
+
+    @staticmethod
+    def _projected(e: FloatArray, cov: FloatArray, normals: list[FloatArray]) -> tuple[float, int]:
+        """:meth:`_mahalanobis` and the number of directions it counts (its χ² dof)."""
         P = np.eye(3)
         for n in normals:
             t = np.array([-n[1], n[0], 0.0])
@@ -417,7 +472,7 @@ class LoopCloser:
         B = V[:, w > 0.5]
         eb = B.T @ e
         Sb = B.T @ cov @ B
-        return float(eb @ np.linalg.solve(Sb, eb))
+        return float(eb @ np.linalg.solve(Sb, eb)), int(B.shape[1])
 
     def chain_chi2(self, h: Hypothesis) -> float:
         """How far the hypothesis is from the front end's own trajectory, in its drift.
@@ -440,6 +495,13 @@ class LoopCloser:
         two measurements: ``e = Log(z_a⁻¹ ∘ F(old_a→old_b) ∘ z_b ∘ F(k_b→k_a))``, covariance the
         drift along both chains plus both measurements' tolerances.
         """
+        return self._cycle(a, b, fitted=False)[0]
+
+    def _cycle(self, a: Hypothesis, b: Hypothesis, fitted: bool) -> tuple[float, int]:
+        """:meth:`pair_chi2` and its dof.
+
+        With ``fitted`` the hypotheses' own covariances (``cov``) stand for the tolerances.
+        """
         d = self.drift
         cycle = pose_compose(
             pose_compose(pose_inverse(a.z), d.relative(a.k_old, b.k_old)),
@@ -449,9 +511,34 @@ class LoopCloser:
         s1xy, s1th = d.between(a.k_old, b.k_old)
         s2xy, s2th = d.between(b.keyframe, a.keyframe)
         var_xy = float(s1xy) ** 2 + float(s2xy) ** 2
-        S = np.diag([var_xy, var_xy, float(s1th) ** 2 + float(s2th) ** 2]) + 2.0 * self._z_cov()
+        S = np.diag([var_xy, var_xy, float(s1th) ** 2 + float(s2th) ** 2])
+        if fitted and a.cov is not None and b.cov is not None:
+            S = S + a.cov + b.cov
+        else:
+            S = S + 2.0 * self._z_cov()
         normals = [n for n in (a.normal, b.normal) if n is not None]
-        return self._mahalanobis(e, S, normals)
+        return self._projected(e, S, normals)
+
+    def contradiction(self, h: Hypothesis) -> str | None:
+        """Why ``h`` contradicts a recently accepted closure, or None.
+
+        Recent: accepted within the last ``local_keyframes`` keyframes.  ``h`` contradicts
+        one when their cycle (:meth:`pair_chi2`, with each hypothesis' covariance from its
+        paired lines) lies beyond the ``consistency_probability`` quantile of χ² with as many
+        degrees of freedom as directions are compared.
+        """
+        lcc = self.config.loop_closure
+        self._accepted = [
+            r for r in self._accepted if r.keyframe > h.keyframe - lcc.local_keyframes
+        ]
+        for r in self._accepted:
+            chi2, dof = self._cycle(r, h, fitted=True)
+            if chi2 > self._chi2_limit(dof):
+                return (
+                    f"contradicts the closure accepted at keyframe {r.keyframe} "
+                    f"(χ² {chi2:.1f} > {self._chi2_limit(dof):.1f}, {dof} dof)"
+                )
+        return None
 
     def agreement(self, h: Hypothesis) -> int:
         """How many recent hypotheses agree with ``h`` (``h`` then joins them).
@@ -490,6 +577,7 @@ class LoopCloser:
         pose: int,
         chi2_t: float = float("nan"),
         agree: int = 0,
+        hypothesis: Hypothesis | None = None,
     ) -> int:
         """Spread the correction, merge the verified pairs, judge; keep only if explained.
 
@@ -500,8 +588,8 @@ class LoopCloser:
         back-end never sees it; an accepted one with a large correction restarts the back-end
         from the judged estimate, a small one reaches it incrementally
         (``large_correction_*``).  ``agree`` is the number of recent hypotheses that agree
-        with this one (:meth:`agreement`; the robust second chance needs one).  Returns 1
-        when accepted, else 0.
+        with this one (:meth:`agreement`; the robust second chance needs one); an accepted
+        ``hypothesis`` is kept for :meth:`contradiction`.  Returns 1 when accepted, else 0.
         """
         book = self.book
         g = book.graph
@@ -514,6 +602,7 @@ class LoopCloser:
         k_old = int(np.median(old_last))
         where = self.where(pose, k_old)
         corr = self.effective_correction(found, old)
+        normal = self.corridor_normal(found, old)
         big = bool(
             np.hypot(corr[0], corr[1]) > lcc.large_correction_m
             or abs(corr[2]) > lcc.large_correction_rad
@@ -575,6 +664,7 @@ class LoopCloser:
             worst_pair_chi2=worst,
             correction=[float(v) for v in found.correction],
             single_direction=bool(found.single_direction),
+            corridor_normal=None if normal is None else [float(v) for v in normal],
             score=float(found.score),
             runner_up=float(found.runner_up),
             judge_iterations=judged.iterations,
@@ -611,6 +701,8 @@ class LoopCloser:
             )
             attempt.accepted = True
             attempt.backend_restarted = big
+            if hypothesis is not None:
+                self._accepted.append(hypothesis)
             self.counters["loop_closures"] += 1
             return 1
         # not explained: the back-end never saw it; the book goes back to its snapshot
