@@ -18,6 +18,11 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    (pairwise consistency through the front end's chains, as in PCM, Mangelson et al. 2018;
    within the ``consistency_probability`` quantile of χ²): a revisit is then recognised twice
    before it is judged.  How many recent hypotheses agree is passed to the judge either way.
+   With ``consistent_with_accepted`` it must also be consistent with every closure accepted
+   within the last ``local_keyframes`` keyframes, by the same cycle with each hypothesis' own
+   covariance (its paired lines' and the drift across its local submap): right after a
+   closure the two places are tied, and a hypothesis that moves the robot further than that
+   matched other walls; it is turned away before the judge (:meth:`LoopCloser.contradiction`).
 4. **Judge.**  A large correction is first spread over the loop (:func:`spread_correction`); the
    paired landmarks are merged and a batch solve of the loop
    (:class:`slam.graph.batch.BatchSolver`, at most ``judge_iterations``) outside the back-end
