@@ -277,6 +277,22 @@ def _pairs_at(
     )
 
 
+def _correction_jacobian(alpha: FloatArray, c_t: FloatArray) -> FloatArray:
+    """Jacobian of moved lines' ``(r, α)`` w.r.t. a small extra correction ``(δt, δθ)``.
+
+    Lines of normal angles ``alpha`` ``(K,)``, already moved by a correction whose rotation
+    centre is now ``c_t``: ``r' = r + n·δt + δθ·t·c_t``, ``α' = α + δθ`` (``t`` the line's
+    direction).  Rows ``2k`` (offset) and ``2k + 1`` (angle), shape ``(2K, 3)``.
+    """
+    n = np.stack([np.cos(alpha), np.sin(alpha)], -1)
+    tdir = np.stack([-n[:, 1], n[:, 0]], -1)
+    A = np.zeros((2 * alpha.size, 3))
+    A[0::2, :2] = n
+    A[0::2, 2] = tdir @ c_t
+    A[1::2, 2] = 1.0
+    return A
+
+
 def _refine(
     local: LoopLines,
     old: LoopLines,
@@ -307,16 +323,10 @@ def _refine(
             break
         # residuals of the moved lines against their old partners; Jacobians w.r.t. a small
         # extra correction (δt, δθ) applied after the current one
-        n = np.stack([np.cos(moved.alpha[i]), np.sin(moved.alpha[i])], -1)
-        tdir = np.stack([-n[:, 1], n[:, 0]], -1)
         c_t = np.asarray(center) + corr[:2]  # rotation centre after the current translation
         e_r = moved.r[i] - old.r[j]
         e_a = np.asarray(wrap_angle(moved.alpha[i] - old.alpha[j]))
-        # r' = r + n·δt + δθ·t·c_t ; α' = α + δθ
-        A = np.zeros((2 * i.size, 3))
-        A[0::2, :2] = n
-        A[0::2, 2] = tdir @ c_t
-        A[1::2, 2] = 1.0
+        A = _correction_jacobian(moved.alpha[i], c_t)
         b = np.empty(2 * i.size)
         b[0::2] = -e_r
         b[1::2] = -e_a
@@ -400,12 +410,7 @@ def correction_covariance(
     corr = np.asarray(correction, dtype=float)
     i = np.array([a for a, _ in pairs], dtype=np.intp)
     moved = local.transformed(corr, c)
-    n = np.stack([np.cos(moved.alpha[i]), np.sin(moved.alpha[i])], -1)
-    tdir = np.stack([-n[:, 1], n[:, 0]], -1)
-    A = np.zeros((2 * i.size, 3))
-    A[0::2, :2] = n
-    A[0::2, 2] = tdir @ (c + corr[:2])
-    A[1::2, 2] = 1.0
+    A = _correction_jacobian(moved.alpha[i], c + corr[:2])
     W = np.empty(2 * i.size)
     W[0::2] = (config.offset_tolerance_m / 3.0) ** -2
     W[1::2] = (config.angle_tolerance_rad / 3.0) ** -2

@@ -406,12 +406,16 @@ class LoopCloser:
                 return kf
         return None
 
-    def corridor_normal(self, found: LoopClosure, old: IntArray) -> FloatArray | None:
-        """Along a corridor, the walls' unit normal (world frame); None otherwise."""
+    def _corridor_angle(self, found: LoopClosure, old: IntArray) -> float | None:
+        """Along a corridor, the angle of the walls' normal (world frame); None otherwise."""
         if not found.single_direction:
             return None
-        a = self.book.loop_lines(old[[found.pairs[0][1]]]).alpha[0]
-        return np.array([np.cos(a), np.sin(a)])
+        return float(self.book.loop_lines(old[[found.pairs[0][1]]]).alpha[0])
+
+    def corridor_normal(self, found: LoopClosure, old: IntArray) -> FloatArray | None:
+        """Along a corridor, the walls' unit normal (world frame); None otherwise."""
+        a = self._corridor_angle(found, old)
+        return None if a is None else np.array([np.cos(a), np.sin(a)])
 
     def effective_correction(self, found: LoopClosure, old: IntArray) -> FloatArray:
         """The hypothesis' correction; along a corridor without its arbitrary along-component."""
@@ -443,9 +447,9 @@ class LoopCloser:
         moved = np.array([x[0] + corr[0], x[1] + corr[1], float(wrap_angle(x[2] + corr[2]))])
         z = pose_between(g.poses[k_old], moved)
         normal = None
-        if found.single_direction:
-            a = float(self.book.loop_lines(old[[found.pairs[0][1]]]).alpha[0]) - float(moved[2])
-            normal = np.array([np.cos(a), np.sin(a)])
+        a = self._corridor_angle(found, old)
+        if a is not None:
+            normal = np.array([np.cos(a - float(moved[2])), np.sin(a - float(moved[2]))])
         cov_k = None
         if cov is not None:
             c, s = np.cos(moved[2]), np.sin(moved[2])
@@ -462,13 +466,14 @@ class LoopCloser:
     def _chi2_limit(self, dof: int) -> float:
         return chi2_ppf(self.config.loop_closure.consistency_probability, dof)
 
-    def _mahalanobis(self, e: FloatArray, cov: FloatArray, normals: list[FloatArray]) -> float:
-        """``eᵀ S⁻¹ e`` with the components along any corridor (``normals``' tangents) left out."""
-        return self._projected(e, cov, normals)[0]
-
     @staticmethod
-    def _projected(e: FloatArray, cov: FloatArray, normals: list[FloatArray]) -> tuple[float, int]:
-        """:meth:`_mahalanobis` and the number of directions it counts (its χ² dof)."""
+    def _mahalanobis(
+        e: FloatArray, cov: FloatArray, normals: list[FloatArray]
+    ) -> tuple[float, int]:
+        """``eᵀ S⁻¹ e`` without the components along any corridor, and its χ² dof.
+
+        The tangents of ``normals`` are left out; the dof is the number of directions counted.
+        """
         P = np.eye(3)
         for n in normals:
             t = np.array([-n[1], n[0], 0.0])
@@ -491,7 +496,7 @@ class LoopCloser:
         e = pose_log(pose_between(F, h.z))
         sxy, sth = self.drift.between(h.k_old, h.keyframe)
         S = np.diag([float(sxy) ** 2, float(sxy) ** 2, float(sth) ** 2]) + self._z_cov()
-        return self._mahalanobis(e, S, [] if h.normal is None else [h.normal])
+        return self._mahalanobis(e, S, [] if h.normal is None else [h.normal])[0]
 
     def pair_chi2(self, a: Hypothesis, b: Hypothesis) -> float:
         """Pairwise consistency of two hypotheses (PCM, Mangelson et al. 2018).
@@ -522,14 +527,14 @@ class LoopCloser:
         else:
             S = S + 2.0 * self._z_cov()
         normals = [n for n in (a.normal, b.normal) if n is not None]
-        return self._projected(e, S, normals)
+        return self._mahalanobis(e, S, normals)
 
     def contradiction(self, h: Hypothesis) -> str | None:
         """Why ``h`` contradicts a recently accepted closure, or None.
 
         Recent: accepted within the last ``local_keyframes`` keyframes.  ``h`` contradicts
-        one when their cycle (:meth:`pair_chi2`, with each hypothesis' covariance from its
-        paired lines) lies beyond the ``consistency_probability`` quantile of χ² with as many
+        one when their cycle (:meth:`pair_chi2`, with each hypothesis' own covariance,
+        ``Hypothesis.cov``) lies beyond the ``consistency_probability`` quantile of χ² with as many
         degrees of freedom as directions are compared.
         """
         lcc = self.config.loop_closure
