@@ -16,6 +16,7 @@ from slam.experiments.robustness import (
     BiasOdometry,
     Chain,
     ClipRanges,
+    CropFieldOfView,
     DecimateBeams,
     DecimateScans,
     MoveOdometryToCentre,
@@ -359,6 +360,38 @@ def test_beam_decimation_reads_back_with_its_geometry(tmp_path, every, n_kept):
     assert scans[0].bearings[-1] == pytest.approx(math.radians(-90 + every * 0.5 * (n_kept - 1)))
 
 
+@pytest.mark.parametrize(("fov_deg", "n_kept"), [(60.0, 121), (90.0, 181)])
+def test_field_of_view_crop_reads_back_with_its_geometry(tmp_path, fov_deg, n_kept):
+    """The beams within ±fov/2 of straight ahead, their readings and bearings as logged."""
+    ranges = [1.0 + 0.01 * i for i in range(360)]
+    laser = _wavy_poses(3)
+    src = _log(3, laser, ranges=ranges)
+    step = math.radians(0.5)
+    transform = CropFieldOfView(math.radians(fov_deg), -math.pi / 2, step, 81.91)
+    path = _write(tmp_path / "fov.clf", rewrite_lines(transform, src))
+    reader = CarmenReader(path)
+    scans = list(reader.scans())
+    assert reader.stats.laser_type == "ROBOTLASER1"
+    assert len(scans) == 3
+    first = 180 - (n_kept - 1) // 2  # the source's beam at −fov/2
+    for i, scan in enumerate(scans):
+        assert scan.n_beams == n_kept
+        assert scan.bearings[0] == pytest.approx(-math.radians(fov_deg) / 2, abs=1e-9)
+        assert scan.bearings[-1] == pytest.approx(math.radians(fov_deg) / 2, abs=1e-9)
+        np.testing.assert_allclose(np.diff(scan.bearings), step, atol=1e-12)
+        np.testing.assert_allclose(scan.ranges, np.round(ranges, 2)[first : first + n_kept])
+        assert scan.max_range_m == 81.91
+        np.testing.assert_allclose(scan.pose_odom_laser, laser[i], atol=1e-6)
+
+
+def test_field_of_view_crop_refuses_a_field_narrower_than_two_beams():
+    narrow = CropFieldOfView(math.radians(0.6), -math.pi / 2, math.radians(0.5), 81.91)
+    with pytest.raises(LogFormatError, match="keeps 1 of 360 beams"):
+        rewrite_lines(narrow, _log(1, ranges=[1.0] * 360))
+    with pytest.raises(ConfigError, match="fov_rad > 0"):
+        CropFieldOfView(0.0, -math.pi / 2, math.radians(0.5), 81.91)
+
+
 # --------------------------------------------------------------------------------------------
 # chains of transforms
 # --------------------------------------------------------------------------------------------
@@ -533,11 +566,12 @@ def test_table_parameters_match_the_catalogue():
             assert t.limit_m == 8.0
         if isinstance(t, ClipRanges | RangeNoise):
             assert t.no_return_m == laser.max_range_m
-        if isinstance(t, ClipRanges | DecimateBeams | RangeNoise):
+        if isinstance(t, ClipRanges | CropFieldOfView | DecimateBeams | RangeNoise):
             assert t.first_angle_rad == pytest.approx(math.radians(laser.first_angle_deg))
             assert t.step_rad == pytest.approx(math.radians(laser.step_deg))
-        if isinstance(t, DecimateBeams):
+        if isinstance(t, CropFieldOfView | DecimateBeams):
             assert t.max_range_m == laser.max_range_m
+        if isinstance(t, DecimateBeams):
             assert laser.beams % t.every == 0
     assert {v.name for v in VARIANTS if v.transform is None} == {"intel", "aces", "fr079"}
 

@@ -47,6 +47,10 @@ relations still apply (rewritten only by :class:`MoveOdometryToCentre`):
     Every ``every``-th beam from the first; the scans are written as ``ROBOTLASER1`` lines,
     which state their geometry (start angle, field of view ``= step·(n − 1)``, angular
     resolution, maximum range); laser and robot pose are the ``FLASER`` line's two poses.
+:class:`CropFieldOfView`
+    Only the beams within ``±fov_rad/2`` of the laser's forward direction (a narrower scanner:
+    a 60° field of view is that of a depth camera's scan); written as ``ROBOTLASER1`` with
+    the kept beams' geometry like :class:`DecimateBeams`.
 :class:`Chain`
     Several of the above, each applied to the previous one's output (only the last may write
     ``ROBOTLASER1`` lines); the relations go through every step.
@@ -109,6 +113,7 @@ __all__ = [
     "BiasOdometry",
     "Chain",
     "ClipRanges",
+    "CropFieldOfView",
     "DecimateBeams",
     "DecimateScans",
     "LogTransform",
@@ -544,6 +549,42 @@ class DecimateBeams(LogTransform):
 
 
 @dataclass(frozen=True)
+class CropFieldOfView(LogTransform):
+    """The beams whose bearing lies within ``±fov_rad/2``, as ``ROBOTLASER1`` with their geometry.
+
+    ``first_angle_rad``, ``step_rad`` and ``max_range_m`` are those of the source's ``FLASER``
+    lines (the catalogue's laser facts); the kept beams are consecutive, so the field of view
+    written is ``step·(kept − 1)``, at most ``fov_rad``.
+    """
+
+    fov_rad: float
+    first_angle_rad: float
+    step_rad: float
+    max_range_m: float
+    kind: ClassVar[str] = "crop-fov"
+
+    def __post_init__(self) -> None:
+        if not (self.fov_rad > 0.0 and self.step_rad > 0.0 and self.max_range_m > 0.0):
+            raise ConfigError(f"need fov_rad > 0, step_rad > 0, max_range_m > 0, got {self}")
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if tokens[0] != "FLASER":
+            yield _join(tokens)
+            return
+        n = _flaser_beams(tokens, where)
+        bearings = self.first_angle_rad + self.step_rad * np.arange(n)
+        kept = np.flatnonzero(np.abs(bearings) <= 0.5 * self.fov_rad + 1e-9)
+        if kept.size < 2:
+            raise LogFormatError(
+                f"a {math.degrees(self.fov_rad):g}° field of view keeps {kept.size} of {n} beams",
+                where,
+            )
+        readings = tokens[2 + int(kept[0]) : 3 + int(kept[-1])]
+        first = float(bearings[kept[0]])
+        yield _robotlaser(tokens, n, readings, first, self.step_rad, self.max_range_m)
+
+
+@dataclass(frozen=True)
 class Chain(LogTransform):
     """``steps`` applied one after the other (each to the previous one's output).
 
@@ -559,7 +600,7 @@ class Chain(LogTransform):
         if len(self.steps) < 2:
             raise ConfigError(f"a chain needs at least two steps, got {len(self.steps)}")
         for step in self.steps[:-1]:
-            if isinstance(step, (ClipRanges, DecimateBeams, Chain)):
+            if isinstance(step, (ClipRanges, CropFieldOfView, DecimateBeams, Chain)):
                 raise ConfigError(
                     f"{step.kind} writes ROBOTLASER1 lines (or is a chain): only the last step may"
                 )
@@ -703,12 +744,26 @@ _ODOM_NOISE = "odometry noise: σ 5 cm/√m in x and y, heading 0.05 rad/√m + 
 _RANGE_NOISE_SIGMA_M = 0.02
 _RANGE_NOISE = "range noise: σ 2 cm added to every return, seed 0, ROBOTLASER1"
 
-#: More rows, never used to choose a default before they were added: the same transforms on
-#: Intel, chains of two or three transforms on the three logs (a lower scan rate together
-#: with a mounted laser, a shorter range, fewer beams or biased odometry), and the three logs
-#: with noisier odometry and with a noisier laser.  Intel's bar is its own plus 0.02 m; a
-#: chain's (and a noise row's) is its log's bar for the variants.  ``aces-every4-mount-0.22``
-#: is about 1.35 scans/s with the laser 0.22 m ahead of the robot centre.
+#: ``aces-mount-yaw``: the laser's pose in the robot's frame is ``(0.2 m, 0, 0.5 rad)``.
+_YAW_MOUNT: tuple[float, float, float] = (
+    -0.2 * math.cos(0.5),
+    0.2 * math.sin(0.5),
+    -0.5,
+)
+
+#: The ``*-fov60`` rows: only the middle 60° of the scan (a depth camera's field of view).
+_FOV_60_RAD = math.radians(60.0)
+_FOV_60 = "field of view 60° (the middle beams, ±30°), ROBOTLASER1"
+
+#: More rows, never used to choose a default before they were added (the ``*-fov60`` rows
+#: are among those the handling of a contradicted scan match was judged on): the same
+#: transforms on Intel, chains of two or three transforms on the three logs (a lower scan
+#: rate together with a mounted laser, a shorter range, fewer beams or biased odometry), the
+#: three logs with noisier odometry, with a noisier laser and with a 60° field of view, and
+#: ACES with its laser turned against the robot's heading.  Intel's bar is its own plus
+#: 0.02 m; a chain's (and a noise or field-of-view row's) is its log's bar for the variants.
+#: ``aces-every4-mount-0.22`` is about 1.35 scans/s with the laser 0.22 m ahead of the robot
+#: centre.
 EXTRA_VARIANTS: tuple[Variant, ...] = (
     Variant("intel-every4", "intel", 0.05, DecimateScans(4), "every 4th FLASER line"),
     Variant(
@@ -867,6 +922,35 @@ EXTRA_VARIANTS: tuple[Variant, ...] = (
             )
         ),
         "every 4th FLASER line, every 4th beam (90 beams, 2°), ROBOTLASER1",
+    ),
+    Variant(
+        "aces-mount-yaw",
+        "aces",
+        0.08,
+        MoveOdometryToCentre(_YAW_MOUNT),
+        "laser 0.2 m ahead of the odometry centre, turned 0.5 rad (29°) to the left; "
+        "relations for the centre",
+    ),
+    Variant(
+        "intel-fov60",
+        "intel",
+        0.05,
+        CropFieldOfView(_FOV_60_RAD, -_HALF_PI, _ONE_DEG_RAD, _INTEL_NO_RETURN_M),
+        _FOV_60,
+    ),
+    Variant(
+        "aces-fov60",
+        "aces",
+        0.08,
+        CropFieldOfView(_FOV_60_RAD, -_HALF_PI, _ONE_DEG_RAD, _ACES_NO_RETURN_M),
+        _FOV_60,
+    ),
+    Variant(
+        "fr079-fov60",
+        "fr079",
+        0.10,
+        CropFieldOfView(_FOV_60_RAD, -_HALF_PI, _FR079_STEP_RAD, _FR079_NO_RETURN_M),
+        _FOV_60,
     ),
 )
 
