@@ -40,6 +40,7 @@ from slam.frontend.scan_match import (
 )
 from slam.geometry import pose_between, pose_compose, pose_log
 from slam.io import read_tum
+from slam.io.carmen import scan_trajectory
 from slam.io.relations import read_relations
 from slam.io.results import read_covariances
 from slam.models import MotionNoiseConfig
@@ -889,13 +890,13 @@ def test_scan_matching_corrects_a_heading_slip_in_the_demo_log(tmp_path):
     assert with_sm < np.deg2rad(0.2)
 
 
-def test_a_slip_the_points_cannot_settle_is_left_to_the_loop_closure(tmp_path):
+def test_a_slip_the_points_do_not_settle_centres_the_step_with_the_slip_spread(tmp_path):
     """The demo's 20° slip at scan 200 with no match trusted (``min_overlap = 0.99``: 359 of
     382 matches rejected).  The slip's step is the only one whose rejected match finds a
-    slip; its odometry factor gets the slip component's covariance, so the loop closure can
-    bend the trajectory there: the run ends within 0.2° of the truth's heading, where
-    without the slip mixture (``slip_probability = 0``: nothing is flagged, the step keeps
-    the odometry's covariance) it ends 20° off."""
+    slip (``contradicted``); its odometry factor is centred on the match with the slip
+    component's covariance: the run ends within 0.2° of the truth's heading, where without the
+    slip mixture (``slip_probability = 0``: nothing is flagged, the step keeps the odometry)
+    it ends 20° off."""
     log = tmp_path / "slip.clf"
     _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(20.0))
     summary = run_slam(log, tmp_path / "doubted", _with_scan_matching(min_overlap=0.99))
@@ -948,3 +949,51 @@ def test_slip_mixture_recovers_the_turns_fr079s_odometry_misreports(shared_data)
         if k == 0:
             g = match_scans(points(a), points(b), delta0, prior, replace(cfg, slip_probability=0.0))
             assert abs(_angle(g.delta[2] - delta0[2])) < np.deg2rad(4.0)
+
+
+def _odometry_edges(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The run's odometry factors from ``graph.g2o``: time stamps of both keyframes ``(m, 2)``,
+    measurements ``(m, 3)`` and the heading's standard deviation ``(m,)``."""
+    stamps: dict[int, float] = {}
+    edges = []
+    for line in (out / "graph.g2o").read_text().splitlines():
+        f = line.split()
+        if f[0] == "LINESLAM_SCAN":
+            stamps[int(f[1])] = float(f[2])
+        elif f[0] == "EDGE_SE2":
+            edges.append([float(v) for v in f[1:]])
+    e = np.array(edges)
+    info = np.zeros((e.shape[0], 3, 3))
+    iu = np.triu_indices(3)
+    info[:, iu[0], iu[1]] = e[:, 5:]
+    info = info + np.triu(info, 1).transpose(0, 2, 1)
+    sigma_theta = np.sqrt(np.linalg.inv(info)[:, 2, 2])
+    t = np.array([[stamps[int(i)], stamps[int(j)]] for i, j in e[:, :2]])
+    return t, e[:, 2:5], sigma_theta
+
+
+def test_a_contradicted_step_is_the_match_in_the_graph(tmp_path):
+    """The same slip and untrusted matches: of the run's odometry factors exactly one turns
+    more than 10° away from the logged odometry, the contradicted step's; it turns as the
+    ground truth does (within 1°, where the log is 20° off), with the slip component's heading
+    spread (at least ``slip_sigma_rad``, 0.35 rad): centred where the points put it, as
+    uncertain as a slip."""
+    log = tmp_path / "slip.clf"
+    _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(20.0))
+    summary = run_slam(log, tmp_path / "doubted", _with_scan_matching(min_overlap=0.99))
+    assert summary["scan_match_contradictions"] == 1
+    t, z, sigma_theta = _odometry_edges(tmp_path / "doubted")
+    truth, logged = read_tum(DEMO / "ground_truth.tum"), scan_trajectory(log, frame="laser")
+
+    def turn(traj, when):
+        i = np.searchsorted(traj.timestamps, when - 1e-6)
+        np.testing.assert_allclose(traj.timestamps[i], when, atol=1e-5)
+        return pose_between(traj.poses[i[:, 0]], traj.poses[i[:, 1]])[:, 2]
+
+    off_log = np.abs(np.remainder(z[:, 2] - turn(logged, t) + np.pi, 2.0 * np.pi) - np.pi)
+    (k,) = np.flatnonzero(off_log > np.deg2rad(10.0))
+    assert off_log[k] == pytest.approx(np.deg2rad(20.0), abs=np.deg2rad(1.0))
+    assert abs(_angle(float(z[k, 2] - turn(truth, t)[k]))) < np.deg2rad(1.0)
+    slip_sigma = RunConfig().slam.frontend.scan_matching.slip_sigma_rad
+    assert slip_sigma <= sigma_theta[k] < 1.1 * slip_sigma
+    assert np.all(np.delete(sigma_theta, k) < 0.5 * slip_sigma)

@@ -511,8 +511,9 @@ class ScanMatch:
         the points.
     contradicted : bool
         Not accepted, yet the slip component is the more probable at the match: the points
-        contradict the odometry's heading without settling it.  The step's prior is then the
-        slip component's (:func:`slip_covariance`), not the odometry's Gaussian.
+        contradict the odometry's heading, with too little overlap to be trusted as a
+        measurement.  The pipeline then centres the step on ``delta`` with the slip
+        component's covariance (:func:`slip_covariance`), not the odometry's Gaussian.
     """
 
     delta: FloatArray

@@ -19,7 +19,9 @@ For each keyframe:
    match that finds the odometry's heading slipped (``scan_matching.slip_probability``)
    replaces the keyframe's odometry factor (the match's posterior under the slip component:
    the points' rotation, the translation moved with it), and the step is left out of the
-   odometry-noise estimate.
+   odometry-noise estimate.  A match not used (too little overlap) whose best solution is
+   still a slip (``contradicted``) centres the step too, with the slip component's covariance:
+   the points refute the odometry's heading but are not trusted as a measurement of it.
 4. **Front end** (:mod:`~slam.line_slam.local_map`, :mod:`~slam.line_slam.front_end`): the
    lines are registered against the local map around ``x̂``; the registered pose is the
    keyframe's initial estimate and the registration's pairs are the data association.
@@ -327,13 +329,14 @@ class LineSlam:
         Q = self.odometry_noise.model.covariance(step.delta)
         x_odo = x_pred
         slip: ScanMatch | None = None
+        step_delta = step.delta  # the step's odometry factor: the odometry, or what replaces it
         contradicted = False
         # 4. front end: the scan's points matched against the previous keyframe's with the
         # odometry as the prior (a slip the points see is corrected before the lines are
         # paired); then the lines registered against the local map = initial guess +
         # association.  The match moves the prediction (its covariance stays the odometry's);
         # it enters the graph only where it finds a slip, as that step's odometry factor (5.);
-        # a match not used that finds a slip leaves the step the slip component's covariance
+        # a match not used that finds a slip centres the step, with the slip's spread
         with self.clock("frontend"):
             if points is not None and self._points is not None and not step.first:
                 match = match_scans(self._points, points, step.delta, Q, cfg.frontend.scan_matching)
@@ -346,9 +349,12 @@ class LineSlam:
                 else:
                     self.counters["scan_matches_rejected"] += 1
                     if match.contradicted:
-                        # the points say the odometry's heading slipped but not by how much:
-                        # the step keeps the odometry with the slip component's covariance
+                        # the points say the odometry's heading slipped, with too little
+                        # overlap to be trusted as a measurement: the step is centred where
+                        # they put it, with the slip component's spread
                         Q = slip_covariance(Q, cfg.frontend.scan_matching, step.delta, body=True)
+                        step_delta = match.delta
+                        x_pred = pose_compose(g.poses[prev], match.delta)
                         contradicted = True
                         self.counters["scan_match_contradictions"] += 1
             self._points = points
@@ -382,7 +388,7 @@ class LineSlam:
                 g.set_prior(reg.pose_world_laser, cfg.prior_cov)
             else:
                 if slip is None:
-                    g.add_odometry(prev, i, step.delta, Q)
+                    g.add_odometry(prev, i, step_delta, Q)
                 else:
                     # the odometry's heading slipped: the step's factor is the match (the
                     # points' rotation, the translation moved with the slip)
