@@ -287,8 +287,24 @@ class DecimateScans(LogTransform):
             yield _join(tokens)
 
 
+class _ScanAsRobotLaser(LogTransform):
+    """Every ``FLASER`` line written as a ``ROBOTLASER1`` line (``_scan``); others as logged.
+
+    Only the last step of a :class:`Chain` may be one (the others rewrite ``FLASER`` logs).
+    """
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if tokens[0] != "FLASER":
+            yield _join(tokens)
+            return
+        yield self._scan(tokens, _flaser_beams(tokens, where), where, state)
+
+    def _scan(self, tokens: list[str], n: int, where: str, state: _Pass) -> str:  # pragma: no cover
+        raise NotImplementedError
+
+
 @dataclass(frozen=True)
-class ClipRanges(LogTransform):
+class ClipRanges(_ScanAsRobotLaser):
     """Readings above ``limit_m`` become ``no_return_m``; written as ``ROBOTLASER1``.
 
     A ``FLASER`` line cannot say which reading means "no return", so the variant's scans are
@@ -306,23 +322,19 @@ class ClipRanges(LogTransform):
         if not (0.0 < self.limit_m < self.no_return_m and self.step_rad > 0.0):
             raise ConfigError(f"need 0 < limit_m < no_return_m and step_rad > 0, got {self}")
 
-    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
-        if tokens[0] != "FLASER":
-            yield _join(tokens)
-            return
-        n = _flaser_beams(tokens, where)
+    def _scan(self, tokens: list[str], n: int, where: str, state: _Pass) -> str:
         token = f"{self.no_return_m:.2f}"
         if float(token) != self.no_return_m:
             token = repr(self.no_return_m)
         readings, ranges = _readings(tokens, n, where)
         readings = [token if r > self.limit_m else v for r, v in zip(ranges, readings, strict=True)]
-        yield _robotlaser(
+        return _robotlaser(
             tokens, n, readings, self.first_angle_rad, self.step_rad, self.no_return_m
         )
 
 
 @dataclass(frozen=True)
-class RangeNoise(LogTransform):
+class RangeNoise(_ScanAsRobotLaser):
     """Normal noise of ``sigma_m`` added to every reading that is a return; ``ROBOTLASER1``.
 
     A reading at or above ``no_return_m`` (the source's no-return value) or at or below 0 is
@@ -346,11 +358,7 @@ class RangeNoise(LogTransform):
         if not (self.no_return_m > 0.0 and self.step_rad > 0.0):
             raise ConfigError(f"need no_return_m > 0 and step_rad > 0, got {self}")
 
-    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
-        if tokens[0] != "FLASER":
-            yield _join(tokens)
-            return
-        n = _flaser_beams(tokens, where)
+    def _scan(self, tokens: list[str], n: int, where: str, state: _Pass) -> str:
         if state.rng is None:
             state.rng = np.random.default_rng(self.seed)
         readings, ranges = _readings(tokens, n, where)
@@ -358,7 +366,7 @@ class RangeNoise(LogTransform):
         inside = (ranges > 0.0) & (ranges < self.no_return_m)
         changed = inside & (noisy > 0.0) & (noisy < self.no_return_m)
         out = [f"{r:.3f}" if c else v for r, c, v in zip(noisy, changed, readings, strict=True)]
-        yield _robotlaser(tokens, n, out, self.first_angle_rad, self.step_rad, self.no_return_m)
+        return _robotlaser(tokens, n, out, self.first_angle_rad, self.step_rad, self.no_return_m)
 
 
 class _ReintegratedOdometry(LogTransform):
@@ -521,7 +529,7 @@ class MoveOdometryToCentre(LogTransform):
 
 
 @dataclass(frozen=True)
-class DecimateBeams(LogTransform):
+class DecimateBeams(_ScanAsRobotLaser):
     """Every ``every``-th beam from the first, written as ``ROBOTLASER1`` with its geometry.
 
     ``first_angle_rad``, ``step_rad`` and ``max_range_m`` are those of the source's ``FLASER``
@@ -538,18 +546,14 @@ class DecimateBeams(LogTransform):
         if self.every < 1 or not (self.step_rad > 0.0 and self.max_range_m > 0.0):
             raise ConfigError(f"need every >= 1, step_rad > 0, max_range_m > 0, got {self}")
 
-    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
-        if tokens[0] != "FLASER":
-            yield _join(tokens)
-            return
-        n = _flaser_beams(tokens, where)
+    def _scan(self, tokens: list[str], n: int, where: str, state: _Pass) -> str:
         kept = tokens[2 : 2 + n : self.every]
         step = self.every * self.step_rad
-        yield _robotlaser(tokens, n, kept, self.first_angle_rad, step, self.max_range_m)
+        return _robotlaser(tokens, n, kept, self.first_angle_rad, step, self.max_range_m)
 
 
 @dataclass(frozen=True)
-class CropFieldOfView(LogTransform):
+class CropFieldOfView(_ScanAsRobotLaser):
     """The beams whose bearing lies within ``±fov_rad/2``, as ``ROBOTLASER1`` with their geometry.
 
     ``first_angle_rad``, ``step_rad`` and ``max_range_m`` are those of the source's ``FLASER``
@@ -567,11 +571,7 @@ class CropFieldOfView(LogTransform):
         if not (self.fov_rad > 0.0 and self.step_rad > 0.0 and self.max_range_m > 0.0):
             raise ConfigError(f"need fov_rad > 0, step_rad > 0, max_range_m > 0, got {self}")
 
-    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
-        if tokens[0] != "FLASER":
-            yield _join(tokens)
-            return
-        n = _flaser_beams(tokens, where)
+    def _scan(self, tokens: list[str], n: int, where: str, state: _Pass) -> str:
         bearings = self.first_angle_rad + self.step_rad * np.arange(n)
         kept = np.flatnonzero(np.abs(bearings) <= 0.5 * self.fov_rad + 1e-9)
         if kept.size < 2:
@@ -581,7 +581,7 @@ class CropFieldOfView(LogTransform):
             )
         readings = tokens[2 + int(kept[0]) : 3 + int(kept[-1])]
         first = float(bearings[kept[0]])
-        yield _robotlaser(tokens, n, readings, first, self.step_rad, self.max_range_m)
+        return _robotlaser(tokens, n, readings, first, self.step_rad, self.max_range_m)
 
 
 @dataclass(frozen=True)
@@ -600,7 +600,7 @@ class Chain(LogTransform):
         if len(self.steps) < 2:
             raise ConfigError(f"a chain needs at least two steps, got {len(self.steps)}")
         for step in self.steps[:-1]:
-            if isinstance(step, (ClipRanges, CropFieldOfView, DecimateBeams, Chain)):
+            if isinstance(step, (_ScanAsRobotLaser, Chain)):
                 raise ConfigError(
                     f"{step.kind} writes ROBOTLASER1 lines (or is a chain): only the last step may"
                 )
