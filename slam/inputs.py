@@ -70,6 +70,20 @@ catalogue's ``relations_frame``, so that ``trajectory.tum`` and the relations co
 like), for any other log the base.  ``summary.json``'s ``"frame"`` says which.  ``odometry_sign =
 "velocity"`` repairs CARMEN odometry that logs reversing as forward motion
 (:func:`slam.io.carmen.velocity_signed_scans`).
+
+Logs without odometry
+---------------------
+A laser-only recording has no odometry, or odometry that never moves; read as it is, every
+scan would sit at the first pose.  With ``[scanner] odometry_source = "auto"`` (the default)
+the scans are held back while the log's odometry has not moved and are registered meanwhile
+(:class:`slam.frontend.laser_odometry.LaserOdometry`, scan matching alone).  Once the odometry
+moves, every scan passes as logged (a robot that stood still at the start).  Once the scans
+have moved :data:`STILL_ODOMETRY_M` or :data:`STILL_ODOMETRY_RAD` from the first scan without
+it, the odometry is taken for absent: an :class:`InputWarning` says so and every scan gets the
+laser odometry's pose (from the first scan's logged pose).  ``"scan_matching"`` always uses the
+laser odometry, ``"log"`` never.  ``summary.json``'s ``"input"`` block has
+``odometry_source`` (``"log"`` or ``"scan_matching"``) and, for the latter,
+``laser_odometry_scans`` (matched, unmatched).
 """
 
 from __future__ import annotations
@@ -115,6 +129,13 @@ MOUNT_TOLERANCE_M = 0.01
 """Largest spread (m) of ``pose_odom_base⁻¹ ∘ pose_odom_laser`` over a log for a mounting."""
 MOUNT_TOLERANCE_RAD = math.radians(0.5)
 """Largest spread (rad) of its heading for a mounting."""
+
+
+STILL_ODOMETRY_M = 0.5
+"""How far (m) the scans must move from the first scan, the log's odometry not moving, before
+``odometry_source = "auto"`` takes the odometry for absent."""
+STILL_ODOMETRY_RAD = 0.5
+"""The same in rotation (rad)."""
 
 
 class InputWarning(UserWarning):
@@ -163,6 +184,11 @@ class ScannerConfig:
         Bags: the odometry topic, or the ``/tf`` transforms to the base frame.
     base_frame : str, optional
         Bags: the robot's base frame (default: the odometry's ``child_frame_id``).
+    odometry_source : {"auto", "log", "scan_matching"}
+        Where the motion comes from: the log's odometry (``"log"``), the scans alone
+        (``"scan_matching"``: :class:`slam.frontend.laser_odometry.LaserOdometry`), or
+        ``"auto"``: the log's, unless it has none or it never moves while the scans do
+        (module docstring, "Logs without odometry").
     """
 
     first_angle_deg: float | None = None
@@ -180,6 +206,7 @@ class ScannerConfig:
     odom_topic: str | None = None
     odometry: Literal["auto", "topic", "tf"] = "auto"
     base_frame: str | None = None
+    odometry_source: Literal["auto", "log", "scan_matching"] = "auto"
 
     def __post_init__(self) -> None:
         for name in ("first_angle_deg", "step_deg", "fov_deg", "min_range_m", "max_range_m"):
@@ -220,6 +247,10 @@ class ScannerConfig:
             "odometry_sign must be velocity or logged",
         )
         require(self.odometry in ("auto", "topic", "tf"), "odometry must be auto, topic or tf")
+        require(
+            self.odometry_source in ("auto", "log", "scan_matching"),
+            "odometry_source must be auto, log or scan_matching",
+        )
 
     @property
     def states_geometry(self) -> bool:
@@ -533,6 +564,8 @@ class LogInput:
     geometry: _Geometry = field(default_factory=_Geometry)
     _reader: Any = None
     _skipped_without_odometry: int = 0
+    _laser_odometry: Any = None
+    odometry_source: str = "log"
 
     def total(self, max_scans: int | None = None) -> int | None:
         """Scans a run over at most ``max_scans`` of them will read (None if unknown)."""
@@ -583,15 +616,26 @@ class LogInput:
         part of the log read, or an error at the first one (:meth:`raw_scans`; bags are not
         checked).
         """
-        scanner = self.scanner
-        k = 0
-        skipped = 0
         if max_scans is not None and max_scans <= 0:
             return
         if self.format == "carmen" and stats is None:
             from slam.io.carmen import CarmenStats
 
             stats = CarmenStats()
+        scans = self._read(max_scans, need_odometry, stats, strict)
+        yield from self._motion(scans) if need_odometry else scans
+
+    def _read(
+        self,
+        max_scans: int | None,
+        need_odometry: bool,
+        stats: CarmenStats | None,
+        strict: bool,
+    ) -> Iterator[Scan]:
+        """:meth:`scans` before the odometry source is applied."""
+        scanner = self.scanner
+        k = 0
+        skipped = 0
         for scan in self.raw_scans(stats=stats, strict=strict):
             if need_odometry and scan.pose_odom_base is None and scan.pose_odom_laser is None:
                 # a bag's scan outside its odometry's span; a CARMEN scan without a pose in a
@@ -619,6 +663,87 @@ class LogInput:
                 InputWarning,
                 stacklevel=2,
             )
+
+    def _motion(self, scans: Iterator[Scan]) -> Iterator[Scan]:
+        """``scans`` with the odometry ``[scanner] odometry_source`` asks for (module docstring).
+
+        ``"auto"`` holds the scans back while the log's odometry has not moved (or is absent)
+        and registers them meanwhile (:class:`~slam.frontend.laser_odometry.LaserOdometry`):
+        once the odometry moves they pass unchanged; once the scans have moved
+        :data:`STILL_ODOMETRY_M` or :data:`STILL_ODOMETRY_RAD` from the first scan without it,
+        the log's odometry is taken for absent (an :class:`InputWarning`) and every scan gets
+        the laser odometry's pose.
+        """
+        mode = self.scanner.odometry_source
+        if mode == "log":
+            yield from scans
+            return
+        from slam.frontend.laser_odometry import LaserOdometry
+
+        laser = LaserOdometry()
+        origin: FloatArray | None = None  # the first scan's logged pose (else zero)
+        first: FloatArray | None = None  # the first scan's logged pose, if it has one
+        held: list[tuple[Scan, FloatArray]] = []
+        decided: str | None = mode if mode == "scan_matching" else None
+        for scan in scans:
+            if decided == "log":
+                yield scan
+                continue
+            odom = self._logged_pose(scan)
+            if origin is None:
+                origin = np.zeros(3) if odom is None else odom
+                first = odom
+            moved = odom is not None and first is not None and np.any(np.abs(odom - first) > 0)
+            if decided is None and moved:
+                decided = "log"  # the log's odometry moves: everything as logged
+                yield from (s for s, _ in held)
+                held = []
+                yield scan
+                continue
+            pose = laser.add(scan)
+            if decided is not None:
+                yield self._with_laser_pose(scan, pose, origin)
+                continue
+            held.append((scan, pose))
+            away = math.hypot(pose[0], pose[1])
+            if away > STILL_ODOMETRY_M or abs(pose[2]) > STILL_ODOMETRY_RAD:
+                decided = "scan_matching"
+                warnings.warn(
+                    f"{self.log}: the log's odometry "
+                    + ("is absent" if first is None else "never moves")
+                    + f" while its scans move ({away:.2f} m, {abs(pose[2]):.2f} rad by scan "
+                    f"{scan.index}): the motion is made by matching the scans (laser "
+                    "odometry, [scanner] odometry_source)",
+                    InputWarning,
+                    stacklevel=2,
+                )
+                yield from (self._with_laser_pose(s, p, origin) for s, p in held)
+                held = []
+        if decided is None and held:
+            # neither the odometry nor the scans moved: the scans as logged, those without
+            # odometry at the laser odometry's pose (as still as they are)
+            assert origin is not None
+            absent = [s.pose_odom_laser is None and s.pose_odom_base is None for s, _ in held]
+            yield from (
+                self._with_laser_pose(s, p, origin) if a else s
+                for (s, p), a in zip(held, absent, strict=True)
+            )
+            decided = "scan_matching" if any(absent) else "log"
+        if decided == "scan_matching":
+            self.odometry_source = "scan_matching"
+            self._laser_odometry = laser
+
+    def _logged_pose(self, scan: Scan) -> FloatArray | None:
+        """The scan's logged laser odometry pose, or None when it has none."""
+        if scan.pose_odom_laser is None and scan.pose_odom_base is None:
+            return None
+        return self.policy.pose_odom_laser(scan)
+
+    def _with_laser_pose(self, scan: Scan, pose: FloatArray, origin: FloatArray) -> Scan:
+        """``scan`` with the laser odometry's pose (moved to start at ``origin``)."""
+        pose_laser = pose_compose(origin, pose)
+        pose_base = pose_compose(pose_laser, pose_inverse(self.policy.mount))
+        return replace(scan, pose_odom_laser=pose_laser, pose_odom_base=pose_base)
 
     def _note_geometry(self, scan: Scan) -> None:
         g = self.geometry
@@ -664,6 +789,12 @@ class LogInput:
         }
         if self._skipped_without_odometry:
             out["scans_without_odometry_left_out"] = self._skipped_without_odometry
+        out["odometry_source"] = self.odometry_source
+        if self._laser_odometry is not None:
+            out["laser_odometry_scans"] = {
+                "matched": int(self._laser_odometry.matched),
+                "unmatched": int(self._laser_odometry.unmatched),
+            }
         return out
 
 

@@ -1,0 +1,121 @@
+"""Logs without odometry: laser odometry from the scans, and when a log needs it."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from carmen_lines import flaser, odom
+
+from slam.config import RunConfig
+from slam.errors import ConfigError
+from slam.experiments.robustness import FreezeOdometry, rewrite_lines
+from slam.frontend.laser_odometry import LaserOdometry, LaserOdometryConfig
+from slam.geometry import pose_between, pose_compose, pose_log
+from slam.inputs import InputWarning, ScannerConfig, open_log
+from slam.io.tum import read_tum
+from slam.runner import run_slam
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DEMO = REPO_ROOT / "datasets" / "sim" / "demo"
+
+
+def _relative_errors(poses: np.ndarray, truth: np.ndarray, k: int) -> np.ndarray:
+    """Translation error (m) of every relative pose ``k`` scans apart."""
+    e = pose_log(
+        pose_between(pose_between(truth[:-k], truth[k:]), pose_between(poses[:-k], poses[k:]))
+    )
+    return np.hypot(e[:, 0], e[:, 1])
+
+
+def _frozen_demo(tmp_path: Path) -> Path:
+    lines = DEMO.joinpath("log.clf").read_text().splitlines()
+    path = tmp_path / "frozen.clf"
+    path.write_text("".join(rewrite_lines(FreezeOdometry(), lines, "log.clf")))
+    return path
+
+
+def test_laser_odometry_on_the_demo_beats_its_odometry_against_the_ground_truth():
+    """The scans alone give the demo's motion to millimetres, where its wheels drift by 1 %."""
+    log = open_log(DEMO / "log.clf", ScannerConfig(odometry_source="log"))
+    laser = LaserOdometry()
+    poses = np.array([laser.add(scan) for scan in log.scans()])
+    truth = read_tum(DEMO / "ground_truth.tum").poses
+    wheels = read_tum(DEMO / "odometry.tum").poses
+    assert laser.unmatched == 0
+    for k in (1, 10):
+        ours = _relative_errors(poses, truth, k).mean()
+        theirs = _relative_errors(wheels, truth, k).mean()
+        assert ours < 0.01
+        assert ours < 0.5 * theirs
+
+
+def test_laser_odometry_config_is_validated():
+    with pytest.raises(ConfigError, match="sigma_xy_m"):
+        LaserOdometryConfig(sigma_xy_m=0.0)
+
+
+def test_freeze_odometry_keeps_the_first_pose_and_the_laser_offset():
+    base = [(0.1 * i, 0.02 * i, 0.05 * i) for i in range(4)]
+    laser = [tuple(pose_compose(np.array(b), np.array([0.2, 0.0, 0.0]))) for b in base]
+    src = []
+    for i in range(4):
+        src.append(odom(base[i], 9.5 + i, tv=0.3, rv=0.1))
+        src.append(flaser([1.0] * 5, laser[i], base[i], 10.0 + i))
+    out = rewrite_lines(FreezeOdometry(), src)
+    for line in out:
+        tokens = line.split()
+        if tokens[0] == "ODOM":
+            assert [float(v) for v in tokens[1:6]] == [0.0, 0.0, 0.0, 0.0, 0.0]
+        else:
+            np.testing.assert_allclose([float(v) for v in tokens[7:13]], [0.2, 0, 0, 0, 0, 0])
+            assert len(tokens) == 16
+
+
+def test_a_log_whose_odometry_never_moves_gets_laser_odometry(tmp_path):
+    frozen = _frozen_demo(tmp_path)
+    log = open_log(frozen)
+    with pytest.warns(InputWarning, match="never moves while its scans move"):
+        poses = np.array([log.policy.pose_odom_laser(s) for s in log.scans()])
+    assert log.describe()["odometry_source"] == "scan_matching"
+    truth = read_tum(DEMO / "ground_truth.tum").poses
+    assert _relative_errors(poses, truth, 10).mean() < 0.01
+    # told to take the log's odometry as it is, the scans stay where the log puts them
+    as_logged = open_log(frozen, ScannerConfig(odometry_source="log"))
+    still = np.array([as_logged.policy.pose_odom_laser(s) for s in as_logged.scans()])
+    assert np.ptp(still, axis=0).max() == 0.0
+    assert as_logged.describe()["odometry_source"] == "log"
+
+
+def test_a_log_with_odometry_reads_the_same_whatever_the_source_setting():
+    """``auto`` holds back the first scans while the odometry stands still, then passes all."""
+    auto = open_log(DEMO / "log.clf")
+    logged = open_log(DEMO / "log.clf", ScannerConfig(odometry_source="log"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InputWarning)
+        a = list(auto.scans())
+    b = list(logged.scans())
+    assert len(a) == len(b)
+    for s, t in zip(a, b, strict=True):
+        assert s.index == t.index
+        np.testing.assert_array_equal(s.pose_odom_laser, t.pose_odom_laser)
+        np.testing.assert_array_equal(s.ranges, t.ranges)
+    assert auto.describe()["odometry_source"] == "log"
+
+
+def test_slam_on_a_laser_only_log(tmp_path):
+    """The demo with its odometry frozen: lineslam on its scans alone stays near the truth."""
+    frozen = _frozen_demo(tmp_path)
+    run_slam(frozen, tmp_path / "out", RunConfig())
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert any("never moves" in str(w) for w in summary["warnings"])
+    assert summary["input"]["odometry_source"] == "scan_matching"
+    assert summary["input"]["laser_odometry_scans"]["unmatched"] == 0
+    poses = read_tum(tmp_path / "out" / "trajectory.tum").poses
+    truth = read_tum(DEMO / "ground_truth.tum").poses
+    assert _relative_errors(poses, truth, 10).mean() < 0.01
+    # the frozen odometry as it is leaves every scan at the first pose: far from the truth
+    assert _relative_errors(np.zeros_like(truth), truth, 10).mean() > 0.1
