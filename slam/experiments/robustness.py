@@ -116,6 +116,7 @@ __all__ = [
     "CropFieldOfView",
     "DecimateBeams",
     "DecimateScans",
+    "FreezeOdometry",
     "LogTransform",
     "MoveOdometryToCentre",
     "NoisyOdometry",
@@ -418,6 +419,37 @@ class _ReintegratedOdometry(LogTransform):
                 state.odometry = (base, new)
             tokens[2 + n : 5 + n] = _pose_tokens(pose_compose(new, pose_between(base, laser)))
             tokens[5 + n : 8 + n] = _pose_tokens(new)
+        yield _join(tokens)
+
+
+@dataclass(frozen=True)
+class FreezeOdometry(LogTransform):
+    """A log whose odometry never moves, as a laser-only recording writes it.
+
+    Every pose of ``ODOM`` and ``FLASER`` lines (the laser pose and the odometry pose) is the
+    log's first one (the laser pose keeps its logged offset), ``tv`` and ``rv`` are zero.
+    """
+
+    kind: ClassVar[str] = "freeze-odometry"
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if tokens[0] == "ODOM":
+            if len(tokens) < 8:
+                raise LogFormatError("ODOM with fewer than 8 fields", where)
+            raw = _pose(tokens, 1, where)
+            if state.odometry is None:
+                state.odometry = (raw, raw)
+            tokens[1:4] = _pose_tokens(state.odometry[1])
+            tokens[4:6] = ["0.000000", "0.000000"]
+        elif tokens[0] == "FLASER":
+            n = _flaser_beams(tokens, where)
+            laser = _pose(tokens, 2 + n, where)
+            base = _pose(tokens, 5 + n, where)
+            if state.odometry is None:
+                state.odometry = (base, base)
+            still = state.odometry[1]
+            tokens[2 + n : 5 + n] = _pose_tokens(pose_compose(still, pose_between(base, laser)))
+            tokens[5 + n : 8 + n] = _pose_tokens(still)
         yield _join(tokens)
 
 
@@ -754,6 +786,7 @@ _YAW_MOUNT: tuple[float, float, float] = (
 #: The ``*-fov60`` rows: only the middle 60° of the scan (a depth camera's field of view).
 _FOV_60_RAD = math.radians(60.0)
 _FOV_60 = "field of view 60° (the middle beams, ±30°), ROBOTLASER1"
+_NO_ODOMETRY = "odometry frozen at its first pose (a laser-only log): the motion from the scans"
 
 #: More rows, never used to choose a default before they were added (the ``*-fov60`` rows
 #: are among those the handling of a contradicted scan match was judged on): the same
@@ -952,6 +985,9 @@ EXTRA_VARIANTS: tuple[Variant, ...] = (
         CropFieldOfView(_FOV_60_RAD, -_HALF_PI, _FR079_STEP_RAD, _FR079_NO_RETURN_M),
         _FOV_60,
     ),
+    Variant("intel-no-odometry", "intel", 0.05, FreezeOdometry(), _NO_ODOMETRY),
+    Variant("aces-no-odometry", "aces", 0.08, FreezeOdometry(), _NO_ODOMETRY),
+    Variant("fr079-no-odometry", "fr079", 0.10, FreezeOdometry(), _NO_ODOMETRY),
 )
 
 
