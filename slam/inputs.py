@@ -77,13 +77,15 @@ A laser-only recording has no odometry, or odometry that never moves; read as it
 scan would sit at the first pose.  With ``[scanner] odometry_source = "auto"`` (the default)
 the scans are held back while the log's odometry has not moved and are registered meanwhile
 (:class:`slam.frontend.laser_odometry.LaserOdometry`, scan matching alone).  Once the odometry
-moves, every scan passes as logged (a robot that stood still at the start).  Once the scans
-have moved :data:`STILL_ODOMETRY_M` or :data:`STILL_ODOMETRY_RAD` from the first scan without
-it, the odometry is taken for absent: an :class:`InputWarning` says so and every scan gets the
-laser odometry's pose (from the first scan's logged pose).  ``"scan_matching"`` always uses the
-laser odometry, ``"log"`` never.  ``summary.json``'s ``"input"`` block has
-``odometry_source`` (``"log"`` or ``"scan_matching"``) and, for the latter,
-``laser_odometry_scans`` (matched, unmatched).
+moves, every scan passes as logged (a robot that stood still at the start); where the logged
+laser poses stand still while the odometry poses move, the laser odometry is the odometry
+pose composed with the mounting (an :class:`InputWarning`; ``laser_odometry`` ``"base"``).
+Once the scans have moved :data:`STILL_ODOMETRY_M` or :data:`STILL_ODOMETRY_RAD` from the
+first scan without it, the odometry is taken for absent: an :class:`InputWarning` says so and
+every scan gets the laser odometry's pose (from the first scan's logged pose).
+``"scan_matching"`` always uses the laser odometry, ``"log"`` never.  ``summary.json``'s
+``"input"`` block has ``odometry_source`` (``"log"`` or ``"scan_matching"``) and, for the
+latter, ``laser_odometry_scans`` (matched, unmatched).
 """
 
 from __future__ import annotations
@@ -669,7 +671,9 @@ class LogInput:
 
         ``"auto"`` holds the scans back while the log's odometry has not moved (or is absent)
         and registers them meanwhile (:class:`~slam.frontend.laser_odometry.LaserOdometry`):
-        once the odometry moves they pass unchanged; once the scans have moved
+        once the odometry moves they pass unchanged (where the logged laser poses stand still
+        while the odometry poses move, with the odometry pose composed with the mounting, and
+        an :class:`InputWarning`); once the scans have moved
         :data:`STILL_ODOMETRY_M` or :data:`STILL_ODOMETRY_RAD` from the first scan without it,
         the log's odometry is taken for absent (an :class:`InputWarning`) and every scan gets
         the laser odometry's pose.
@@ -685,20 +689,46 @@ class LogInput:
         first: FloatArray | None = None  # the first scan's logged pose, if it has one
         held: list[tuple[Scan, FloatArray]] = []
         decided: str | None = mode if mode == "scan_matching" else None
+        first_base: FloatArray | None = None  # the first scan's odometry (base) pose
         for scan in scans:
             if decided == "log":
                 yield scan
+                continue
+            if decided == "base":
+                yield self._with_base_pose(scan)
                 continue
             odom = self._logged_pose(scan)
             if origin is None:
                 origin = np.zeros(3) if odom is None else odom
                 first = odom
+                first_base = scan.pose_odom_base
             moved = odom is not None and first is not None and np.any(np.abs(odom - first) > 0)
             if decided is None and moved:
                 decided = "log"  # the log's odometry moves: everything as logged
                 yield from (s for s, _ in held)
                 held = []
                 yield scan
+                continue
+            base = scan.pose_odom_base
+            base_moved = (
+                base is not None
+                and first_base is not None
+                and bool(np.any(np.asarray(base) != np.asarray(first_base)))
+            )
+            if decided is None and base_moved:
+                # the logged laser poses stand still while the odometry poses move
+                decided = "base"
+                warnings.warn(
+                    f"{self.log}: the log's laser poses never move while its odometry "
+                    f"poses do (by scan {scan.index}): the laser odometry is the "
+                    "odometry pose composed with the mounting",
+                    InputWarning,
+                    stacklevel=2,
+                )
+                self.policy = replace(self.policy, laser_odometry="base")
+                yield from (self._with_base_pose(s) for s, _ in held)
+                held = []
+                yield self._with_base_pose(scan)
                 continue
             pose = laser.add(scan)
             if decided is not None:
@@ -738,6 +768,12 @@ class LogInput:
         if scan.pose_odom_laser is None and scan.pose_odom_base is None:
             return None
         return self.policy.pose_odom_laser(scan)
+
+    def _with_base_pose(self, scan: Scan) -> Scan:
+        """``scan`` with its laser odometry from its odometry (base) pose and the mounting."""
+        assert scan.pose_odom_base is not None
+        pose = pose_compose(np.asarray(scan.pose_odom_base, dtype=float), self.policy.mount)
+        return replace(scan, pose_odom_laser=pose)
 
     def _with_laser_pose(self, scan: Scan, pose: FloatArray, origin: FloatArray) -> Scan:
         """``scan`` with the laser odometry's pose (moved to start at ``origin``)."""

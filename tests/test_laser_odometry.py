@@ -119,3 +119,26 @@ def test_slam_on_a_laser_only_log(tmp_path):
     assert _relative_errors(poses, truth, 10).mean() < 0.01
     # the frozen odometry as it is leaves every scan at the first pose: far from the truth
     assert _relative_errors(np.zeros_like(truth), truth, 10).mean() > 0.1
+
+
+def test_a_log_whose_laser_poses_stand_still_reads_its_odometry_poses(tmp_path):
+    """FLASER ``x y θ`` all zero, ``odom_x odom_y odom_θ`` moving: the odometry poses are read."""
+    lines = []
+    for line in DEMO.joinpath("log.clf").read_text().splitlines():
+        tokens = line.split()
+        if tokens and tokens[0] == "FLASER":
+            n = int(tokens[1])
+            tokens[2 + n : 5 + n] = ["0.000000"] * 3
+            line = " ".join(tokens)
+        lines.append(line + "\n")
+    path = tmp_path / "still_laser.clf"
+    path.write_text("".join(lines))
+    log = open_log(path)
+    with pytest.warns(InputWarning, match="laser poses never move while its odometry"):
+        poses = np.array([log.policy.pose_odom_laser(s) for s in log.scans()])
+    demo = open_log(DEMO / "log.clf")
+    expected = np.array([demo.policy.pose_odom_laser(s) for s in demo.scans()])
+    np.testing.assert_allclose(poses, expected, atol=1e-9)  # the demo's laser is its base
+    described = log.describe()
+    assert described["odometry_source"] == "log"
+    assert described["laser_odometry"] == "base"
