@@ -156,7 +156,8 @@ class ScannerConfig:
     first_angle_deg : float, optional
         Bearing of beam 0 in the laser frame (deg); default with ``fov_deg``: ``−fov/2``.
     step_deg : float, optional
-        Angle between beams (deg, > 0).
+        Angle between beams (deg); negative for beams in clockwise order (a scanner mounted
+        upside down: ``first_angle_deg = 90``, ``step_deg = -1`` for CARMEN's 180 beams).
     fov_deg : float, optional
         Angle from the first to the last beam (deg); the step is ``fov / (n − 1)``.  Give
         ``step_deg`` or ``fov_deg``, not both.
@@ -214,7 +215,10 @@ class ScannerConfig:
         for name in ("first_angle_deg", "step_deg", "fov_deg", "min_range_m", "max_range_m"):
             value = getattr(self, name)
             require(value is None or math.isfinite(value), f"{name} must be a finite number")
-        require(self.step_deg is None or self.step_deg > 0.0, "step_deg must be > 0")
+        require(
+            self.step_deg is None or self.step_deg != 0.0,
+            "step_deg must not be 0 (negative: beams in clockwise order)",
+        )
         require(self.fov_deg is None or self.fov_deg > 0.0, "fov_deg must be > 0")
         require(
             self.step_deg is None or self.fov_deg is None,
@@ -861,7 +865,7 @@ def _apply_scanner(scan: Scan, scanner: ScannerConfig, index: int) -> Scan:
             first = float(b[0])
         from slam.io.laser import beam_bearings
 
-        changes["bearings"] = beam_bearings(first, step, n) if step > 0 else b
+        changes["bearings"] = beam_bearings(first, step, n) if step != 0 else b
     if scanner.max_range_m is not None:
         changes["max_range_m"] = float(scanner.max_range_m)
     if scanner.min_range_m:

@@ -142,3 +142,44 @@ def test_a_log_whose_laser_poses_stand_still_reads_its_odometry_poses(tmp_path):
     described = log.describe()
     assert described["odometry_source"] == "log"
     assert described["laser_odometry"] == "base"
+
+
+def _mirrored_demo(tmp_path: Path) -> Path:
+    """The demo with every scan's readings in reverse order (a scanner mounted upside down)."""
+    lines = []
+    for line in DEMO.joinpath("log.clf").read_text().splitlines():
+        tokens = line.split()
+        if tokens and tokens[0] == "FLASER":
+            n = int(tokens[1])
+            tokens[2 : 2 + n] = tokens[2 : 2 + n][::-1]
+            line = " ".join(tokens)
+        lines.append(line + "\n")
+    path = tmp_path / "mirrored.clf"
+    path.write_text("".join(lines))
+    return path
+
+
+def test_scans_that_turn_against_the_odometry_are_reported_and_a_negative_step_reads_them(
+    tmp_path,
+):
+    mirrored = _mirrored_demo(tmp_path)
+    run_slam(mirrored, tmp_path / "as_is", RunConfig())
+    summary = json.loads((tmp_path / "as_is" / "summary.json").read_text())
+    assert any("turn against the odometry" in str(w) for w in summary["warnings"])
+    turns, against = summary["scan_match_turns"], summary["scan_match_turns_against"]
+    assert turns >= 10 and against > 0.9 * turns
+    # stated as it is (reversed, the first beam is the demo's last, at +89°, clockwise): the
+    # demo's own result
+    stated = RunConfig(scanner=ScannerConfig(first_angle_deg=89.0, step_deg=-1.0))
+    run_slam(mirrored, tmp_path / "stated", stated)
+    summary = json.loads((tmp_path / "stated" / "summary.json").read_text())
+    assert not any("turn against the odometry" in str(w) for w in summary["warnings"])
+    assert summary["scan_match_turns_against"] < 0.1 * summary["scan_match_turns"]
+    poses = read_tum(tmp_path / "stated" / "trajectory.tum").poses
+    truth = read_tum(DEMO / "ground_truth.tum").poses
+    assert _relative_errors(poses, truth, 10).mean() < 0.01
+
+
+def test_a_zero_step_is_refused():
+    with pytest.raises(ConfigError, match="step_deg must not be 0"):
+        ScannerConfig(step_deg=0.0)

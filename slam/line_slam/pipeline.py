@@ -44,6 +44,7 @@ back-end; :meth:`LineSlam.result` assembles a :class:`~slam.result.SlamResult`
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Sequence
@@ -53,6 +54,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import binom
 
 from linefit.config import LineFitConfig
 from linefit.line import Line
@@ -93,7 +95,14 @@ from slam.line_slam.passes import (
     fitted_pairs,
     with_pass_links,
 )
-from slam.line_slam.report import COUNTERS, ScanReport, SlamWarning, degradation
+from slam.line_slam.report import (
+    COUNTERS,
+    MIRRORED_P_VALUE,
+    ScanReport,
+    SlamWarning,
+    degradation,
+    warn_mirrored,
+)
 from slam.result import SlamResult
 from slam.types import Scan, check_lines, check_scan
 from slam.validate import check_config
@@ -160,6 +169,7 @@ class LineSlam:
         self.drift = DriftAccumulator(cfg.frontend.drift_xy_per_m, cfg.frontend.drift_theta_per_m)
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
+        self._warned_mirrored = False
         self.line_noise = LineModelErrorEstimator(
             cfg.line_model_sigma_r_m, cfg.line_model_sigma_alpha_rad
         )
@@ -276,6 +286,26 @@ class LineSlam:
         self.counters["scan_matches_between"] += 1
         return match.delta, match.cov
 
+    def _check_turn(self, turn_odom: float, Q: FloatArray, match: ScanMatch) -> None:
+        """Count a turn the odometry is sure of (beyond 3σ) against the match's rotation.
+
+        Scans whose beams run clockwise while the geometry says anticlockwise (a scanner
+        mounted upside down) turn against the odometry at nearly every turn; a one-sided sign
+        test (:data:`~slam.line_slam.report.MIRRORED_P_VALUE`) then warns once.
+        """
+        if not (match.accepted or match.contradicted):
+            return
+        if abs(turn_odom) <= 3.0 * math.sqrt(max(float(Q[2, 2]), 0.0)):
+            return
+        self.counters["scan_match_turns"] += 1
+        self.counters["scan_match_turns_against"] += int(turn_odom * float(match.delta[2]) < 0.0)
+        n, k = self.counters["scan_match_turns"], self.counters["scan_match_turns_against"]
+        if not self._warned_mirrored and 2 * k > n:
+            p_value = float(binom.sf(k - 1, n, 0.5))
+            if p_value < MIRRORED_P_VALUE:
+                self._warned_mirrored = True
+                warnings.warn(warn_mirrored(n, k), SlamWarning, stacklevel=4)
+
     def _scan_points(self, scan: Scan, with_normals: bool = True) -> ScanPoints:
         """The scan matcher's points of ``scan`` (:func:`scan_points`)."""
         return scan_points(
@@ -341,6 +371,7 @@ class LineSlam:
             if points is not None and self._points is not None and not step.first:
                 match = match_scans(self._points, points, step.delta, Q, cfg.frontend.scan_matching)
                 self.counters["scan_matches"] += 1
+                self._check_turn(step.delta[2], Q, match)
                 if match.accepted:
                     x_pred = pose_compose(g.poses[prev], match.delta)
                     if match.slip:

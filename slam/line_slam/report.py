@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "COUNTERS",
+    "MIRRORED_P_VALUE",
     "PARALLEL_TOLERANCE_RAD",
     "WARN_LOST",
     "WARN_NO_LINES",
@@ -25,6 +26,7 @@ __all__ = [
     "SlamWarning",
     "all_parallel",
     "degradation",
+    "warn_mirrored",
 ]
 
 COUNTERS = (
@@ -48,6 +50,8 @@ COUNTERS = (
     "scan_matches_rejected",
     "scan_match_slips",
     "scan_match_contradictions",
+    "scan_match_turns",
+    "scan_match_turns_against",
     "scan_matches_between",
     "scan_matches_between_rejected",
     "loop_closure_attempts",
@@ -72,6 +76,20 @@ WARN_NO_LINES = "keyframe without usable lines: its pose rests on odometry alone
 WARN_PARALLEL = (
     "all matched lines are parallel (e.g. a corridor): the position along them rests on odometry"
 )
+MIRRORED_P_VALUE = 1e-3
+"""The sign test's level at which scans that turn against the odometry are reported."""
+
+
+def warn_mirrored(turns: int, against: int) -> str:
+    """The warning for scans whose matches turn against the odometry (``against`` of ``turns``)."""
+    return (
+        f"the scans turn against the odometry in {against} of {turns} turns: are the beams in "
+        "clockwise order (a scanner mounted upside down)? State the geometry with the signs of "
+        "the first angle and the step changed (CARMEN's 180 beams from -90 deg at 1 deg, upside "
+        "down: --first-angle 90 --step -1)"
+    )
+
+
 WARN_LOST = (
     "no line matched the map near the predicted pose (lost association): "
     "continuing on odometry, new landmarks started"
