@@ -86,7 +86,7 @@ def warn_mirrored(turns: int, against: int) -> str:
         f"the scans turn against the odometry in {against} of {turns} turns: are the beams in "
         "clockwise order (a scanner mounted upside down)? State the geometry with the signs of "
         "the first angle and the step changed (CARMEN's 180 beams from -90 deg at 1 deg, upside "
-        "down: --first-angle 90 --step -1)"
+        "down: --first-angle 90 --step -1). Or the odometry counts its turns clockwise"
     )
 
 
