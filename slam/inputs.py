@@ -775,7 +775,8 @@ class LogInput:
 
     def _with_base_pose(self, scan: Scan) -> Scan:
         """``scan`` with its laser odometry from its odometry (base) pose and the mounting."""
-        assert scan.pose_odom_base is not None
+        if scan.pose_odom_base is None:
+            return scan
         pose = pose_compose(np.asarray(scan.pose_odom_base, dtype=float), self.policy.mount)
         return replace(scan, pose_odom_laser=pose)
 
