@@ -1019,8 +1019,14 @@ def _open_bag(path: Path, scanner: ScannerConfig) -> LogInput:
             details["tf"] = f"{info.base_frame} -> {info.laser_frame} ({info.hops} static)"
     details["odometry"] = bag.odometry_source or "none"
     if bag.odometry is None:
+        fallback = (
+            ""
+            if scanner.odometry_source == "log"
+            else ": the motion is made by matching the scans once they move (laser odometry)"
+        )
         warnings.warn(
-            f"{where}: no odometry (no nav_msgs/Odometry topic and no /tf to the base frame)",
+            f"{where}: no odometry (no nav_msgs/Odometry topic and no /tf to the base frame)"
+            + fallback,
             InputWarning,
             stacklevel=3,
         )

@@ -184,10 +184,17 @@ def _run(argv: list[str]) -> int:
 # -- ROS bags ----------------------------------------------------------------------------------
 
 
-def write_demo_bag(path: Path, version: int, mount: np.ndarray, n: int, tf_odometry: bool) -> None:
+def write_demo_bag(
+    path: Path,
+    version: int,
+    mount: np.ndarray,
+    n: int,
+    tf_odometry: bool,
+    odometry: bool = True,
+) -> None:
     """The first ``n`` scans of the demo log as a bag: scans in frame ``laser``, the odometry of
-    the base (the logged laser pose ∘ mount⁻¹) on ``/odom`` or ``/tf``, the mount on
-    ``/tf_static``."""
+    the base (the logged laser pose ∘ mount⁻¹) on ``/odom`` or ``/tf`` (none without
+    ``odometry``), the mount on ``/tf_static``."""
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS1_NOETIC if version == 1 else Stores.ROS2_HUMBLE)
@@ -256,6 +263,8 @@ def write_demo_bag(path: Path, version: int, mount: np.ndarray, n: int, tf_odome
                 ),
             )
         )
+        if not odometry:
+            continue
         if tf_odometry:
             msg = T["tf2_msgs/msg/TFMessage"](
                 transforms=[transform(s.timestamp, "odom", "base_link", base)]

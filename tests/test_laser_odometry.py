@@ -183,3 +183,18 @@ def test_scans_that_turn_against_the_odometry_are_reported_and_a_negative_step_r
 def test_a_zero_step_is_refused():
     with pytest.raises(ConfigError, match="step_deg must not be 0"):
         ScannerConfig(step_deg=0.0)
+
+
+def test_a_bag_without_odometry_gets_laser_odometry(tmp_path):
+    from test_inputs import write_demo_bag
+
+    bag = tmp_path / "no_odometry.bag"
+    write_demo_bag(bag, 1, np.zeros(3), 60, tf_odometry=False, odometry=False)
+    with pytest.warns(InputWarning, match="no odometry .*laser odometry"):
+        log = open_log(bag)
+    with pytest.warns(InputWarning, match="is absent while its scans move"):
+        poses = np.array([log.policy.pose_odom_laser(s) for s in log.scans()])
+    assert log.describe()["odometry_source"] == "scan_matching"
+    truth = read_tum(DEMO / "ground_truth.tum").poses[: len(poses)]
+    assert len(poses) == 60
+    assert _relative_errors(poses, truth, 10).mean() < 0.01
