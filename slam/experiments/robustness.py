@@ -423,34 +423,21 @@ class _ReintegratedOdometry(LogTransform):
 
 
 @dataclass(frozen=True)
-class FreezeOdometry(LogTransform):
+class FreezeOdometry(_ReintegratedOdometry):
     """A log whose odometry never moves, as a laser-only recording writes it.
 
-    Every pose of ``ODOM`` and ``FLASER`` lines (the laser pose and the odometry pose) is the
-    log's first one (the laser pose keeps its logged offset), ``tv`` and ``rv`` are zero.
+    Every increment is zero: every pose of ``ODOM`` and ``FLASER`` lines (the laser pose and the
+    odometry pose) is the log's first one (the laser pose keeps its logged offset), ``tv`` and
+    ``rv`` are zero.
     """
 
     kind: ClassVar[str] = "freeze-odometry"
 
-    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
-        if tokens[0] == "ODOM":
-            if len(tokens) < 8:
-                raise LogFormatError("ODOM with fewer than 8 fields", where)
-            raw = _pose(tokens, 1, where)
-            if state.odometry is None:
-                state.odometry = (raw, raw)
-            tokens[1:4] = _pose_tokens(state.odometry[1])
-            tokens[4:6] = ["0.000000", "0.000000"]
-        elif tokens[0] == "FLASER":
-            n = _flaser_beams(tokens, where)
-            laser = _pose(tokens, 2 + n, where)
-            base = _pose(tokens, 5 + n, where)
-            if state.odometry is None:
-                state.odometry = (base, base)
-            still = state.odometry[1]
-            tokens[2 + n : 5 + n] = _pose_tokens(pose_compose(still, pose_between(base, laser)))
-            tokens[5 + n : 8 + n] = _pose_tokens(still)
-        yield _join(tokens)
+    def _increment(self, d: FloatArray, state: _Pass) -> FloatArray:
+        return np.zeros(3)
+
+    def _velocities(self, tv: float, rv: float) -> tuple[float, float] | None:
+        return 0.0, 0.0
 
 
 @dataclass(frozen=True)
