@@ -706,20 +706,13 @@ class LogInput:
                 origin = np.zeros(3) if odom is None else odom
                 first = odom
                 first_base = scan.pose_odom_base
-            moved = odom is not None and first is not None and np.any(np.abs(odom - first) > 0)
-            if decided is None and moved:
+            if decided is None and _moved(odom, first):
                 decided = "log"  # the log's odometry moves: everything as logged
                 yield from (s for s, _ in held)
                 held = []
                 yield scan
                 continue
-            base = scan.pose_odom_base
-            base_moved = (
-                base is not None
-                and first_base is not None
-                and bool(np.any(np.asarray(base) != np.asarray(first_base)))
-            )
-            if decided is None and base_moved:
+            if decided is None and _moved(scan.pose_odom_base, first_base):
                 # the logged laser poses stand still while the odometry poses move
                 decided = "base"
                 warnings.warn(
@@ -837,6 +830,11 @@ class LogInput:
                 "unmatched": int(self._laser_odometry.unmatched),
             }
         return out
+
+
+def _moved(pose: FloatArray | None, first: FloatArray | None) -> bool:
+    """Whether ``pose`` differs from ``first`` at all (False when either is missing)."""
+    return pose is not None and first is not None and bool(np.any(pose != first))
 
 
 def _apply_scanner(scan: Scan, scanner: ScannerConfig, index: int) -> Scan:

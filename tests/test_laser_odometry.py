@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,19 @@ def _relative_errors(poses: np.ndarray, truth: np.ndarray, k: int) -> np.ndarray
         pose_between(pose_between(truth[:-k], truth[k:]), pose_between(poses[:-k], poses[k:]))
     )
     return np.hypot(e[:, 0], e[:, 1])
+
+
+def _demo_flaser_rewritten(path: Path, edit: Callable[[list[str], int], None]) -> Path:
+    """The demo log at ``path``, ``edit(tokens, n_beams)`` applied to each FLASER line."""
+    lines = []
+    for line in DEMO.joinpath("log.clf").read_text().splitlines():
+        tokens = line.split()
+        if tokens and tokens[0] == "FLASER":
+            edit(tokens, int(tokens[1]))
+            line = " ".join(tokens)
+        lines.append(line + "\n")
+    path.write_text("".join(lines))
+    return path
 
 
 def _frozen_demo(tmp_path: Path) -> Path:
@@ -123,16 +137,11 @@ def test_slam_on_a_laser_only_log(tmp_path):
 
 def test_a_log_whose_laser_poses_stand_still_reads_its_odometry_poses(tmp_path):
     """FLASER ``x y θ`` all zero, ``odom_x odom_y odom_θ`` moving: the odometry poses are read."""
-    lines = []
-    for line in DEMO.joinpath("log.clf").read_text().splitlines():
-        tokens = line.split()
-        if tokens and tokens[0] == "FLASER":
-            n = int(tokens[1])
-            tokens[2 + n : 5 + n] = ["0.000000"] * 3
-            line = " ".join(tokens)
-        lines.append(line + "\n")
-    path = tmp_path / "still_laser.clf"
-    path.write_text("".join(lines))
+
+    def still(tokens: list[str], n: int) -> None:
+        tokens[2 + n : 5 + n] = ["0.000000"] * 3
+
+    path = _demo_flaser_rewritten(tmp_path / "still_laser.clf", still)
     log = open_log(path)
     with pytest.warns(InputWarning, match="laser poses never move while its odometry"):
         poses = np.array([log.policy.pose_odom_laser(s) for s in log.scans()])
@@ -146,17 +155,11 @@ def test_a_log_whose_laser_poses_stand_still_reads_its_odometry_poses(tmp_path):
 
 def _mirrored_demo(tmp_path: Path) -> Path:
     """The demo with every scan's readings in reverse order (a scanner mounted upside down)."""
-    lines = []
-    for line in DEMO.joinpath("log.clf").read_text().splitlines():
-        tokens = line.split()
-        if tokens and tokens[0] == "FLASER":
-            n = int(tokens[1])
-            tokens[2 : 2 + n] = tokens[2 : 2 + n][::-1]
-            line = " ".join(tokens)
-        lines.append(line + "\n")
-    path = tmp_path / "mirrored.clf"
-    path.write_text("".join(lines))
-    return path
+
+    def reverse(tokens: list[str], n: int) -> None:
+        tokens[2 : 2 + n] = tokens[2 : 2 + n][::-1]
+
+    return _demo_flaser_rewritten(tmp_path / "mirrored.clf", reverse)
 
 
 def test_scans_that_turn_against_the_odometry_are_reported_and_a_negative_step_reads_them(
