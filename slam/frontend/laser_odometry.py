@@ -90,8 +90,6 @@ class LaserOdometry:
     ----------
     matched, unmatched : int
         Scans registered against their reference, and scans left at the prediction.
-    path_m, turned_rad : float
-        Distance travelled and absolute rotation summed over the steps so far.
     """
 
     def __init__(
@@ -108,8 +106,8 @@ class LaserOdometry:
         )
         self.matched = 0
         self.unmatched = 0
-        self.path_m = 0.0
-        self.turned_rad = 0.0
+        sxy, sth = self.config.sigma_xy_m, self.config.sigma_theta_rad
+        self._Q = np.diag([sxy**2, sxy**2, sth**2])  # the prediction's spread per scan
         self._reference: ScanPoints | None = None
         self._pose_reference = np.zeros(3)
         self._pose = np.zeros(3)
@@ -131,18 +129,14 @@ class LaserOdometry:
             return self._pose.copy()
         predicted = pose_compose(self._pose, self._step)
         delta0 = pose_between(self._pose_reference, predicted)
-        Q = np.diag([cfg.sigma_xy_m**2, cfg.sigma_xy_m**2, cfg.sigma_theta_rad**2])
-        match = match_scans(self._reference, points, delta0, Q, self.matching)
+        match = match_scans(self._reference, points, delta0, self._Q, self.matching)
         if match.accepted:
             pose = pose_compose(self._pose_reference, match.delta)
             self.matched += 1
         else:
             pose = predicted
             self.unmatched += 1
-        step = pose_between(self._pose, pose)
-        self.path_m += float(np.hypot(step[0], step[1]))
-        self.turned_rad += abs(float(step[2]))
-        self._step = step
+        self._step = pose_between(self._pose, pose)
         self._pose = pose
         away = pose_between(self._pose_reference, pose)
         if (
