@@ -12,8 +12,9 @@ corridor only (its ``corridor_normal``; the component along it is arbitrary and 
 
     .venv/bin/python scripts/closure_oracle.py results/fr079 --reference other/trajectory.tum
 
-The reference is another run of the same log (scans in the same order), e.g. one whose
-relations error is small; its own errors are part of the numbers.
+The reference is another run of the same log, or of the log a variant was made from (its
+poses found by time stamp), e.g. one whose relations error is small; its own errors are part
+of the numbers.
 """
 
 from __future__ import annotations
@@ -30,7 +31,10 @@ from slam.io.tum import read_tum
 
 
 def classify(entry: dict, reference: np.ndarray, right_m: float, wrong_m: float) -> tuple:
-    """``(class, needed correction (m), error of the candidate's correction (m))``."""
+    """``(class, needed correction (m), error of the candidate's correction (m))``.
+
+    ``reference`` holds the reference's pose of every scan of the run (``(N, 3)``).
+    """
     x_now = np.asarray(entry["pose_before"], dtype=float)
     x_old = np.asarray(entry["old_pose_before"], dtype=float)
     rel = pose_between(reference[entry["old_scan"]], reference[entry["scan"]])
@@ -60,13 +64,20 @@ def main() -> None:
     summary = json.loads((args.run / "summary.json").read_text(encoding="utf-8"))
     ours = read_tum(args.run / "trajectory.tum")
     ref = read_tum(args.reference)
-    if ref.timestamps.shape != ours.timestamps.shape or not np.allclose(
+    # the reference's pose of each of our scans: the same scans, or (a variant of the log the
+    # reference ran on, e.g. every 4th scan) the reference's scan nearest in time
+    if ref.timestamps.shape == ours.timestamps.shape and np.allclose(
         ref.timestamps, ours.timestamps, atol=1e-6
     ):
-        raise SystemExit(
-            f"{args.reference}: not the same scans as {args.run / 'trajectory.tum'} "
-            "(a reference must be a run of the same log)"
-        )
+        reference_poses = ref.poses
+    else:
+        at = np.array([int(np.argmin(np.abs(ref.timestamps - t))) for t in ours.timestamps])
+        if np.any(np.abs(ref.timestamps[at] - ours.timestamps) > 1e-3):
+            raise SystemExit(
+                f"{args.reference}: has no pose at some scans of {args.run / 'trajectory.tum'} "
+                "(a reference must be a run of the same log, or of the log it was made from)"
+            )
+        reference_poses = ref.poses[at]
     entries = [e for e in summary.get("loop_closures_log", []) if "scan" in e]
     if not entries:
         raise SystemExit(f"{args.run}: no candidate with its keyframes in the log (older run?)")
@@ -76,7 +87,7 @@ def main() -> None:
     )
     tally: Counter[tuple[str, str]] = Counter()
     for e in entries:
-        cls, need, err = classify(e, ref.poses, args.right, args.wrong)
+        cls, need, err = classify(e, reference_poses, args.right, args.wrong)
         reason = str(e.get("reason", ""))
         if e["accepted"]:
             outcome = "accepted"
