@@ -65,9 +65,13 @@ class LaserOdometryConfig:
     min_overlap: float = 0.3
 
     def __post_init__(self) -> None:
-        for name in ("sigma_xy_m", "sigma_theta_rad", "reference_distance_m"):
+        for name in (
+            "sigma_xy_m",
+            "sigma_theta_rad",
+            "reference_distance_m",
+            "reference_angle_rad",
+        ):
             positive(name, getattr(self, name))
-        positive("reference_angle_rad", self.reference_angle_rad)
         require(0.0 <= self.min_overlap <= 1.0, "min_overlap must be in [0, 1]")
 
 
