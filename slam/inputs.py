@@ -85,7 +85,8 @@ first scan without it, the odometry is taken for absent: an :class:`InputWarning
 every scan gets the laser odometry's pose (from the first scan's logged pose).
 ``"scan_matching"`` always uses the laser odometry, ``"log"`` never.  ``summary.json``'s
 ``"input"`` block has ``odometry_source`` (``"log"`` or ``"scan_matching"``) and, for the
-latter, ``laser_odometry_scans`` (matched, unmatched).
+latter, ``laser_odometry_scans`` (matched, unmatched, and of the matched those registered by
+the search over every heading: rescued).
 """
 
 from __future__ import annotations
@@ -828,6 +829,7 @@ class LogInput:
             out["laser_odometry_scans"] = {
                 "matched": int(self._laser_odometry.matched),
                 "unmatched": int(self._laser_odometry.unmatched),
+                "rescued": int(self._laser_odometry.rescued),
             }
         return out
 

@@ -19,6 +19,9 @@ from slam.geometry import pose_between, pose_compose, pose_log
 from slam.inputs import InputWarning, ScannerConfig, open_log
 from slam.io.tum import read_tum
 from slam.runner import run_slam
+from slam.sim.raycast import cast_scan
+from slam.sim.world import WorldBuilder
+from slam.types import Scan
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DEMO = REPO_ROOT / "datasets" / "sim" / "demo"
@@ -128,6 +131,7 @@ def test_slam_on_a_laser_only_log(tmp_path):
     assert any("never moves" in str(w) for w in summary["warnings"])
     assert summary["input"]["odometry_source"] == "scan_matching"
     assert summary["input"]["laser_odometry_scans"]["unmatched"] == 0
+    assert summary["input"]["laser_odometry_scans"]["rescued"] == 0
     poses = read_tum(tmp_path / "out" / "trajectory.tum").poses
     truth = read_tum(DEMO / "ground_truth.tum").poses
     assert _relative_errors(poses, truth, 10).mean() < 0.01
@@ -201,3 +205,65 @@ def test_a_bag_without_odometry_gets_laser_odometry(tmp_path):
     truth = read_tum(DEMO / "ground_truth.tum").poses[: len(poses)]
     assert len(poses) == 60
     assert _relative_errors(poses, truth, 10).mean() < 0.01
+
+
+def _room_scans(turn_rad: float, gap_s: float) -> tuple[list[Scan], np.ndarray]:
+    """Scans of a 360° scanner in an L-shaped room: ten steps forward 10 scans/s, then after
+    ``gap_s`` a scan turned in place by ``turn_rad``, then ten steps forward again."""
+    b = WorldBuilder()
+    b.polyline([(0, 0), (10, 0), (10, 4), (6, 4), (6, 8), (0, 8)], closed=True)
+    b.box(2.0, 1.0, 1.0, 0.6)
+    b.rotated_box(7.5, 2.0, 0.8, 0.5, 0.4, "box")
+    b.box(1.0, 5.5, 0.7, 1.2)
+    world = b.build("room")
+    bearings = np.deg2rad(np.arange(360.0) - 180.0)
+    forward = np.array([0.05, 0.0, 0.02])
+    poses, times = [np.array([3.0, 3.0, 0.2])], [0.0]
+    for i in range(21):
+        step, dt = (np.array([0.0, 0.0, turn_rad]), gap_s) if i == 10 else (forward, 0.1)
+        poses.append(pose_compose(poses[-1], step))
+        times.append(times[-1] + dt)
+    scans = [
+        Scan(i, t, cast_scan(p, bearings, world, 30.0)[0], bearings, max_range_m=30.0)
+        for i, (p, t) in enumerate(zip(poses, times, strict=True))
+    ]
+    return scans, np.array(poses)
+
+
+def test_a_turn_across_a_gap_is_found_over_every_heading():
+    """3 s without scans, during which the robot turned 80° in place: beyond the search
+    around the constant-velocity prediction, so the scan would stay at the prediction, 80°
+    off from there on; the search over every heading registers it (the room has one
+    solution) and the laser odometry keeps the true motion to the end.  With the search off
+    (``any_heading_probability = 1``) the heading is lost."""
+    scans, truth = _room_scans(1.4, 3.0)
+    laser = LaserOdometry()
+    poses = np.array([laser.add(s) for s in scans])
+    assert laser.rescued == 1 and laser.unmatched == 0
+    end = pose_log(pose_between(pose_between(truth[0], truth[-1]), poses[-1]))
+    assert np.hypot(end[0], end[1]) < 0.01 and abs(end[2]) < 0.005
+    blind = LaserOdometry(LaserOdometryConfig(any_heading_probability=1.0))
+    poses = np.array([blind.add(s) for s in scans])
+    assert blind.rescued == 0 and blind.unmatched >= 1
+    end = pose_log(pose_between(pose_between(truth[0], truth[-1]), poses[-1]))
+    assert abs(end[2]) > 0.5
+
+
+def test_a_corridor_seen_both_ways_after_a_gap_is_not_rescued():
+    """In a corridor a turn of a quarter fits every point as well as its half-turn twin: the
+    search around the prediction reaches neither, the search over every heading finds both,
+    neither probable enough, and the scan stays at the prediction."""
+    b = WorldBuilder()
+    b.segment((-200.0, -1.1), (200.0, -1.1))
+    b.segment((-200.0, 1.1), (200.0, 1.1))
+    world = b.build("corridor")
+    bearings = np.deg2rad(np.arange(360.0) - 180.0)
+    poses = [np.array([0.0, 0.0, 0.0]), np.array([0.1, 0.0, 0.0]), np.array([0.2, 0.0, 1.57])]
+    scans = [
+        Scan(i, t, cast_scan(p, bearings, world, 30.0)[0], bearings, max_range_m=30.0)
+        for i, (p, t) in enumerate(zip(poses, (0.0, 0.1, 3.1), strict=True))
+    ]
+    laser = LaserOdometry()
+    for s in scans:
+        laser.add(s)
+    assert laser.unmatched == 1 and laser.rescued == 0

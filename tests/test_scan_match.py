@@ -31,6 +31,7 @@ from slam.frontend.scan_match import (
     _chi2_median,
     _Matcher,
     _OdometryPrior,
+    match_any_heading,
     match_scans,
     normal_half_window,
     refine_scan,
@@ -336,6 +337,35 @@ def test_rotation_search_recovers_an_odometry_slip(slip_deg):
     assert m0.start_offset_rad == 0.0
     assert _pose_error(m0, TRUE_DELTA)[1] > np.deg2rad(10.0)
     assert not m0.accepted and m0.overlap < 0.2
+
+
+def test_a_turn_beyond_the_search_is_found_over_every_heading():
+    """After a gap the scan has turned 86° where the prediction says it stood still: the
+    matcher's search around the prediction does not reach it and the match is not used; the
+    search over every heading finds the true pose, the only solution of the L-shaped room."""
+    truth = np.array([0.1, 0.05, 1.5])
+    cfg = ScanMatchConfig()
+    ref, cur = _pair(ROOM, FULL, cfg, delta=truth)
+    delta0 = np.zeros(3)
+    near = match_scans(ref, cur, delta0, _odometry_cov(delta0), cfg)
+    assert not near.accepted
+    m, probability = match_any_heading(ref, cur, delta0, 0.5, cfg)
+    err_m, err_rad = _pose_error(m, truth)
+    assert err_m < 1e-3 and err_rad < 1e-3
+    assert m.accepted and probability > 0.999
+
+
+def test_a_corridor_seen_both_ways_is_ambiguous_over_every_heading():
+    """Two parallel walls look the same after a half turn: both headings fit every point,
+    and neither is the more probable by much."""
+    truth = np.array([0.3, 0.05, 3.0])
+    cfg = ScanMatchConfig()
+    ref, cur = _pair(CORRIDOR, FULL, cfg, pose_a=np.array([0.0, 0.0, 0.0]), delta=truth)
+    m, probability = match_any_heading(ref, cur, np.zeros(3), 0.5, cfg)
+    assert m.accepted
+    off = _angle(float(m.delta[2] - truth[2]))
+    assert min(abs(off), abs(_angle(off + math.pi))) < 1e-3
+    assert probability < 0.9
 
 
 @pytest.mark.parametrize("slip_deg", [-25.0, 28.0])

@@ -11,7 +11,12 @@ by ``sigma_xy_m`` and ``sigma_theta_rad`` per scan, or with the matcher's slip p
 slip of it (a sudden turn, a gap in the log).  The reference is kept while the scan stays
 within ``reference_distance_m`` and ``reference_angle_rad`` of it (fewer matches chained, so
 less drift), then the current scan becomes the reference.  A match the matcher does not accept
-(too little overlap) leaves the scan at the prediction (``unmatched``).
+(too little overlap: a gap in the log, a turn faster than the prediction allows) is searched
+again over every heading (:func:`slam.frontend.scan_match.match_any_heading`: the rotation's
+prior flat, the translation's spread grown with the time since the last scan); its best
+solution is used when the matcher accepts it and its posterior probability among the distinct
+solutions found is at least ``any_heading_probability`` (``rescued``: a corridor seen both
+ways is not).  Otherwise the scan stays at the prediction (``unmatched``).
 
 The poses are the laser's, in the frame of the first scan; the estimators then treat them
 as any logged odometry (their motion noise, the scan matcher between keyframes, the line
@@ -27,7 +32,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from linefit.config import SensorNoiseConfig
-from slam.frontend.scan_match import ScanMatchConfig, ScanPoints, match_scans, scan_points
+from slam.frontend.scan_match import (
+    ScanMatchConfig,
+    ScanPoints,
+    match_any_heading,
+    match_scans,
+    scan_points,
+)
 from slam.geometry import pose_between, pose_compose
 from slam.types import Scan
 from slam.validate import positive, require
@@ -56,6 +67,10 @@ class LaserOdometryConfig:
         guess: on ACES's first 1,500 scans 20 matches fall below 0.5 and none below 0.3, and
         with 0.3 the heading error over 50 scans is 0.015 against 0.058 rad (against the
         default run's trajectory; measured without the slip mixture).
+    any_heading_probability : float
+        A scan the matcher does not register against the prediction is searched over every
+        heading; the best solution is used when its posterior probability among the distinct
+        solutions found is at least this (1: never).
     """
 
     sigma_xy_m: float = 0.1
@@ -63,6 +78,7 @@ class LaserOdometryConfig:
     reference_distance_m: float = 0.2
     reference_angle_rad: float = 0.15
     min_overlap: float = 0.3
+    any_heading_probability: float = 0.99
 
     def __post_init__(self) -> None:
         for name in (
@@ -73,6 +89,10 @@ class LaserOdometryConfig:
         ):
             positive(name, getattr(self, name))
         require(0.0 <= self.min_overlap <= 1.0, "min_overlap must be in [0, 1]")
+        require(
+            0.0 < self.any_heading_probability <= 1.0,
+            "any_heading_probability must be in (0, 1]",
+        )
 
 
 class LaserOdometry:
@@ -94,6 +114,8 @@ class LaserOdometry:
     ----------
     matched, unmatched : int
         Scans registered against their reference, and scans left at the prediction.
+    rescued : int
+        Of the matched, those registered by the search over every heading.
     """
 
     def __init__(
@@ -110,12 +132,15 @@ class LaserOdometry:
         )
         self.matched = 0
         self.unmatched = 0
+        self.rescued = 0
         sxy, sth = self.config.sigma_xy_m, self.config.sigma_theta_rad
         self._Q = np.diag([sxy**2, sxy**2, sth**2])  # the prediction's spread per scan
         self._reference: ScanPoints | None = None
         self._pose_reference = np.zeros(3)
         self._pose = np.zeros(3)
         self._step = np.zeros(3)  # the last step, the constant-velocity prediction
+        self._time: float | None = None  # the last scan's time stamp (s)
+        self._intervals: list[float] = []  # the last scans' intervals (s)
 
     @property
     def pose_odom_laser(self) -> FloatArray:
@@ -131,9 +156,21 @@ class LaserOdometry:
         if self._reference is None:
             self._reference = points
             return self._pose.copy()
+        # how many of the usual intervals since the last scan (1 without time stamps)
+        elapsed = self._elapsed(scan.timestamp)
         predicted = pose_compose(self._pose, self._step)
         delta0 = pose_between(self._pose_reference, predicted)
         match = match_scans(self._reference, points, delta0, self._Q, self.matching)
+        rescued = False
+        if not match.accepted and cfg.any_heading_probability < 1.0:
+            match, probability = match_any_heading(
+                self._reference, points, delta0, cfg.sigma_xy_m * elapsed, self.matching
+            )
+            rescued = match.accepted and probability >= cfg.any_heading_probability
+            if rescued:
+                self.rescued += 1
+            else:
+                match = replace(match, accepted=False)
         if match.accepted:
             pose = pose_compose(self._pose_reference, match.delta)
             self.matched += 1
@@ -141,6 +178,8 @@ class LaserOdometry:
             pose = predicted
             self.unmatched += 1
         self._step = pose_between(self._pose, pose)
+        if rescued:
+            self._step /= elapsed  # a gap's motion, spread over its usual intervals
         self._pose = pose
         away = pose_between(self._pose_reference, pose)
         if (
@@ -151,3 +190,15 @@ class LaserOdometry:
             self._reference = points
             self._pose_reference = pose.copy()
         return pose.copy()
+
+    def _elapsed(self, timestamp: float) -> float:
+        """The time since the last scan in units of the median of the last 50 intervals (≥ 1)."""
+        last, self._time = self._time, float(timestamp)
+        if last is None or not np.isfinite(self._time) or not np.isfinite(last):
+            return 1.0
+        dt = self._time - last
+        if dt <= 0.0:
+            return 1.0
+        usual = float(np.median(self._intervals)) if self._intervals else dt
+        self._intervals = [*self._intervals[-49:], dt]
+        return max(dt / usual, 1.0)

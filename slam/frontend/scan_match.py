@@ -34,14 +34,15 @@ weigh as one wall); it is combined with the prior's information.  A known limit
 information along a corridor's axis, so the covariance there is too small;
 ``normal_length_m`` extends the lines along the walls and removes it (not the default).
 
-:func:`scan_points` makes the points of a scan; :func:`match_scans` matches two.
+:func:`scan_points` makes the points of a scan; :func:`match_scans` matches two;
+:func:`match_any_heading` matches two with nothing known of the rotation between them.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -58,6 +59,7 @@ __all__ = [
     "ScanMatch",
     "ScanMatchConfig",
     "ScanPoints",
+    "match_any_heading",
     "match_scans",
     "normal_half_window",
     "refine_scan",
@@ -1082,6 +1084,76 @@ def match_scans(
     return ScanMatch(
         x, cov, float(overlap), inl, float(offset), accepted, slip and accepted, contradicted
     )
+
+
+def match_any_heading(
+    reference: ScanPoints,
+    current: ScanPoints,
+    delta0: FloatArray,
+    sigma_xy_m: float,
+    config: ScanMatchConfig,
+    refine: int = 6,
+) -> tuple[ScanMatch, float]:
+    """Register ``current`` against ``reference`` with no prior on the rotation between them.
+
+    For a scan that :func:`match_scans` could not register against its prediction (a gap in
+    the log, a turn faster than the prediction allows).  The search starts from every
+    rotation of the circle (steps of ``rotation_step_rad``) with the translation of
+    ``delta0`` under an isotropic Gaussian of ``sigma_xy_m``; the ``refine`` starts of most
+    overlap after a few iterations are refined, and the distinct solutions (apart by more
+    than half a rotation step or ``inlier_m``) are weighed by their posterior: the points'
+    log-likelihood scaled by ``κ`` (module docstring) plus the translation prior, the
+    rotation's prior being flat.  A corridor seen both ways gives two solutions of nearly
+    equal weight.
+
+    Returns
+    -------
+    ScanMatch
+        The solution of greatest posterior (``cov`` its points' and the translation prior's
+        posterior; ``accepted`` as in :func:`match_scans`; ``start_offset_rad`` the start's
+        rotation from ``delta0``).
+    float
+        Its posterior probability among the distinct solutions found (1 when it is the only
+        one).
+    """
+    cfg = config
+    x0 = np.asarray(delta0, dtype=float)
+    # the rotation's prior: flat (a standard deviation far beyond the circle)
+    Q = np.diag([sigma_xy_m**2, sigma_xy_m**2, 1e6])
+    prior = _OdometryPrior(x0, Q, replace(cfg, slip_probability=0.0))
+    matcher = _Matcher(reference, current, cfg, x0, prior.info, prior.cost)
+    n_starts = max(math.ceil(2.0 * math.pi / cfg.rotation_step_rad), 1)
+    offsets = [-math.pi + i * 2.0 * math.pi / n_starts for i in range(n_starts)]
+    coarse: list[tuple[int, float, FloatArray]] = []
+    for off in offsets:
+        start = x0 + np.array([0.0, 0.0, off])
+        x = matcher.solve(start, cfg.coarse_iterations, cfg.max_correspondence_m)
+        coarse.append((matcher.inliers(x), off, x))
+    refined: list[tuple[float, FloatArray]] = []
+    for _, off, x in sorted(coarse, key=lambda c: -c[0])[: max(refine, 1)]:
+        x = matcher.solve(x, cfg.max_iterations, cfg.max_correspondence_m)
+        x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
+        x[2] = math.remainder(float(x[2]), 2.0 * math.pi)
+        refined.append((off, x))
+    objectives = [matcher.objective(x) for _, x in refined]
+    kappa = matcher.overconfidence(refined[int(np.argmin(objectives))][1])
+    # one entry per distinct solution: its least objective
+    modes: list[tuple[float, float, FloatArray]] = []
+    for obj, (off, x) in sorted(
+        zip((matcher.objective(x, kappa) for _, x in refined), refined, strict=True),
+        key=lambda t: t[0],
+    ):
+        if any(
+            abs(math.remainder(float(x[2] - y[2]), 2.0 * math.pi)) < 0.5 * cfg.rotation_step_rad
+            and math.hypot(float(x[0] - y[0]), float(x[1] - y[1])) < cfg.inlier_m
+            for _, _, y in modes
+        ):
+            continue
+        modes.append((obj, off, x))
+    best_obj, offset, x = modes[0]
+    probability = 1.0 / sum(math.exp(best_obj - obj) for obj, _, _ in modes)
+    cov, overlap, inl, accepted = _posterior(matcher, reference, current, x, Q, prior.info)
+    return ScanMatch(x, cov, float(overlap), inl, float(offset), accepted), probability
 
 
 def _posterior(
