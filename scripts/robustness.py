@@ -210,7 +210,7 @@ def summary_table(records: list[dict[str, Any]]) -> str:
         d = r["diagnostics"]
         short = _short(s, 3)
         cells = [
-            f"{r['name']} ({r['description']})",
+            f"{r['name']} ({r['description']})".replace("|", "\\|"),  # a Markdown cell
             f"{r['bar_m']:.3f}",
             f"{r['trans_m']:.3f}",
             "✓" if r["within_bar"] else "✗",

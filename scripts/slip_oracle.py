@@ -12,7 +12,8 @@ log serves its decimated variants too).
     python scripts/slip_oracle.py LOG --reference other/trajectory.tum [--config FILE]
 
 Prints how many matches lie within ``--right`` rad of the reference (default 0.05), how many
-are closer to it than the odometry, and one line per contradicted match.  The reference's own
+are closer to it than the odometry, and one line per contradicted match (with ``--slips``, per
+slip too).  The reference's own
 errors are part of the numbers.
 """
 
@@ -87,6 +88,7 @@ def main() -> None:
     parser.add_argument("--reference", type=Path, required=True, help="TUM trajectory")
     parser.add_argument("--config", type=Path, help="run configuration (TOML)")
     parser.add_argument("--right", type=float, default=0.05, help="rad (default 0.05)")
+    parser.add_argument("--slips", action="store_true", help="one line per slip too (kind 'slip')")
     args = parser.parse_args()
     config = RunConfig.from_toml(args.config) if args.config else RunConfig()
     ref = read_tum(args.reference)
@@ -107,11 +109,15 @@ def main() -> None:
             f"{int(np.sum(e_match < args.right))}, closer to it than the odometry "
             f"{int(np.sum(e_match < e_odo))}"
         )
-    print(f"{'scan':>6} {'overlap':>8} {'odometry':>9} {'match':>8} {'reference':>10}  (rad)")
+    print(
+        f"{'scan':>6} {'kind':>12} {'overlap':>8} {'odometry':>9} {'match':>8} "
+        f"{'reference':>10}  (rad)"
+    )
     for r in rows:
-        if r["contradicted"]:
+        if r["contradicted"] or args.slips:
+            kind = "contradicted" if r["contradicted"] else "slip"
             print(
-                f"{r['scan']:6d} {r['overlap']:8.2f} {r['odometry_rad']:9.3f} "
+                f"{r['scan']:6d} {kind:>12} {r['overlap']:8.2f} {r['odometry_rad']:9.3f} "
                 f"{r['match_rad']:8.3f} {r['reference_rad']:10.3f}"
             )
 
