@@ -26,6 +26,7 @@ registration).  :mod:`slam.inputs` decides when a log needs them
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -140,7 +141,7 @@ class LaserOdometry:
         self._pose = np.zeros(3)
         self._step = np.zeros(3)  # the last step, the constant-velocity prediction
         self._time: float | None = None  # the last scan's time stamp (s)
-        self._intervals: list[float] = []  # the last scans' intervals (s)
+        self._intervals: deque[float] = deque(maxlen=50)  # the last scans' intervals (s)
 
     @property
     def pose_odom_laser(self) -> FloatArray:
@@ -156,13 +157,16 @@ class LaserOdometry:
         if self._reference is None:
             self._reference = points
             return self._pose.copy()
-        # how many of the usual intervals since the last scan (1 without time stamps)
-        elapsed = self._elapsed(scan.timestamp)
+        dt = self._interval(scan.timestamp)
         predicted = pose_compose(self._pose, self._step)
         delta0 = pose_between(self._pose_reference, predicted)
         match = match_scans(self._reference, points, delta0, self._Q, self.matching)
         rescued = False
+        elapsed = 1.0  # the time since the last scan in usual intervals (at least 1)
         if not match.accepted and cfg.any_heading_probability < 1.0:
+            if dt is not None:
+                usual = float(np.median(self._intervals)) if self._intervals else dt
+                elapsed = max(dt / usual, 1.0)
             match, probability = match_any_heading(
                 self._reference, points, delta0, cfg.sigma_xy_m * elapsed, self.matching
             )
@@ -171,6 +175,8 @@ class LaserOdometry:
                 self.rescued += 1
             else:
                 match = replace(match, accepted=False)
+        if dt is not None:
+            self._intervals.append(dt)
         if match.accepted:
             pose = pose_compose(self._pose_reference, match.delta)
             self.matched += 1
@@ -191,14 +197,10 @@ class LaserOdometry:
             self._pose_reference = pose.copy()
         return pose.copy()
 
-    def _elapsed(self, timestamp: float) -> float:
-        """The time since the last scan in units of the median of the last 50 intervals (≥ 1)."""
+    def _interval(self, timestamp: float) -> float | None:
+        """The time since the last scan (s); None without two valid, increasing time stamps."""
         last, self._time = self._time, float(timestamp)
         if last is None or not np.isfinite(self._time) or not np.isfinite(last):
-            return 1.0
+            return None
         dt = self._time - last
-        if dt <= 0.0:
-            return 1.0
-        usual = float(np.median(self._intervals)) if self._intervals else dt
-        self._intervals = [*self._intervals[-49:], dt]
-        return max(dt / usual, 1.0)
+        return dt if dt > 0.0 else None

@@ -1011,6 +1011,24 @@ def visible_points(reference: ScanPoints, current: ScanPoints, delta: FloatArray
     return int(np.count_nonzero(within_fov & within_range))
 
 
+def _coarse_starts(
+    matcher: _Matcher, x0: FloatArray, offsets: list[float], cfg: ScanMatchConfig
+) -> list[tuple[int, float, FloatArray]]:
+    """A few iterations from ``x0`` rotated by each offset: ``(inliers, offset, x)`` each."""
+    coarse: list[tuple[int, float, FloatArray]] = []
+    for off in offsets:
+        start = x0 + np.array([0.0, 0.0, off])
+        x = matcher.solve(start, cfg.coarse_iterations, cfg.max_correspondence_m)
+        coarse.append((matcher.inliers(x), off, x))
+    return coarse
+
+
+def _refine(matcher: _Matcher, x: FloatArray, cfg: ScanMatchConfig) -> FloatArray:
+    """A start refined: pairs within ``max_correspondence_m``, then within ``inlier_m``."""
+    x = matcher.solve(x, cfg.max_iterations, cfg.max_correspondence_m)
+    return matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
+
+
 def match_scans(
     reference: ScanPoints,
     current: ScanPoints,
@@ -1052,17 +1070,9 @@ def match_scans(
     # a few iterations from every start (the prior keeps each near the odometry except in
     # rotation, which the start sets); the odometry's own start and the two others of most
     # overlap are refined; the refined one of least negative log-posterior is the match
-    coarse: list[tuple[int, float, FloatArray]] = []
-    for off in offsets:
-        start = x0 + np.array([0.0, 0.0, off])
-        x = matcher.solve(start, cfg.coarse_iterations, cfg.max_correspondence_m)
-        coarse.append((matcher.inliers(x), off, x))
+    coarse = _coarse_starts(matcher, x0, offsets, cfg)
     candidates = [coarse[0]] + sorted(coarse[1:], key=lambda c: -c[0])[:2]
-    refined = []
-    for _, off, x in candidates:
-        x = matcher.solve(x, cfg.max_iterations, cfg.max_correspondence_m)
-        x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
-        refined.append((off, x))
+    refined = [(off, _refine(matcher, x, cfg)) for _, off, x in candidates]
     # the points' evidence as a log-likelihood ratio: their summed cost over-counts it by κ
     # (measured at the odometry's own start)
     kappa = matcher.overconfidence(refined[0][1])
@@ -1124,15 +1134,10 @@ def match_any_heading(
     matcher = _Matcher(reference, current, cfg, x0, prior.info, prior.cost)
     n_starts = max(math.ceil(2.0 * math.pi / cfg.rotation_step_rad), 1)
     offsets = [-math.pi + i * 2.0 * math.pi / n_starts for i in range(n_starts)]
-    coarse: list[tuple[int, float, FloatArray]] = []
-    for off in offsets:
-        start = x0 + np.array([0.0, 0.0, off])
-        x = matcher.solve(start, cfg.coarse_iterations, cfg.max_correspondence_m)
-        coarse.append((matcher.inliers(x), off, x))
+    coarse = _coarse_starts(matcher, x0, offsets, cfg)
     refined: list[tuple[float, FloatArray]] = []
     for _, off, x in sorted(coarse, key=lambda c: -c[0])[: max(refine, 1)]:
-        x = matcher.solve(x, cfg.max_iterations, cfg.max_correspondence_m)
-        x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
+        x = _refine(matcher, x, cfg)
         x[2] = math.remainder(float(x[2]), 2.0 * math.pi)
         refined.append((off, x))
     objectives = [matcher.objective(x) for _, x in refined]
