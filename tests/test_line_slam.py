@@ -101,6 +101,94 @@ def test_accepted_closures_agree_with_the_front_end_trajectory(loop_runs):
     assert min(e.keyframe for e in waited) < min(e.keyframe for e in judged)
 
 
+def test_a_hypothesis_waiting_alone_is_judged_late_or_replaced(loop_runs):
+    """``judge_unconfirmed``: every hypothesis that waits for a second one is settled at the
+    next attempt: judged with the one that agrees with it, replaced by a newer one that does
+    not, or judged on its own (``judged_late``) by an attempt that found no new hypothesis;
+    the loop is closed as well as without waiting."""
+    _, path, run, _ = loop_runs
+    lcc = LoopClosureConfig(confirmations=1, judge_unconfirmed=True)
+    slam, res, _ = run_slam(run, SlamConfig(motion=MOTION, **EXACT_LINES, loop_closure=lcc))
+    attempts = slam.loop_closer.attempts
+    waited = [e for e in attempts if e.kind == "gated" and (e.reason or "").startswith("await")]
+    assert waited and slam.counters["loop_closures"] >= 1
+    for i, e in enumerate(attempts):
+        if not (e.kind == "gated" and (e.reason or "").startswith("awaiting")):
+            continue
+        rest = attempts[i + 1 :]
+        nxt = next((a for a in rest if a.keyframe > e.keyframe or a.judged_late), None)
+        if nxt is None:  # the run ended: judged at its end
+            continue
+        if nxt.judged_late:
+            # judged by an attempt that found nothing new: no hypothesis at that keyframe
+            assert nxt.keyframe == e.keyframe and nxt.judged_at_keyframe > e.keyframe
+            at = [a for a in attempts if a.keyframe == nxt.judged_at_keyframe]
+            assert all(a.kind in ("not_found", "repeated") for a in at)
+        elif nxt.kind == "judged":
+            assert nxt.agreeing_hypotheses >= 1
+        else:
+            assert nxt.kind == "gated"
+            if (nxt.reason or "").startswith("awaiting"):
+                assert f"since keyframe {e.keyframe}," in nxt.reason
+    err = pose_log(pose_between(path, res.poses_world_laser))
+    assert np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))) < 0.08
+
+
+def test_waiting_hypothesis_bookkeeping(monkeypatch):
+    """The gate keeps the newest unconfirmed hypothesis, drops it once one agrees, leaves it
+    alone when a hypothesis contradicts an accepted closure; an attempt that finds nothing
+    judges it (late, at that attempt's keyframe), and so does the end of the run."""
+    from slam.line_slam.loop_closer import Hypothesis, _Pending
+
+    lcc = LoopClosureConfig(confirmations=1, judge_unconfirmed=True)
+    slam = LineSlam(SlamConfig(loop_closure=lcc))
+    closer = slam.loop_closer
+    contradicts: list[str | None] = [None]
+    monkeypatch.setattr(closer, "contradiction", lambda h: contradicts[0])
+
+    def candidate(k):
+        return _Pending(np.arange(2), np.arange(2), None, 0.0, Hypothesis(k, 0, np.zeros(3)))
+
+    first, second = candidate(10), candidate(15)
+    assert closer.gate(first, 0).startswith("awaiting") and closer.waiting is first.hypothesis
+    reason = closer.gate(second, 0)
+    assert "since keyframe 10," in reason and closer.waiting is second.hypothesis
+    contradicts[0] = "contradicts the closure accepted at keyframe 12"
+    assert closer.gate(candidate(20), 0) == contradicts[0]
+    assert closer.waiting is second.hypothesis
+    contradicts[0] = None
+    assert closer.gate(candidate(20), 1) is None and closer.waiting is None
+    # attempts: one that finds nothing judges the waiting hypothesis, one that finds one not
+    judged = []
+    monkeypatch.setattr(closer, "apply", lambda *a, **k: judged.append((a, k)) or 1)
+    finds = []
+
+    def fake_attempt(pose):
+        if finds.pop(0):
+            closer.attempts.append(ClosureAttempt("gated", pose, reason="awaiting"))
+        else:
+            closer.attempts.append(ClosureAttempt("not_found", pose))
+        return 0
+
+    from slam.line_slam.loop_closer import ClosureAttempt
+
+    monkeypatch.setattr(closer, "_attempt", fake_attempt)
+    closer.gate(first, 0)
+    finds[:] = [True, False]
+    assert closer.attempt(15) == 0 and not judged
+    assert closer.attempt(20) == 1 and closer.waiting is None
+    ((args, kwargs),) = judged
+    assert args[3] == 10 and kwargs == {"late": True, "judged_at": 20}
+    closer.gate(second, 0)
+    assert closer.judge_pending() == 1 and judged[-1][1] == {"late": True, "judged_at": None}
+    assert closer.judge_pending() == 0 and len(judged) == 2
+    # without judge_unconfirmed nothing waits to be judged
+    slam = LineSlam(SlamConfig(loop_closure=LoopClosureConfig(confirmations=1)))
+    monkeypatch.setattr(slam.loop_closer, "contradiction", lambda h: None)
+    assert slam.loop_closer.gate(first, 0).startswith("awaiting")
+    assert slam.loop_closer.waiting is None
+
+
 def test_map_lines_match_the_true_walls(loop_runs):
     """Every map line runs along a true wall piece (its ends within 6 cm of the line, normals
     within 0.5°), each of its visible segments lies on such a piece (± 0.3 m), and the lines'

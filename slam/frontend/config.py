@@ -315,7 +315,16 @@ class LoopClosureConfig:
     confirmations : int
         How many hypotheses found at other keyframes within the last ``local_keyframes`` must
         agree with one before it is judged (0: none; a hypothesis is never accepted on its own
-        once this is 1 or more, so a revisit must be recognised twice).
+        once this is 1 or more, so a revisit must be recognised twice, unless
+        ``judge_unconfirmed``).
+    judge_unconfirmed : bool
+        With ``confirmations`` of 1 or more, a hypothesis that awaits confirmation is judged on
+        its own by the next attempt that finds no new hypothesis (or at the end of the run),
+        so a revisit seen once is still closed, a few keyframes late.  A newer hypothesis
+        that does not agree with it, and so contradicts it, takes its place: of two
+        hypotheses that cannot both be right neither is judged alone (pairwise consistency,
+        PCM, Mangelson et al. 2018).  The log marks such a judgement ``judged_late``, with the
+        keyframe of the attempt that judged it (``judged_at_keyframe``).
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -372,6 +381,7 @@ class LoopClosureConfig:
     judge_max_pair_chi2: float = float("inf")
     consistency_probability: float = 0.999
     confirmations: int = 0
+    judge_unconfirmed: bool = False
     consistent_with_accepted: bool = True
     judge_max_f: float = 100.0
     judge_robust_cost: bool = True

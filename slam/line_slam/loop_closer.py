@@ -17,7 +17,10 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    ``confirmations`` of 1 or more it must agree with that many other recent hypotheses
    (pairwise consistency through the front end's chains, as in PCM, Mangelson et al. 2018;
    within the ``consistency_probability`` quantile of χ²): a revisit is then recognised twice
-   before it is judged.  How many recent hypotheses agree is passed to the judge either way.
+   before it is judged; with ``judge_unconfirmed`` one that no other confirms is judged on
+   its own by the next attempt that finds no new hypothesis, unless a newer one that
+   contradicts it has taken its place.  How many recent hypotheses agree is passed to the
+   judge either way.
    With ``consistent_with_accepted`` it must also be consistent with every closure accepted
    within the last ``local_keyframes`` keyframes, by the same cycle with each hypothesis' own
    covariance (its paired lines' and the drift across its local submap): right after a
@@ -93,6 +96,8 @@ _ORDER = {
         "f_statistic",
         "f_statistic_robust",
         "agreeing_hypotheses",
+        "judged_late",
+        "judged_at_keyframe",
         "correction_chi2",
         *_WHERE,
         "accepted",
@@ -130,6 +135,17 @@ class Hypothesis:
     def single(self) -> bool:
         """Corridor hypothesis (one direction)."""
         return self.normal is not None
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:
+    """A hypothesis awaiting confirmation, with what :meth:`LoopCloser.apply` needs."""
+
+    local: IntArray
+    old: IntArray
+    found: LoopClosure
+    chi2_t: float
+    hypothesis: Hypothesis
 
 
 @dataclass
@@ -170,6 +186,8 @@ class ClosureAttempt:
     f_statistic: float | None = None
     f_statistic_robust: float | None = None
     agreeing_hypotheses: int | None = None
+    judged_late: bool | None = None
+    judged_at_keyframe: int | None = None
     where: dict[str, Any] = field(default_factory=dict)
 
     def as_log(self) -> dict[str, Any]:
@@ -265,6 +283,8 @@ class LoopCloser:
         self._recent: list[Hypothesis] = []
         # recently accepted closures (consistent_with_accepted)
         self._accepted: list[Hypothesis] = []
+        # the hypothesis awaiting confirmation, judged late (judge_unconfirmed)
+        self._pending: _Pending | None = None
         self._every = EveryKeyframes()
         self._judge = BatchSolver(
             replace(config.solver, relative_tolerance=config.loop_closure.judge_relative_tolerance)
@@ -277,9 +297,42 @@ class LoopCloser:
 
     # -- one attempt -------------------------------------------------------------------------
     def attempt(self, pose: int) -> int:
-        """Search, gate, judge; returns 1 when a closure was accepted, else 0."""
+        """Search, gate, judge; returns 1 when a closure was accepted, else 0.
+
+        With ``judge_unconfirmed``, an attempt that finds no new hypothesis judges the one
+        left awaiting confirmation by an earlier attempt (:meth:`judge_pending`).
+        """
         with self.clock("loop_closure"):
-            return self._attempt(pose)
+            n_attempts = len(self.attempts)
+            accepted = self._attempt(pose)
+            new = self.attempts[n_attempts:]
+            if not any(a.kind in ("gated", "judged") for a in new):
+                accepted += self._judge_pending(pose)
+            return accepted
+
+    def judge_pending(self) -> int:
+        """Judge the hypothesis still awaiting confirmation, if any (at the end of a run).
+
+        Returns 1 when it was accepted, else 0.
+        """
+        with self.clock("loop_closure"):
+            return self._judge_pending(None)
+
+    def _judge_pending(self, now: int | None) -> int:
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return 0
+        return self.apply(
+            pending.local,
+            pending.old,
+            pending.found,
+            pending.hypothesis.keyframe,
+            pending.chi2_t,
+            0,
+            pending.hypothesis,
+            late=True,
+            judged_at=now,
+        )
 
     def _attempt(self, pose: int) -> int:
         cfg = self.config
@@ -367,12 +420,8 @@ class LoopCloser:
         cov = cov + np.diag([float(dxy) ** 2, float(dxy) ** 2, float(dth) ** 2])
         hyp = self.hypothesis(found, near, pose, k_old, cov)
         chi2_t = self.chain_chi2(hyp)
-        reason = None
         agree = self.agreement(hyp)
-        if agree < lcc.confirmations:
-            reason = "awaiting a consistent second hypothesis"
-        elif lcc.consistent_with_accepted:
-            reason = self.contradiction(hyp)
+        reason = self.gate(_Pending(local, near, found, chi2_t, hyp), agree)
         if reason is not None:
             self.attempts.append(
                 ClosureAttempt(
@@ -391,6 +440,38 @@ class LoopCloser:
         return self.apply(local, near, found, pose, chi2_t, agree, hyp)
 
     # -- the rules ---------------------------------------------------------------------------
+    def gate(self, candidate: _Pending, agree: int) -> str | None:
+        """Why a hypothesis is not judged now, or None (it is judged at once).
+
+        ``agree`` recent hypotheses agree with it (:meth:`agreement`).  It is turned away when
+        it contradicts a recent closure (``consistent_with_accepted``), and waits while fewer
+        than ``confirmations`` agree; with ``judge_unconfirmed`` it is then kept, in place of
+        any earlier one waiting (which it does not agree with), for :meth:`attempt` to judge
+        at the next attempt that finds no new hypothesis.  One judged at once clears the one
+        waiting (it agrees with it).
+        """
+        lcc = self.config.loop_closure
+        reason = self.contradiction(candidate.hypothesis) if lcc.consistent_with_accepted else None
+        if reason is not None:
+            return reason
+        if agree >= lcc.confirmations:
+            self._pending = None
+            return None
+        reason = "awaiting a consistent second hypothesis"
+        if lcc.judge_unconfirmed:
+            if self._pending is not None:
+                reason += (
+                    f" (replaces the one waiting since keyframe "
+                    f"{self._pending.hypothesis.keyframe}, which it does not agree with)"
+                )
+            self._pending = candidate
+        return reason
+
+    @property
+    def waiting(self) -> Hypothesis | None:
+        """The hypothesis awaiting confirmation (``judge_unconfirmed``), or None."""
+        return None if self._pending is None else self._pending.hypothesis
+
     def repeated_rejection(self, found: LoopClosure, pose: int) -> int | None:
         """The keyframe of a recent rejected hypothesis that ``found`` repeats, if any.
 
@@ -588,6 +669,8 @@ class LoopCloser:
         chi2_t: float = float("nan"),
         agree: int = 0,
         hypothesis: Hypothesis | None = None,
+        late: bool = False,
+        judged_at: int | None = None,
     ) -> int:
         """Spread the correction, merge the verified pairs, judge; keep only if explained.
 
@@ -599,7 +682,9 @@ class LoopCloser:
         from the judged estimate, a small one reaches it incrementally
         (``large_correction_*``).  ``agree`` is the number of recent hypotheses that agree
         with this one (:meth:`agreement`; the robust second chance needs one); an accepted
-        ``hypothesis`` is kept for :meth:`contradiction`.  Returns 1 when accepted, else 0.
+        ``hypothesis`` is kept for :meth:`contradiction`.  ``late``: a hypothesis found
+        at ``pose`` by an earlier attempt, judged by the attempt at keyframe ``judged_at``
+        (``judge_unconfirmed``; None at the end of a run).  Returns 1 when accepted, else 0.
         """
         book = self.book
         g = book.graph
@@ -683,6 +768,9 @@ class LoopCloser:
             correction_chi2=chi2_t,
             where=where,
         )
+        if late:
+            attempt.judged_late = True
+            attempt.judged_at_keyframe = judged_at
         attempt.f_statistic = float(f_stat)
         attempt.f_statistic_robust = float(f_robust)
         attempt.agreeing_hypotheses = int(agree)

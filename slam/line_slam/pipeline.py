@@ -471,6 +471,8 @@ class LineSlam:
         g = self.graph
         if g.n_poses == 0:
             return stats
+        # a loop-closure hypothesis still awaiting confirmation is judged now
+        self.loop_closer.judge_pending()
         if self.line_weights.estimate(g, self.book.fit_cov):
             self.backend.reset(g)
         for _ in range(3):
