@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from slam.evaluation.timestamps import match_timestamps
 from slam.geometry import pose_between, pose_compose
 from slam.io.tum import read_tum
 
@@ -71,8 +72,8 @@ def main() -> None:
     ):
         reference_poses = ref.poses
     else:
-        at = np.array([int(np.argmin(np.abs(ref.timestamps - t))) for t in ours.timestamps])
-        if np.any(np.abs(ref.timestamps[at] - ours.timestamps) > 1e-3):
+        at, found = match_timestamps(ours.timestamps, ref.timestamps, 1e-3)
+        if not found.all():
             raise SystemExit(
                 f"{args.reference}: has no pose at some scans of {args.run / 'trajectory.tum'} "
                 "(a reference must be a run of the same log, or of the log it was made from)"

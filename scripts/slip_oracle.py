@@ -29,6 +29,7 @@ import numpy as np
 
 import slam.line_slam.pipeline as pipeline
 from slam.config import RunConfig
+from slam.evaluation.timestamps import match_timestamps
 from slam.geometry import pose_between
 from slam.inputs import open_log
 from slam.io.tum import read_tum
@@ -93,13 +94,13 @@ def main() -> None:
     config = RunConfig.from_toml(args.config) if args.config else RunConfig()
     ref = read_tum(args.reference)
 
-    def ref_pose(t: float) -> np.ndarray:
-        return np.asarray(ref.poses[int(np.argmin(np.abs(ref.timestamps - t)))])
-
     with tempfile.TemporaryDirectory() as tmp:
         rows = trace(args.log, config, Path(tmp) / "run")
-    for r in rows:
-        r["reference_rad"] = float(pose_between(ref_pose(r["t_from"]), ref_pose(r["t_to"]))[2])
+    # the reference's pose nearest in time to each end of each step
+    i_from = match_timestamps(np.array([r["t_from"] for r in rows]), ref.timestamps, np.inf)[0]
+    i_to = match_timestamps(np.array([r["t_to"] for r in rows]), ref.timestamps, np.inf)[0]
+    for r, a, b in zip(rows, i_from, i_to, strict=True):
+        r["reference_rad"] = float(pose_between(ref.poses[a], ref.poses[b])[2])
     for kind, flag in (("slips", False), ("contradicted", True)):
         rr = [r for r in rows if r["contradicted"] == flag]
         e_match = np.array([abs(r["match_rad"] - r["reference_rad"]) for r in rr])
