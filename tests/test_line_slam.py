@@ -112,6 +112,8 @@ def test_a_hypothesis_waiting_alone_is_judged_late_or_replaced(loop_runs):
     attempts = slam.loop_closer.attempts
     waited = [e for e in attempts if e.kind == "gated" and (e.reason or "").startswith("await")]
     assert waited and slam.counters["loop_closures"] >= 1
+    judged = [e for e in attempts if e.kind == "judged"]
+    assert slam.counters["loop_closure_candidates"] == len(judged)
     for i, e in enumerate(attempts):
         if not (e.kind == "gated" and (e.reason or "").startswith("awaiting")):
             continue
@@ -182,6 +184,7 @@ def test_waiting_hypothesis_bookkeeping(monkeypatch):
     closer.gate(second, 0)
     assert closer.judge_pending() == 1 and judged[-1][1] == {"late": True, "judged_at": None}
     assert closer.judge_pending() == 0 and len(judged) == 2
+    assert slam.counters["loop_closure_candidates"] == 2
     # without judge_unconfirmed nothing waits to be judged
     slam = LineSlam(SlamConfig(loop_closure=LoopClosureConfig(confirmations=1)))
     monkeypatch.setattr(slam.loop_closer, "contradiction", lambda h: None)

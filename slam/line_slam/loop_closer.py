@@ -322,6 +322,7 @@ class LoopCloser:
         pending, self._pending = self._pending, None
         if pending is None:
             return 0
+        self.counters["loop_closure_candidates"] += 1
         return self.apply(
             pending.local,
             pending.old,
