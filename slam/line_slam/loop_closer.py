@@ -160,7 +160,9 @@ class ClosureAttempt:
     ``pose_before``/``old_pose_before`` the two keyframes' estimates before the attempt;
     ``consistent_pairs`` of ``pairs`` were explained by the judge, whose worst pair left
     ``worst_pair_chi2``; along a corridor (``single_direction``) ``corridor_normal`` is the
-    walls' unit normal in the world frame (only the correction's component along it is used).
+    walls' unit normal in the world frame (only the correction's component along it is used);
+    ``judged_late`` marks a hypothesis found at ``keyframe`` that waited for confirmation and
+    was judged by the attempt at ``judged_at_keyframe`` (None: at the end of the run).
     """
 
     kind: str
