@@ -192,6 +192,22 @@ def test_waiting_hypothesis_bookkeeping(monkeypatch):
     assert slam.loop_closer.waiting is None
 
 
+@pytest.mark.parametrize(("same_place", "expected"), [(False, [0, 1, 2]), (True, [0, 1, 0])])
+def test_agreement_of_the_same_revisit(monkeypatch, same_place, expected):
+    """With ``agreement_same_place`` a hypothesis onto old keyframes 200 keyframes away from
+    another's does not count as agreeing with it, whatever their pairwise test says."""
+    from slam.line_slam.loop_closer import Hypothesis
+
+    lcc = LoopClosureConfig(agreement_same_place=same_place)
+    closer = LineSlam(SlamConfig(loop_closure=lcc)).loop_closer
+    monkeypatch.setattr(closer, "pair_chi2", lambda a, b: 0.0)  # every pair consistent
+    got = [
+        closer.agreement(Hypothesis(k, k_old, np.zeros(3)))
+        for k, k_old in ((300, 100), (305, 110), (310, 310))
+    ]
+    assert got == expected
+
+
 def test_map_lines_match_the_true_walls(loop_runs):
     """Every map line runs along a true wall piece (its ends within 6 cm of the line, normals
     within 0.5°), each of its visible segments lies on such a piece (± 0.3 m), and the lines'

@@ -317,6 +317,12 @@ class LoopClosureConfig:
         agree with one before it is judged (0: none; a hypothesis is never accepted on its own
         once this is 1 or more, so a revisit must be recognised twice, unless
         ``judge_unconfirmed``).
+    agreement_same_place : bool
+        Two hypotheses agree (for ``confirmations`` and the robust second chance of
+        ``judge_robust_cost``) only when their old keyframes, like their current ones, lie
+        within ``local_keyframes`` of each other: the same revisit.  The pairwise test runs
+        through the front end's chain between the two old keyframes, whose drift grows with
+        its length; between places far apart along it nearly any two hypotheses pass.
     judge_unconfirmed : bool
         With ``confirmations`` of 1 or more, a hypothesis that awaits confirmation is judged on
         its own by the next attempt that finds no new hypothesis (or at the end of the run),
@@ -382,6 +388,7 @@ class LoopClosureConfig:
     consistency_probability: float = 0.999
     confirmations: int = 0
     judge_unconfirmed: bool = False
+    agreement_same_place: bool = False
     consistent_with_accepted: bool = True
     judge_max_f: float = 100.0
     judge_robust_cost: bool = True

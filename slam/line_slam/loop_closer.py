@@ -639,12 +639,15 @@ class LoopCloser:
 
         Recent: found within the last ``local_keyframes`` keyframes at another keyframe; two
         agree when their pairwise consistency (:meth:`pair_chi2`) lies within the
-        ``consistency_probability`` quantile of χ²₃.
+        ``consistency_probability`` quantile of χ²₃ (with ``agreement_same_place``, only
+        hypotheses whose old keyframes also lie within ``local_keyframes`` of each other).
         """
         lcc = self.config.loop_closure
         self._recent = [r for r in self._recent if r.keyframe > h.keyframe - lcc.local_keyframes]
         agree = sum(
-            r.keyframe != h.keyframe and self.pair_chi2(r, h) <= self._chi2_limit(3)
+            r.keyframe != h.keyframe
+            and (not lcc.agreement_same_place or abs(r.k_old - h.k_old) < lcc.local_keyframes)
+            and self.pair_chi2(r, h) <= self._chi2_limit(3)
             for r in self._recent
         )
         self._recent.append(h)
