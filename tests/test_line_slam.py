@@ -90,7 +90,9 @@ def test_accepted_closures_agree_with_the_front_end_trajectory(loop_runs):
         assert accepted
         assert all(0.0 <= e.correction_chi2 < 16.27 for e in accepted)
     config = SlamConfig(
-        motion=MOTION, **EXACT_LINES, loop_closure=LoopClosureConfig(confirmations=1)
+        motion=MOTION,
+        **EXACT_LINES,
+        loop_closure=LoopClosureConfig(confirmations=1, judge_unconfirmed=False),
     )
     slam, _, _ = run_slam(run, config)
     attempts = slam.loop_closer.attempts
@@ -186,7 +188,8 @@ def test_waiting_hypothesis_bookkeeping(monkeypatch):
     assert closer.judge_pending() == 0 and len(judged) == 2
     assert slam.counters["loop_closure_candidates"] == 2
     # without judge_unconfirmed nothing waits to be judged
-    slam = LineSlam(SlamConfig(loop_closure=LoopClosureConfig(confirmations=1)))
+    lcc = LoopClosureConfig(confirmations=1, judge_unconfirmed=False)
+    slam = LineSlam(SlamConfig(loop_closure=lcc))
     monkeypatch.setattr(slam.loop_closer, "contradiction", lambda h: None)
     assert slam.loop_closer.gate(first, 0).startswith("awaiting")
     assert slam.loop_closer.waiting is None
