@@ -327,9 +327,9 @@ class LoopClosureConfig:
         With ``confirmations`` of 1 or more, a hypothesis that awaits confirmation is judged on
         its own by the next attempt that finds no new hypothesis (or at the end of the run),
         so a revisit seen once is still closed, a few keyframes late.  A newer hypothesis
-        that does not agree with it, and so contradicts it, takes its place: of two
-        hypotheses that cannot both be right neither is judged alone (pairwise consistency,
-        PCM, Mangelson et al. 2018).  The log marks such a judgement ``judged_late``, with the
+        that does not agree with it takes its place, and the older one is never judged: the
+        two cannot both be right (pairwise consistency, PCM, Mangelson et al. 2018), and the
+        newer one waits in turn.  The log marks such a judgement ``judged_late``, with the
         keyframe of the attempt that judged it (``judged_at_keyframe``).
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
