@@ -19,8 +19,9 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    within the ``consistency_probability`` quantile of χ²): a revisit is then recognised twice
    before it is judged; with ``judge_unconfirmed`` one that no other confirms is judged on
    its own by the next attempt that finds no new hypothesis, unless a newer one that
-   contradicts it has taken its place.  How many recent hypotheses agree is passed to the
-   judge either way.
+   contradicts it has taken its place; with ``agreement_same_place`` only hypotheses of the
+   same revisit (old keyframes within ``local_keyframes``) agree.  How many recent
+   hypotheses agree is passed to the judge either way.
    With ``consistent_with_accepted`` it must also be consistent with every closure accepted
    within the last ``local_keyframes`` keyframes, by the same cycle with each hypothesis' own
    covariance (its paired lines' and the drift across its local submap): right after a
