@@ -167,7 +167,10 @@ def test_exact_optimize_relinearises_to_the_batch_solution():
     rebuilds it at the estimate until the Gauss-Newton step vanishes: the batch optimum."""
     src = synthetic_problem(80, seed=12).graph
     coarse = Isam2Config(
-        relinearize_threshold_m=0.1, relinearize_threshold_rad=0.1, final_relinearizations=5
+        relinearize_threshold_m=0.1,
+        relinearize_threshold_rad=0.1,
+        final_relinearizations=5,
+        final_solver="incremental",
     )
     linear, exact = Isam2Solver(coarse, GAUSSIAN), Isam2Solver(coarse, GAUSSIAN)
     g_linear, g_exact = feed(src, linear), feed(src, exact)
@@ -188,6 +191,38 @@ def test_exact_optimize_relinearises_to_the_batch_solution():
     factors = exact.isam.getFactorsUnsafe()
     n_factors = sum(1 for k in range(factors.size()) if factors.exists(k))
     assert n_factors == g_exact.n_poses + g_exact.n_odometry + 1
+
+
+def test_batch_final_solver_ends_at_the_batch_solution_with_its_covariances():
+    """``final_solver = "batch"``: the final convergence is the batch solver's solution of
+    the whole graph (with the Cauchy kernel), not iSAM2's online estimate, which coarse
+    thresholds leave centimetres away; iSAM2, rebuilt there, holds that estimate and the
+    batch marginals at it."""
+    src = synthetic_problem(120, seed=14).graph
+    cauchy = SolverConfig(robust_kernel="cauchy", robust_k=3.0)
+    coarse = dict(relinearize_threshold_m=0.1, relinearize_threshold_rad=0.1)
+    online = Isam2Solver(Isam2Config(**coarse), cauchy)
+    g_online = feed(src, online)
+    solver = Isam2Solver(Isam2Config(**coarse, final_solver="batch"), cauchy)
+    g = feed(src, solver)
+    np.testing.assert_array_equal(g.poses, g_online.poses)  # the same online estimate
+    solver.optimize(g, exact=True)
+    assert solver.stats.final_relinearizations >= 1
+    online_poses = g_online.poses.copy()
+    reference = g_online  # solved in place by the batch solver
+    assert BatchSolver(cauchy).solve(reference).converged
+    err_online = np.max(np.abs(online_poses[:, :2] - reference.poses[:, :2]))
+    err = np.max(np.abs(g.poses[:, :2] - reference.poses[:, :2]))
+    assert err < 1e-4 < err_online
+    # iSAM2 holds the final estimate
+    for i in (0, 60, 119):
+        p = solver.isam.calculateEstimatePose2(keys_of("x", np.array([i]))[0])
+        np.testing.assert_allclose([p.x(), p.y()], g.poses[i, :2], atol=1e-9)
+    # and its covariances are the batch marginals at the estimate
+    at_estimate = BatchSolver(cauchy).marginals(g)
+    for i in (30, 60, 119):
+        key = keys_of("x", np.array([i]))[0]
+        close_covariances(solver.pose_covariance(i), at_estimate.marginalCovariance(key), 0.02)
 
 
 def test_landmark_fusion_rewires_isam2_blocks():
@@ -300,7 +335,8 @@ def test_final_weight_refresh_gives_the_covariances_at_the_estimate():
     coarse = dict(relinearize_threshold_m=0.03, relinearize_threshold_rad=0.03)
     traces = {}
     for refresh in (False, True):
-        solver = Isam2Solver(Isam2Config(**coarse, final_weight_refresh=refresh), cauchy)
+        config = Isam2Config(**coarse, final_weight_refresh=refresh, final_solver="incremental")
+        solver = Isam2Solver(config, cauchy)
         g = feed(src, solver)
         solver.optimize(g, exact=True)
         assert solver.stats.final_relinearizations == int(refresh)

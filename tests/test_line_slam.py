@@ -485,13 +485,13 @@ def _undone_merges_and_a_wrong_pair(seed=3):
     return slam, right, (a, b)
 
 
-def _judge(with_wrong_pair, agree=0, **loop_closure):
+def _judge(with_wrong_pair, agree=0, seed=3, **loop_closure):
     """The three right pairs (and the wrong one) judged as one closure with the loop-closure
     settings changed by ``loop_closure``, ``agree`` recent hypotheses agreeing; returns
     ``(accepted, log entry)``."""
     from slam.frontend.loop_closure import LoopClosure
 
-    slam, right, (a, b) = _undone_merges_and_a_wrong_pair()
+    slam, right, (a, b) = _undone_merges_and_a_wrong_pair(seed)
     lcc = replace(slam.config.loop_closure, **loop_closure)
     slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
     local = [r.drop for r in right] + ([a] if with_wrong_pair else [])
@@ -528,21 +528,25 @@ def test_right_closure_passes_the_f_test():
 def test_robust_second_chance_needs_every_pair_explained_and_an_agreeing_hypothesis():
     """``judge_robust_cost``: a closure that fails the Gaussian F test but passes it in the
     solver's robust cost is accepted only with all its pairs explained and a recent hypothesis
-    agreeing with it; a closure with a pair left metres apart is not, whatever its robust F."""
-    _, entry = _judge(False, judge_robust_cost=True, judge_max_f=np.inf)
+    agreeing with it; a closure with a pair left metres apart is not, whatever its robust F.
+
+    Which of the two F statistics of three right pairs is the larger depends on the loop's
+    residuals (over seeds 1-8 of this loop the robust one is the smaller in six); the loop of
+    seed 4 has the robust F at half the Gaussian one, the case the second chance is for."""
+    _, entry = _judge(False, seed=4, judge_robust_cost=True, judge_max_f=np.inf)
     f_gauss, f_robust = entry["f_statistic"], entry["f_statistic_robust"]
     assert entry["consistent_pairs"] == entry["pairs"] == 3
-    assert 0.0 < f_robust < f_gauss  # the robust cost grows less: the kernel bounds each line
+    assert 0.0 < f_robust < f_gauss  # the premise: the robust cost grew less
     between = 0.5 * (f_robust + f_gauss)
-    assert _judge(False, 1, judge_robust_cost=True, judge_max_f=between)[0] == 1
-    assert _judge(False, 0, judge_robust_cost=True, judge_max_f=between)[0] == 0
-    assert _judge(False, 1, judge_robust_cost=False, judge_max_f=between)[0] == 0
+    assert _judge(False, 1, seed=4, judge_robust_cost=True, judge_max_f=between)[0] == 1
+    assert _judge(False, 0, seed=4, judge_robust_cost=True, judge_max_f=between)[0] == 0
+    assert _judge(False, 1, seed=4, judge_robust_cost=False, judge_max_f=between)[0] == 0
     # three right pairs and a wrong one: rejected though its robust F is within the limit
-    _, entry = _judge(True, 1, judge_max_f=np.inf)
+    _, entry = _judge(True, 1, seed=4, judge_max_f=np.inf)
     assert entry["consistent_pairs"] == 3 and entry["pairs"] == 4
     assert entry["f_statistic_robust"] < entry["f_statistic"]
     between = 0.5 * (entry["f_statistic_robust"] + entry["f_statistic"])
-    assert _judge(True, 1, judge_max_f=between)[0] == 0
+    assert _judge(True, 1, seed=4, judge_max_f=between)[0] == 0
 
 
 def test_judge_cost_counts_an_outlier_line_as_the_solver_does(loop_runs):

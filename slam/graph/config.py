@@ -112,9 +112,19 @@ class Isam2Config:
         estimate is read back from iSAM2; otherwise only the touched variables.
     full_refresh_interval : int
         Read back the whole estimate at least every this many updates.
+    final_solver : {"batch", "incremental"}
+        How the final :meth:`~slam.graph.backend.Isam2Backend.optimize` converges.
+        ``"batch"``: the batch solver (Levenberg-Marquardt with the ``[slam.solver]``
+        settings, :class:`~slam.graph.batch.BatchSolver`) solves the whole graph from the
+        online estimate, and iSAM2 is then rebuilt at its solution (at least once, so that
+        iSAM2's covariances are those at the estimate).  ``"incremental"``: at most
+        ``final_updates`` iSAM2 updates with forced relinearisation, then the same rebuild.
+        The incremental updates relinearise the odometry where iSAM2 moved it while the line
+        blocks follow one update later, so on a whole log they need not settle
+        (``docs/graph.md``, iSAM2).
     final_updates : int
-        Most extra updates (no new factors, forced relinearisation) run by :meth:`optimize`
-        to converge.
+        With ``final_solver = "incremental"``, most extra updates (no new factors, forced
+        relinearisation) run by the final :meth:`optimize` to converge.
     final_relinearizations : int
         After those, the final :meth:`~slam.graph.backend.Isam2Backend.optimize` rebuilds
         iSAM2 at the estimate (every factor relinearised: one Gauss-Newton step) at most this
@@ -157,6 +167,7 @@ class Isam2Config:
     relin_range_m: float = 0.0
     full_refresh_variables: int = 200
     full_refresh_interval: int = 50
+    final_solver: Literal["batch", "incremental"] = "batch"
     final_updates: int = 20
     final_relinearizations: int = 0
     final_step_tolerance: float = 1e-4
@@ -174,5 +185,9 @@ class Isam2Config:
         nonneg("relin_range_m", self.relin_range_m)
         require(self.full_refresh_variables >= 0, "full_refresh_variables must be >= 0")
         require(self.full_refresh_interval >= 1, "full_refresh_interval must be >= 1")
+        require(
+            self.final_solver in ("batch", "incremental"),
+            f"final_solver must be batch or incremental, got {self.final_solver!r}",
+        )
         require(self.final_updates >= 0, "final_updates must be >= 0")
         require(self.relinearize_skip >= 1, "relinearize_skip must be >= 1")

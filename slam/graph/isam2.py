@@ -20,9 +20,13 @@ Design (measured in ``scripts/bench_graph.py``; see ``docs/graph.md``):
   are thus always linearised where iSAM2 linearises its native factors.
 * **Robust kernels** weight a block when it is (re)built, from the residual at ``θ`` (IRLS with
   weights refreshed on relinearisation).  ``θ`` lags the estimate by up to the relinearisation
-  thresholds, so the final convergence rebuilds iSAM2 at the estimate once
+  thresholds, so the final convergence rebuilds iSAM2 at the estimate
   (``Isam2Config.final_weight_refresh``): the final estimate and covariances then carry the
   weights at the estimate, as the batch solver's do.
+* **The final convergence** (:meth:`Isam2Solver.optimize` with ``exact``) is by default the
+  batch solver's (``Isam2Config.final_solver``): Levenberg-Marquardt over the whole graph
+  from the online estimate, then iSAM2 rebuilt at its solution, so that the marginals are
+  iSAM2's at the final estimate.
 * **Landmark fusion**: the blocks of keyframes that saw the retired landmark are rebuilt
   against the kept one; the retired variable keeps a weak prior (σ = 1) so that the system
   stays well posed (iSAM2 cannot delete a variable).
@@ -49,6 +53,7 @@ from linefit.line import wrap_angle
 from slam import interrupts
 from slam.errors import EstimationError
 from slam.geometry import pose_retract
+from slam.graph.batch import BatchSolver
 from slam.graph.config import Isam2Config, SolverConfig
 from slam.graph.factors import LineLinearization, linearize_line_factors
 from slam.graph.linear import (
@@ -605,16 +610,23 @@ class Isam2Solver:
     ) -> int:
         """Extra updates (no new factors) until iSAM2 and the block policy settle.
 
-        With ``exact``, iSAM2 is then rebuilt at the estimate (:meth:`restart`: every factor
-        relinearised, one Gauss-Newton step) until the step's largest component is below
-        ``final_step_tolerance``, ``final_relinearizations`` times at most (at least once with
-        a robust kernel and ``final_weight_refresh``: the blocks' IRLS weights were taken at
+        With ``exact`` (the final convergence) and ``final_solver = "batch"``, the batch
+        solver (:class:`~slam.graph.batch.BatchSolver`, the ``solver`` settings) solves the
+        whole graph instead of the updates.  iSAM2 is then rebuilt at the estimate
+        (:meth:`restart`: every factor relinearised, one Gauss-Newton step) until the step's
+        largest component is below ``final_step_tolerance``, ``final_relinearizations`` times
+        at most (at least once after the batch solver, which iSAM2 has not seen, and with a
+        robust kernel and ``final_weight_refresh``: the blocks' IRLS weights were taken at
         ``θ``).  Updates below the relinearisation thresholds stay linear in iSAM2; they do
         not in the result.
 
         Returns the number of updates run (restarts not counted).
         """
         n = self.config.final_updates if max_updates is None else max_updates
+        batch = exact and self.config.final_solver == "batch"
+        if batch:
+            BatchSolver(self.solver).solve(graph)
+            n = 0
         runs = 0
         for _ in range(n):
             interrupts.check()  # between updates (slam.interrupts)
@@ -623,12 +635,14 @@ class Isam2Solver:
             # settled: iSAM2 relinearised nothing, so no block is stale and nothing is queued
             if int(result.getVariablesRelinearized()) == 0 and not self._pending:
                 break
-        self.read_all(graph)
+        if not batch:
+            self.read_all(graph)
         if not exact:
             return runs
         rebuilds = self.config.final_relinearizations
-        if self.config.final_weight_refresh and self.solver.robust_kernel != "none":
-            rebuilds = max(rebuilds, 1)  # the kernel's weights at the estimate, not at θ
+        if batch or (self.config.final_weight_refresh and self.solver.robust_kernel != "none"):
+            # iSAM2 at the batch solution; the kernel's weights at the estimate, not at θ
+            rebuilds = max(rebuilds, 1)
         for _ in range(rebuilds):
             interrupts.check()
             poses, landmarks = graph.poses.copy(), graph.landmarks.copy()
