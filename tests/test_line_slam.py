@@ -195,6 +195,56 @@ def test_waiting_hypothesis_bookkeeping(monkeypatch):
     assert slam.loop_closer.waiting is None
 
 
+@pytest.mark.parametrize("accepted", [0, 1])
+def test_replaced_hypothesis_is_judged(monkeypatch, accepted):
+    """``judge_replaced``: the waiting hypothesis that a newer one replaces is judged (late) by
+    the attempt that found the newer one; accepted, it drops the newer one (its log entry says
+    so); rejected, the newer one waits.  Without the setting the replaced one is dropped."""
+    from slam.line_slam.loop_closer import ClosureAttempt, Hypothesis, _Pending
+
+    def candidate(k):
+        return _Pending(np.arange(2), np.arange(2), None, 0.0, Hypothesis(k, 0, np.zeros(3)))
+
+    for judge_replaced in (True, False):
+        lcc = LoopClosureConfig(
+            confirmations=1, judge_unconfirmed=True, judge_replaced=judge_replaced
+        )
+        slam = LineSlam(SlamConfig(loop_closure=lcc))
+        closer = slam.loop_closer
+        monkeypatch.setattr(closer, "contradiction", lambda h: None)
+        judged: list = []
+
+        def fake_apply(*a, judged=judged, **k):
+            judged.append((a, k))
+            return accepted
+
+        monkeypatch.setattr(closer, "apply", fake_apply)
+        first, second = candidate(10), candidate(15)
+
+        def fake_attempt(pose, closer=closer, second=second):
+            reason = closer.gate(second, 0)
+            closer.attempts.append(ClosureAttempt("gated", pose, reason=reason))
+            return 0
+
+        monkeypatch.setattr(closer, "_attempt", fake_attempt)
+        closer.gate(first, 0)
+        got = closer.attempt(15)
+        entry = closer.attempts[-1]
+        assert "since keyframe 10," in entry.reason
+        if not judge_replaced:
+            assert got == 0 and not judged and closer.waiting is second.hypothesis
+            continue
+        ((args, kwargs),) = judged
+        assert args[3] == 10 and kwargs == {"late": True, "judged_at": 15}
+        assert got == accepted and slam.counters["loop_closure_candidates"] == 1
+        if accepted:
+            assert closer.waiting is None and entry.reason.endswith(
+                "the one it replaced was accepted"
+            )
+        else:
+            assert closer.waiting is second.hypothesis and "dropped" not in entry.reason
+
+
 @pytest.mark.parametrize(("same_place", "expected"), [(False, [0, 1, 2]), (True, [0, 1, 0])])
 def test_agreement_of_the_same_revisit(monkeypatch, same_place, expected):
     """With ``agreement_same_place`` a hypothesis onto old keyframes 200 keyframes away from

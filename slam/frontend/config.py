@@ -327,10 +327,17 @@ class LoopClosureConfig:
         With ``confirmations`` of 1 or more, a hypothesis that awaits confirmation is judged on
         its own by the next attempt that finds no new hypothesis (or at the end of the run),
         so a revisit seen once is still closed, a few keyframes late.  A newer hypothesis
-        that does not agree with it takes its place, and the older one is never judged: the
-        two cannot both be right (pairwise consistency, PCM, Mangelson et al. 2018), and the
-        newer one waits in turn.  The log marks such a judgement ``judged_late``, with the
-        keyframe of the attempt that judged it (``judged_at_keyframe``).
+        that does not agree with it takes its place: the two cannot both be right (pairwise
+        consistency, PCM, Mangelson et al. 2018), and the newer one waits in turn; the older
+        one is then never judged, unless ``judge_replaced``.  The log marks such a judgement
+        ``judged_late``, with the keyframe of the attempt that judged it
+        (``judged_at_keyframe``).
+    judge_replaced : bool
+        With ``judge_unconfirmed``, the waiting hypothesis that a newer one replaces is judged
+        on its own by the attempt that found the newer one, instead of being dropped.  If it
+        is accepted the newer one, which does not agree with it, is dropped (its log entry's
+        reason says so); if not, the newer one waits.  So every hypothesis that passes the
+        gate is judged, at once when another agrees with it, else a few keyframes late.
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -388,6 +395,7 @@ class LoopClosureConfig:
     consistency_probability: float = 0.999
     confirmations: int = 0
     judge_unconfirmed: bool = False
+    judge_replaced: bool = False
     agreement_same_place: bool = False
     consistent_with_accepted: bool = True
     judge_max_f: float = 100.0

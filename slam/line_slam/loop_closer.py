@@ -19,8 +19,9 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    within the ``consistency_probability`` quantile of χ²): a revisit is then recognised twice
    before it is judged; with ``judge_unconfirmed`` one that no other confirms is judged on
    its own by the next attempt that finds no new hypothesis, unless a newer one that
-   contradicts it has taken its place; with ``agreement_same_place`` only hypotheses of the
-   same revisit (old keyframes within ``local_keyframes``) agree.  How many recent
+   contradicts it has taken its place (with ``judge_replaced`` it is then judged at once, and
+   the newer one waits only if it is rejected); with ``agreement_same_place`` only
+   hypotheses of the same revisit (old keyframes within ``local_keyframes``) agree.  How many recent
    hypotheses agree is passed to the judge either way.
    With ``consistent_with_accepted`` it must also be consistent with every closure accepted
    within the last ``local_keyframes`` keyframes, by the same cycle with each hypothesis' own
@@ -286,8 +287,10 @@ class LoopCloser:
         self._recent: list[Hypothesis] = []
         # recently accepted closures (consistent_with_accepted)
         self._accepted: list[Hypothesis] = []
-        # the hypothesis awaiting confirmation, judged late (judge_unconfirmed)
+        # the hypothesis awaiting confirmation, judged late (judge_unconfirmed), and the one it
+        # has just replaced, to be judged now (judge_replaced)
         self._pending: _Pending | None = None
+        self._replaced: _Pending | None = None
         self._every = EveryKeyframes()
         self._judge = BatchSolver(
             replace(config.solver, relative_tolerance=config.loop_closure.judge_relative_tolerance)
@@ -309,7 +312,9 @@ class LoopCloser:
             n_attempts = len(self.attempts)
             accepted = self._attempt(pose)
             new = self.attempts[n_attempts:]
-            if not any(a.kind in ("gated", "judged") for a in new):
+            if self._replaced is not None:
+                accepted += self._judge_replaced(pose)
+            elif not any(a.kind in ("gated", "judged") for a in new):
                 accepted += self._judge_pending(pose)
             return accepted
 
@@ -320,6 +325,22 @@ class LoopCloser:
         """
         with self.clock("loop_closure"):
             return self._judge_pending(None)
+
+    def _judge_replaced(self, now: int) -> int:
+        """Judge the hypothesis the newest one replaced (``judge_replaced``), late.
+
+        If it is accepted, the newest one (which does not agree with it) is dropped; else the
+        newest one waits.  Returns 1 when it was accepted, else 0.
+        """
+        replaced, self._replaced = self._replaced, None
+        newer, self._pending = self._pending, replaced
+        gated = self.attempts[-1]  # the newer one's entry (gate() has just replaced)
+        accepted = self._judge_pending(now)
+        if accepted:
+            gated.reason = (gated.reason or "") + "; dropped: the one it replaced was accepted"
+        else:
+            self._pending = newer
+        return accepted
 
     def _judge_pending(self, now: int | None) -> int:
         pending, self._pending = self._pending, None
@@ -451,7 +472,8 @@ class LoopCloser:
         it contradicts a recent closure (``consistent_with_accepted``), and waits while fewer
         than ``confirmations`` agree; with ``judge_unconfirmed`` it is then kept, in place of
         any earlier one waiting (which it does not agree with), for :meth:`attempt` to judge
-        at the next attempt that finds no new hypothesis.  One judged at once clears the one
+        at the next attempt that finds no new hypothesis (with ``judge_replaced`` the earlier
+        one is kept for :meth:`attempt` to judge now).  One judged at once clears the one
         waiting (it agrees with it).
         """
         lcc = self.config.loop_closure
@@ -468,6 +490,8 @@ class LoopCloser:
                     f" (replaces the one waiting since keyframe "
                     f"{self._pending.hypothesis.keyframe}, which it does not agree with)"
                 )
+                if lcc.judge_replaced:
+                    self._replaced = self._pending
             self._pending = candidate
         return reason
 
