@@ -109,7 +109,7 @@ def test_a_hypothesis_waiting_alone_is_judged_late_or_replaced(loop_runs):
     not, or judged on its own (``judged_late``) by an attempt that found no new hypothesis;
     the loop is closed as well as without waiting."""
     _, path, run, _ = loop_runs
-    lcc = LoopClosureConfig(confirmations=1, judge_unconfirmed=True)
+    lcc = LoopClosureConfig(confirmations=1, judge_unconfirmed=True, judge_replaced=False)
     slam, res, _ = run_slam(run, SlamConfig(motion=MOTION, **EXACT_LINES, loop_closure=lcc))
     attempts = slam.loop_closer.attempts
     waited = [e for e in attempts if e.kind == "gated" and (e.reason or "").startswith("await")]
@@ -144,7 +144,7 @@ def test_waiting_hypothesis_bookkeeping(monkeypatch):
     judges it (late, at that attempt's keyframe), and so does the end of the run."""
     from slam.line_slam.loop_closer import Hypothesis, _Pending
 
-    lcc = LoopClosureConfig(confirmations=1, judge_unconfirmed=True)
+    lcc = LoopClosureConfig(confirmations=1, judge_unconfirmed=True, judge_replaced=False)
     slam = LineSlam(SlamConfig(loop_closure=lcc))
     closer = slam.loop_closer
     contradicts: list[str | None] = [None]

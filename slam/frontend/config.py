@@ -314,9 +314,13 @@ class LoopClosureConfig:
         ``agreeing_hypotheses``.
     confirmations : int
         How many hypotheses found at other keyframes within the last ``local_keyframes`` must
-        agree with one before it is judged (0: none; a hypothesis is never accepted on its own
-        once this is 1 or more, so a revisit must be recognised twice, unless
-        ``judge_unconfirmed``).
+        agree with one before it is judged at once (0: none, every hypothesis is judged when
+        it is found; with 1 or more and without ``judge_unconfirmed`` a hypothesis is never
+        accepted on its own, so a revisit must be recognised twice).  The defaults (1, with
+        ``judge_unconfirmed``, ``judge_replaced`` and ``agreement_same_place``) judge every
+        hypothesis: at once when another of the same revisit agrees with it, else a few
+        keyframes late, and one that a later hypothesis contradicts only if it is judged
+        before it (``docs/real-logs.md``, Pipeline step 3 and Results).
     agreement_same_place : bool
         Two hypotheses agree (for ``confirmations`` and the robust second chance of
         ``judge_robust_cost``) only when their old keyframes, like their current ones, lie
@@ -393,10 +397,10 @@ class LoopClosureConfig:
     judge_loop_only: bool = True
     judge_max_pair_chi2: float = float("inf")
     consistency_probability: float = 0.999
-    confirmations: int = 0
-    judge_unconfirmed: bool = False
-    judge_replaced: bool = False
-    agreement_same_place: bool = False
+    confirmations: int = 1
+    judge_unconfirmed: bool = True
+    judge_replaced: bool = True
+    agreement_same_place: bool = True
     consistent_with_accepted: bool = True
     judge_max_f: float = 100.0
     judge_robust_cost: bool = True
