@@ -318,9 +318,9 @@ class LoopClosureConfig:
         it is found; with 1 or more and without ``judge_unconfirmed`` a hypothesis is never
         accepted on its own, so a revisit must be recognised twice).  The defaults (1, with
         ``judge_unconfirmed``, ``judge_replaced`` and ``agreement_same_place``) judge every
-        hypothesis: at once when another of the same revisit agrees with it, else a few
-        keyframes late, and one that a later hypothesis contradicts only if it is judged
-        before it (``docs/real-logs.md``, Pipeline step 3 and Results).
+        hypothesis that passes the gates: at once when another of the same revisit agrees
+        with it, else a few keyframes late, before any later hypothesis that contradicts it
+        (``docs/real-logs.md``, Pipeline step 3 and Opt-in settings).
     agreement_same_place : bool
         Two hypotheses agree (for ``confirmations`` and the robust second chance of
         ``judge_robust_cost``) only when their old keyframes, like their current ones, lie

@@ -21,8 +21,9 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    its own by the next attempt that finds no new hypothesis, unless a newer one that
    contradicts it has taken its place (with ``judge_replaced`` it is then judged at once, and
    the newer one waits only if it is rejected); with ``agreement_same_place`` only
-   hypotheses of the same revisit (old keyframes within ``local_keyframes``) agree.  How many recent
-   hypotheses agree is passed to the judge either way.
+   hypotheses of the same revisit (old keyframes within ``local_keyframes``) agree.  How many
+   recent hypotheses agree is passed to the judge either way.  The defaults: all three, with
+   ``confirmations = 1``.
    With ``consistent_with_accepted`` it must also be consistent with every closure accepted
    within the last ``local_keyframes`` keyframes, by the same cycle with each hypothesis' own
    covariance (its paired lines' and the drift across its local submap): right after a
