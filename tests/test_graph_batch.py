@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from dataclasses import replace
 
 import gtsam
@@ -478,3 +479,38 @@ def test_fill_reducing_order_covers_uncoupled_variables(method):
     assert sorted(order.tolist()) == list(range(6))
     alone = fill_reducing_order(dims[:2], np.zeros(0, np.int64), np.zeros(0, np.int64), method)
     assert sorted(alone.tolist()) == [0, 1]
+
+
+def test_metis_cut_short_by_sigterm_passes_the_signal_on(monkeypatch):
+    """METIS fails when SIGTERM arrives while it runs and returns part of an ordering, the
+    signal lost: it is sent again (a run records it: ``slam.interrupts``) and COLAMD orders
+    every variable instead."""
+    from types import SimpleNamespace
+
+    import slam.graph.sparse as sparse
+    from slam import interrupts
+
+    def cut_short(sfg):
+        full = gtsam.Ordering.MetisSymbolicFactorGraph(sfg)
+        part = gtsam.Ordering()
+        for i in range(full.size() - 1):
+            part.push_back(full.at(i))
+        return part
+
+    ordering = SimpleNamespace(
+        MetisSymbolicFactorGraph=cut_short,
+        ColamdSymbolicFactorGraph=gtsam.Ordering.ColamdSymbolicFactorGraph,
+    )
+    monkeypatch.setattr(
+        sparse,
+        "gtsam",
+        SimpleNamespace(SymbolicFactorGraph=gtsam.SymbolicFactorGraph, Ordering=ordering),
+    )
+    dims = np.full(6, 3)
+    a, b = np.array([0, 1, 3]), np.array([1, 2, 4])
+    with interrupts.handling_signals():
+        order = sparse.fill_reducing_order(dims, a, b, "metis")
+        assert interrupts.requested() == signal.SIGTERM
+    assert sorted(order.tolist()) == list(range(6))
+    colamd = sparse.fill_reducing_order(dims, a, b, "colamd")
+    np.testing.assert_array_equal(order, colamd)

@@ -32,6 +32,7 @@ numpy linearisation itself; a whole Gauss-Newton iteration is 3.6-6.8× cheaper 
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -178,6 +179,11 @@ def fill_reducing_order(
     GTSAM's COLAMD (or METIS) on a symbolic graph with one binary factor per distinct coupled
     pair (and a unary one per uncoupled variable): the ordering GTSAM's elimination would use
     for the same adjacency.  Returns the variables in elimination order.
+
+    METIS fails when SIGTERM arrives while it runs and returns part of an ordering, the signal
+    lost; it is then sent to the process again (a run started by the command line stops
+    cleanly at its next safe point; without a handler SIGTERM ends the process, as it was
+    meant to) and COLAMD orders the variables instead.
     """
     V = dims.shape[0]
     lo, hi = np.minimum(pairs_a, pairs_b), np.maximum(pairs_a, pairs_b)
@@ -196,6 +202,13 @@ def fill_reducing_order(
         if keys.size:
             ordering = gtsam.Ordering.MetisSymbolicFactorGraph(sfg)
             coupled = [ordering.at(i) for i in range(ordering.size())]
+        if len(coupled) != V - int(alone.sum()):
+            # METIS fails when SIGTERM arrives while it runs ("METIS failed during Nested
+            # Dissection ordering!") and the signal does not reach the process: it is sent
+            # again (a run records it and stops at its next safe point, slam.interrupts), and
+            # COLAMD orders the variables instead
+            signal.raise_signal(signal.SIGTERM)
+            return fill_reducing_order(dims, pairs_a, pairs_b, "colamd")
         order = np.array(coupled + np.flatnonzero(alone).tolist(), dtype=np.int64)
     else:
         for v in np.flatnonzero(alone).tolist():
