@@ -624,18 +624,17 @@ class Isam2Solver:
         """
         n = self.config.final_updates if max_updates is None else max_updates
         batch = exact and self.config.final_solver == "batch"
-        if batch:
-            BatchSolver(self.solver).solve(graph)
-            n = 0
         runs = 0
-        for _ in range(n):
-            interrupts.check()  # between updates (slam.interrupts)
-            result = self.update(graph, force_relinearize=True)
-            runs += 1
-            # settled: iSAM2 relinearised nothing, so no block is stale and nothing is queued
-            if int(result.getVariablesRelinearized()) == 0 and not self._pending:
-                break
-        if not batch:
+        if batch:
+            BatchSolver(self.solver).solve(graph)  # the graph holds its solution
+        else:
+            for _ in range(n):
+                interrupts.check()  # between updates (slam.interrupts)
+                result = self.update(graph, force_relinearize=True)
+                runs += 1
+                # settled: iSAM2 relinearised nothing, so no block is stale and none queued
+                if int(result.getVariablesRelinearized()) == 0 and not self._pending:
+                    break
             self.read_all(graph)
         if not exact:
             return runs

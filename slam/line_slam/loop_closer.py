@@ -334,28 +334,29 @@ class LoopCloser:
         newest one waits.  Returns 1 when it was accepted, else 0.
         """
         replaced, self._replaced = self._replaced, None
-        newer, self._pending = self._pending, replaced
+        assert replaced is not None
         gated = self.attempts[-1]  # the newer one's entry (gate() has just replaced)
-        accepted = self._judge_pending(now)
+        accepted = self._judge_late(replaced, now)
         if accepted:
+            self._pending = None
             gated.reason = (gated.reason or "") + "; dropped: the one it replaced was accepted"
-        else:
-            self._pending = newer
         return accepted
 
     def _judge_pending(self, now: int | None) -> int:
         pending, self._pending = self._pending, None
-        if pending is None:
-            return 0
+        return 0 if pending is None else self._judge_late(pending, now)
+
+    def _judge_late(self, candidate: _Pending, now: int | None) -> int:
+        """Judge a hypothesis that waited (``judged_late``, by the attempt at ``now``)."""
         self.counters["loop_closure_candidates"] += 1
         return self.apply(
-            pending.local,
-            pending.old,
-            pending.found,
-            pending.hypothesis.keyframe,
-            pending.chi2_t,
+            candidate.local,
+            candidate.old,
+            candidate.found,
+            candidate.hypothesis.keyframe,
+            candidate.chi2_t,
             0,
-            pending.hypothesis,
+            candidate.hypothesis,
             late=True,
             judged_at=now,
         )
