@@ -11,6 +11,7 @@ spread (mean, worst).
     .venv/bin/python scripts/sensitivity.py aces --variants default keyframe-0.19 sigma-range+2%
     .venv/bin/python scripts/sensitivity.py fr079 --config my.toml   # perturb another setting
     .venv/bin/python scripts/sensitivity.py --row fr079-every2-max8m  # a robustness row
+    .venv/bin/python scripts/sensitivity.py intel --keep runs/  # keep runs/<variant>/
 
 The perturbations are changes no user would call a different configuration: the keyframe
 distance by ±5 %, the range noise of the line fits by ±2 %, the fusion and loop-closing
@@ -128,6 +129,9 @@ def main() -> None:
     )
     parser.add_argument("--max-scans", type=int, default=None)
     parser.add_argument(
+        "--keep", type=Path, default=None, help="keep each run's results folder under this"
+    )
+    parser.add_argument(
         "--config", type=Path, default=None, help="TOML to perturb instead of the defaults"
     )
     args = parser.parse_args()
@@ -142,7 +146,7 @@ def main() -> None:
     print(f"{'variant':<18}{'trans (m)':>11}{'rot (deg)':>11}{'time (s)':>10}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.variants:
-            out = Path(tmp) / name
+            out = (args.keep if args.keep is not None else Path(tmp)) / name
             config = VARIANTS[name](base)
             t0 = time.perf_counter()
             run_slam(log, out, config, max_scans=args.max_scans)
