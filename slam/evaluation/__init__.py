@@ -4,6 +4,7 @@ Main entry points::
 
     from slam.evaluation import relations_metric, ate, rpe, pose_nees, evaluate_results
     from slam.evaluation import relations_nees      # with relative-pose covariances
+    from slam.evaluation import error_onsets        # where a run's error entered
 
     metric = relations_metric(trajectory, read_relations(path))   # Kümmerle et al.
     print(metric.cartographer_report())
@@ -21,6 +22,7 @@ from slam.evaluation.nees import (
     pose_nees,
     pose_nees_values,
 )
+from slam.evaluation.onsets import ErrorOnset, error_onsets
 from slam.evaluation.relations_metric import (
     MeanStd,
     RelationsMetric,
@@ -37,6 +39,7 @@ from slam.evaluation.timestamps import associate, match_timestamps
 __all__ = [
     "AteResult",
     "CorrelatedBounds",
+    "ErrorOnset",
     "ErrorStats",
     "EvaluationReport",
     "MeanStd",
@@ -49,6 +52,7 @@ __all__ = [
     "ate",
     "correlated_nees_bounds",
     "distance_pairs",
+    "error_onsets",
     "evaluate_results",
     "match_timestamps",
     "nees_bounds",
