@@ -20,11 +20,11 @@ from linefit.config import LineFitConfig
 from linefit.errors import ConfigError
 from linefit.tomlconfig import config_from_dict, dump_toml
 from slam.ekf.config import EkfConfig
-from slam.inputs import ScannerConfig, migrate_slam_keys
+from slam.inputs import LogInput, ScannerConfig, migrate_slam_keys, open_log
 from slam.line_slam.config import SlamConfig
 from slam.lines.config import MapConfig
 
-__all__ = ["RunConfig", "check_run_config"]
+__all__ = ["RunConfig", "check_run_config", "open_run_log"]
 
 
 @dataclass(frozen=True)
@@ -116,3 +116,19 @@ def check_run_config(config: object, name: str = "config") -> RunConfig:
     if not isinstance(config, RunConfig):
         raise ConfigError(f"{name} must be a RunConfig, got {type(config).__name__}")
     return config
+
+
+def open_run_log(log: str | Path, config: RunConfig, *, max_scans: int | None = None) -> LogInput:
+    """Open ``log`` as a run with ``config`` reads it (:func:`slam.inputs.open_log`).
+
+    Its ``[scanner]`` settings, and for a log whose motion comes from its scans the laser
+    odometry's points with the run's sensor noise (``[linefit.noise]``) and its matcher with
+    the run's scan-matcher settings (``[slam.frontend.scan_matching]``).
+    """
+    return open_log(
+        log,
+        config.scanner,
+        max_scans=max_scans,
+        noise=config.linefit.noise,
+        matching=config.slam.frontend.scan_matching,
+    )

@@ -81,13 +81,13 @@ def export_occupancy(
     min_angle_rad: float = 0.1,
 ) -> list[Path]:
     """The ``occupancy`` format (module docstring); ``into``: the files to write (temporary)."""
-    from slam.inputs import open_log
+    from slam.config import open_run_log
     from slam.io.occupancy import occupancy_grid, select_scans, write_map_server
     from slam.io.results import read_results
 
     results = read_results(results_dir)
     log = _log_of(results_dir, results.summary, log)
-    source = open_log(log, _config_of(results_dir).scanner)
+    source = open_run_log(log, _config_of(results_dir))
     poses = laser_poses_of_results(results, source.policy.pose_base_laser)
     stamps = results.trajectory.timestamps
     keep = select_scans(poses, min_distance_m, min_angle_rad)

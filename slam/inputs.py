@@ -83,7 +83,12 @@ pose composed with the mounting (an :class:`InputWarning`; ``laser_odometry`` ``
 Once the scans have moved :data:`STILL_ODOMETRY_M` or :data:`STILL_ODOMETRY_RAD` from the
 first scan without it, the odometry is taken for absent: an :class:`InputWarning` says so and
 every scan gets the laser odometry's pose (from the first scan's logged pose).
-``"scan_matching"`` always uses the laser odometry, ``"log"`` never.  ``summary.json``'s
+``"scan_matching"`` always uses the laser odometry, ``"log"`` never.  The laser odometry's
+settings are the ``[scanner.scan_odometry]`` table
+(:class:`~slam.frontend.laser_odometry.LaserOdometryConfig`); its points carry the run's
+sensor noise (``[linefit.noise]``) and its matcher the run's scan-matcher settings
+(``[slam.frontend.scan_matching]``, its own ``min_overlap``), when the log is opened with
+them (:func:`open_log`; :func:`slam.runner.open_run_log` does).  ``summary.json``'s
 ``"input"`` block has ``odometry_source`` (``"log"`` or ``"scan_matching"``) and, for the
 latter, ``laser_odometry_scans`` (matched, unmatched, and of the matched those registered by
 the search over every heading: rescued).
@@ -102,7 +107,10 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from linefit.config import SensorNoiseConfig
 from slam.errors import ConfigError, InputError, LogFormatError
+from slam.frontend.laser_odometry import LaserOdometryConfig
+from slam.frontend.scan_match import ScanMatchConfig
 from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse
 from slam.types import Scan
 from slam.validate import require
@@ -193,6 +201,9 @@ class ScannerConfig:
         (``"scan_matching"``: :class:`slam.frontend.laser_odometry.LaserOdometry`), or
         ``"auto"``: the log's, unless it has none or it never moves while the scans do
         (module docstring, "Logs without odometry").
+    scan_odometry : LaserOdometryConfig
+        The ``[scanner.scan_odometry]`` table: how the laser odometry chains its scan matches
+        when the motion comes from the scans.
     """
 
     first_angle_deg: float | None = None
@@ -211,6 +222,7 @@ class ScannerConfig:
     odometry: Literal["auto", "topic", "tf"] = "auto"
     base_frame: str | None = None
     odometry_source: Literal["auto", "log", "scan_matching"] = "auto"
+    scan_odometry: LaserOdometryConfig = field(default_factory=LaserOdometryConfig)
 
     def __post_init__(self) -> None:
         for name in ("first_angle_deg", "step_deg", "fov_deg", "min_range_m", "max_range_m"):
@@ -257,6 +269,10 @@ class ScannerConfig:
         require(
             self.odometry_source in ("auto", "log", "scan_matching"),
             "odometry_source must be auto, log or scan_matching",
+        )
+        require(
+            isinstance(self.scan_odometry, LaserOdometryConfig),
+            "scan_odometry must be a LaserOdometryConfig ([scanner.scan_odometry] table)",
         )
 
     @property
@@ -556,6 +572,9 @@ class LogInput:
         poses), ``"tf"`` or ``"none"``.
     details : dict
         More about the input for ``summary.json``.
+    noise, matching : SensorNoiseConfig or ScanMatchConfig, optional
+        The laser odometry's point noise and scan-matcher settings (:func:`open_log`; None:
+        their defaults).
     """
 
     log: Path
@@ -573,6 +592,8 @@ class LogInput:
     _skipped_without_odometry: int = 0
     _laser_odometry: Any = None
     odometry_source: str = "log"
+    noise: SensorNoiseConfig | None = None
+    matching: ScanMatchConfig | None = None
 
     def total(self, max_scans: int | None = None) -> int | None:
         """Scans a run over at most ``max_scans`` of them will read (None if unknown)."""
@@ -689,7 +710,7 @@ class LogInput:
             return
         from slam.frontend.laser_odometry import LaserOdometry
 
-        laser = LaserOdometry()
+        laser = LaserOdometry(self.scanner.scan_odometry, self.noise, self.matching)
         origin: FloatArray | None = None  # the first scan's logged pose (else zero)
         first: FloatArray | None = None  # the first scan's logged pose, if it has one
         held: list[tuple[Scan, FloatArray]] = []
@@ -965,7 +986,12 @@ def _policy(
 
 
 def open_log(
-    log: str | Path, scanner: ScannerConfig | None = None, *, max_scans: int | None = None
+    log: str | Path,
+    scanner: ScannerConfig | None = None,
+    *,
+    max_scans: int | None = None,
+    noise: SensorNoiseConfig | None = None,
+    matching: ScanMatchConfig | None = None,
 ) -> LogInput:
     """Open a log file, bag or catalogue name with the scanner settings (module docstring).
 
@@ -977,6 +1003,11 @@ def open_log(
         The ``[scanner]`` settings; default :class:`ScannerConfig()`.
     max_scans
         The run reads only the first scans: the mounting is derived from those.
+    noise, matching
+        The sensor noise of the laser odometry's points and its scan matcher's settings, when
+        the motion comes from the scans (default: :class:`~linefit.config.SensorNoiseConfig`
+        and :class:`~slam.frontend.scan_match.ScanMatchConfig` defaults; a run passes its own,
+        :func:`slam.runner.open_run_log`).
 
     Raises
     ------
@@ -989,8 +1020,12 @@ def open_log(
     scanner = scanner if scanner is not None else ScannerConfig()
     path = Path(log)
     if is_rosbag(path):
-        return _open_bag(path, scanner)
-    return _open_carmen(resolve_log(log), scanner, max_scans)
+        opened = _open_bag(path, scanner)
+    else:
+        opened = _open_carmen(resolve_log(log), scanner, max_scans)
+    opened.noise = noise
+    opened.matching = matching
+    return opened
 
 
 def _open_bag(path: Path, scanner: ScannerConfig) -> LogInput:

@@ -311,17 +311,14 @@ def run_map(
     """
     from contextlib import nullcontext
 
-    from slam.config import check_run_config
+    from slam.config import check_run_config, open_run_log
     from slam.diagnostics import tally_warnings
-    from slam.inputs import open_log
     from slam.io.atomic import staged_dir
     from slam.io.carmen import CarmenStats
     from slam.io.results import write_summary
 
     config = check_run_config(config)
-    source = (
-        log if isinstance(log, LogInput) else open_log(log, config.scanner, max_scans=max_scans)
-    )
+    source = log if isinstance(log, LogInput) else open_run_log(log, config, max_scans=max_scans)
     source.policy = replace(
         source.policy, laser_odometry="logged", odometry_sign="logged", output_frame="laser"
     )

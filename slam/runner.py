@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from slam import interrupts
-from slam.config import RunConfig, check_run_config
+from slam.config import RunConfig, check_run_config, open_run_log
 from slam.diagnostics import WarningTally, tally_warnings
 from slam.errors import InputError
 from slam.inputs import InputPolicy, LogInput, open_log
@@ -175,7 +175,7 @@ def _tallying(tally: WarningTally | None) -> AbstractContextManager[WarningTally
 def _source(log: str | Path | LogInput, config: RunConfig, max_scans: int | None) -> LogInput:
     if isinstance(log, LogInput):
         return log
-    return open_log(log, config.scanner, max_scans=max_scans)
+    return open_run_log(log, config, max_scans=max_scans)
 
 
 def run_estimator_on_log(

@@ -267,3 +267,51 @@ def test_a_corridor_seen_both_ways_after_a_gap_is_not_rescued():
     for s in scans:
         laser.add(s)
     assert laser.unmatched == 1 and laser.rescued == 0
+
+
+def test_the_runs_settings_reach_the_laser_odometry(tmp_path):
+    """``[scanner.scan_odometry]``, the run's sensor noise and its scan-matcher settings are the
+    laser odometry's: a run that asks every match to see all of its points leaves nearly every
+    scan at the constant-velocity prediction (the default run leaves none), and the noise and matcher settings it is given are
+    those of the run's configuration (with the laser odometry's own ``min_overlap``)."""
+    from dataclasses import replace
+
+    from linefit.config import SensorNoiseConfig
+    from slam.config import open_run_log
+    from slam.frontend.scan_match import ScanMatchConfig
+
+    frozen = _frozen_demo(tmp_path)
+    base = RunConfig()
+    strict = replace(
+        base,
+        scanner=replace(base.scanner, scan_odometry=LaserOdometryConfig(min_overlap=1.0)),
+    )
+    run_slam(frozen, tmp_path / "strict", strict)
+    summary = json.loads((tmp_path / "strict" / "summary.json").read_text())
+    counts = summary["input"]["laser_odometry_scans"]
+    # (the simulated walls show every point of a few scans: those still match)
+    assert counts["unmatched"] > 0.9 * summary["scans"]
+    # the config file of the run holds the table and gives it back
+    assert RunConfig.from_toml(tmp_path / "strict" / "config.toml") == strict
+
+    noise = SensorNoiseConfig(sigma_range_m=0.02, sigma_bearing_rad=5e-4)
+    matching = ScanMatchConfig(rotation_window_rad=0.5, slip_probability=0.05)
+    config = replace(
+        base,
+        linefit=replace(base.linefit, noise=noise),
+        slam=replace(base.slam, frontend=replace(base.slam.frontend, scan_matching=matching)),
+    )
+    opened = open_run_log(frozen, config)
+    with pytest.warns(InputWarning, match="never moves"):
+        for _ in opened.scans():
+            pass
+    laser = opened._laser_odometry
+    assert laser is not None and laser.matched > 0
+    assert laser.noise == noise
+    assert laser.matching == replace(matching, min_overlap=LaserOdometryConfig().min_overlap)
+    # opened without them, the defaults
+    plain = open_log(frozen)
+    with pytest.warns(InputWarning, match="never moves"):
+        for _ in plain.scans():
+            pass
+    assert plain._laser_odometry.noise == SensorNoiseConfig()

@@ -82,9 +82,9 @@ def ekf(
     """EKF-SLAM baseline: trajectory.tum, map.json, summary.json."""
     from tqdm import tqdm
 
+    from slam.config import open_run_log
     from slam.diagnostics import tally_warnings
     from slam.errors import ConfigError
-    from slam.inputs import open_log
     from slam.runner import run_ekf
 
     run_config = build_config(config, sigma_d, sigma_phi, seed)
@@ -113,7 +113,7 @@ def ekf(
     check_max_scans(max_scans)
     check_out_dir(out)
     with tally_warnings() as tally:
-        source = open_log(log, run_config.scanner, max_scans=max_scans)
+        source = open_run_log(log, run_config, max_scans=max_scans)
         with tqdm(desc="ekf", unit="scan", disable=quiet, total=source.total(max_scans)) as bar:
             summary = run_ekf(
                 source,

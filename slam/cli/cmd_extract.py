@@ -146,8 +146,8 @@ def extract(
     into place when every scan is done: a failed or interrupted run leaves earlier files as
     they were.
     """
+    from slam.config import open_run_log
     from slam.diagnostics import tally_warnings
-    from slam.inputs import open_log
 
     config = build_config(config_file, sigma_d, sigma_phi, seed)
     config = with_scanner_options(
@@ -169,7 +169,7 @@ def extract(
         config = replace(config, linefit=replace(config.linefit, grouping=grouping))
     check_output_file(out)
     with tally_warnings() as tally:
-        source = open_log(log, config.scanner, max_scans=limit)
+        source = open_run_log(log, config, max_scans=limit)
         n_scans, n_lines, stats = _extract(
             source, out, config, plot, plot_every, limit, quiet, strict
         )

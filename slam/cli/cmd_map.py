@@ -90,8 +90,8 @@ def map_command(
     """
     from tqdm import tqdm
 
+    from slam.config import open_run_log
     from slam.diagnostics import tally_warnings
-    from slam.inputs import open_log
     from slam.mapping import run_map
 
     config = build_config(config_path, sigma_d, sigma_phi, seed)
@@ -122,7 +122,7 @@ def map_command(
     check_max_scans(max_scans)
     check_out_dir(out)
     with tally_warnings() as tally:
-        source = open_log(log, config.scanner, max_scans=max_scans)
+        source = open_run_log(log, config, max_scans=max_scans)
         with tqdm(desc="map", unit="scan", disable=quiet, total=source.total(max_scans)) as bar:
             summary = run_map(
                 source,

@@ -82,8 +82,8 @@ def slam_command(
     """
     from tqdm import tqdm
 
+    from slam.config import open_run_log
     from slam.diagnostics import tally_warnings
-    from slam.inputs import open_log
     from slam.runner import run_slam
 
     config = build_config(config_path, sigma_d, sigma_phi, seed)
@@ -109,7 +109,7 @@ def slam_command(
     check_max_scans(max_scans)
     check_out_dir(out)
     with tally_warnings() as tally:
-        source = open_log(log, config.scanner, max_scans=max_scans)
+        source = open_run_log(log, config, max_scans=max_scans)
         with tqdm(
             desc=f"slam ({config.slam.backend})",
             unit="scan",
