@@ -88,7 +88,7 @@ settings are the ``[scanner.scan_odometry]`` table
 (:class:`~slam.frontend.laser_odometry.LaserOdometryConfig`); its points carry the run's
 sensor noise (``[linefit.noise]``) and its matcher the run's scan-matcher settings
 (``[slam.frontend.scan_matching]``, its own ``min_overlap``), when the log is opened with
-them (:func:`open_log`; :func:`slam.runner.open_run_log` does).  ``summary.json``'s
+them (:func:`open_log`; :func:`slam.config.open_run_log` does).  ``summary.json``'s
 ``"input"`` block has ``odometry_source`` (``"log"`` or ``"scan_matching"``) and, for the
 latter, ``laser_odometry_scans`` (matched, unmatched, and of the matched those registered by
 the search over every heading: rescued).
@@ -1007,7 +1007,7 @@ def open_log(
         The sensor noise of the laser odometry's points and its scan matcher's settings, when
         the motion comes from the scans (default: :class:`~linefit.config.SensorNoiseConfig`
         and :class:`~slam.frontend.scan_match.ScanMatchConfig` defaults; a run passes its own,
-        :func:`slam.runner.open_run_log`).
+        :func:`slam.config.open_run_log`).
 
     Raises
     ------
