@@ -272,8 +272,9 @@ def test_a_corridor_seen_both_ways_after_a_gap_is_not_rescued():
 def test_the_runs_settings_reach_the_laser_odometry(tmp_path):
     """``[scanner.scan_odometry]``, the run's sensor noise and its scan-matcher settings are the
     laser odometry's: a run that asks every match to see all of its points leaves nearly every
-    scan at the constant-velocity prediction (the default run leaves none), and the noise and matcher settings it is given are
-    those of the run's configuration (with the laser odometry's own ``min_overlap``)."""
+    scan at the constant-velocity prediction (the default run leaves none), and the noise and
+    matcher settings it is given are those of the run's configuration (with the laser
+    odometry's own ``min_overlap``)."""
     from dataclasses import replace
 
     from linefit.config import SensorNoiseConfig
