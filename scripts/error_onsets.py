@@ -57,7 +57,8 @@ def main() -> None:
     args = ap.parse_args()
     if (args.log is None) == (args.relations is None):
         ap.error("give --log NAME or --relations FILE")
-    rel_path = args.relations if args.relations is not None else resolve_log(args.log).relations
+    resolved = resolve_log(args.log) if args.log is not None else None
+    rel_path = args.relations if resolved is None else resolved.relations
     if rel_path is None:
         ap.error(f"{args.log}: no relations file; give --relations")
     relations = read_relations(rel_path)
@@ -66,10 +67,10 @@ def main() -> None:
     summary = json.loads(summary_path.read_text(encoding="utf-8")) if summary_path.exists() else {}
     kept = run.timestamps
     if args.fill:
-        if args.log is None:
+        if resolved is None:
             ap.error("--fill needs --log (its odometry carries the dropped scans)")
         frame = summary.get("frame", "laser")
-        run = fill_dropped_scans(run, scan_trajectory(resolve_log(args.log).log, frame=frame))
+        run = fill_dropped_scans(run, scan_trajectory(resolved.log, frame=frame))
     i1, ok1 = match_timestamps(relations.t1, run.timestamps, 1e-5)
     i2, ok2 = match_timestamps(relations.t2, run.timestamps, 1e-5)
     used = ok1 & ok2

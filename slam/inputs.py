@@ -109,7 +109,7 @@ from numpy.typing import NDArray
 
 from linefit.config import SensorNoiseConfig
 from slam.errors import ConfigError, InputError, LogFormatError
-from slam.frontend.laser_odometry import LaserOdometryConfig
+from slam.frontend.laser_odometry import LaserOdometry, LaserOdometryConfig
 from slam.frontend.scan_match import ScanMatchConfig
 from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse
 from slam.types import Scan
@@ -708,8 +708,6 @@ class LogInput:
         if mode == "log":
             yield from scans
             return
-        from slam.frontend.laser_odometry import LaserOdometry
-
         laser = LaserOdometry(self.scanner.scan_odometry, self.noise, self.matching)
         origin: FloatArray | None = None  # the first scan's logged pose (else zero)
         first: FloatArray | None = None  # the first scan's logged pose, if it has one
