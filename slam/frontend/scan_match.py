@@ -194,6 +194,16 @@ class ScanPoints:
         The piece of wall each point with a local line lies on: runs of consecutive such
         points without a depth jump share one (−1 for the others).  A wall's model error is
         shared by its points.
+    noise_ratio : float
+        The scan's noise against Eq. 8, in variance: the median over the windows of
+        ``2h + 1`` consecutive points without a depth jump (``max_neighbour_gap_m``) of the
+        smaller eigenvalue of their scatter over their mean Eq. 8 variance along the window's
+        normal, divided by the median of χ² with ``2h − 1`` degrees of freedom.  About 1
+        where the points scatter about straight walls as Eq. 8 says, about ``k²`` for
+        Gaussian range noise ``k`` times ``sigma_range_m`` (``tests/test_range_noise.py``);
+        more for rough or cluttered walls.  Ranges written in steps much coarser than their
+        noise read as flat runs and steps rather than scatter, which the median can miss.
+        NaN without local lines (``with_normals`` False) or without such a window.
     """
 
     xy: FloatArray
@@ -203,6 +213,7 @@ class ScanPoints:
     normals: FloatArray
     has_normal: NDArray[np.bool_]
     segment: NDArray[np.int64]
+    noise_ratio: float = math.nan
 
     def __len__(self) -> int:
         return int(self.xy.shape[0])
@@ -228,14 +239,18 @@ def _local_lines(
     q22: FloatArray,
     h: int,
     config: ScanMatchConfig,
-) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """Normals of each point's local line (``2h + 1`` consecutive points centred on it)."""
+) -> tuple[FloatArray, NDArray[np.bool_], float]:
+    """Normals of each point's local line (``2h + 1`` consecutive points centred on it).
+
+    Also the scan's noise against Eq. 8 (:attr:`ScanPoints.noise_ratio`; NaN without a window
+    of ``2h + 1`` points free of depth jumps).
+    """
     n = xy.shape[0]
     normals = np.zeros((n, 2))
     ok = np.zeros(n, dtype=bool)
     k = 2 * h + 1
     if n < k:
-        return normals, ok
+        return normals, ok, math.nan
     # windows of k consecutive points, centred on points h .. n-h-1
     idx = np.arange(n - k + 1)[:, None] + np.arange(k)[None, :]
     W = xy[idx]  # (m, k, 2)
@@ -260,18 +275,22 @@ def _local_lines(
     ok[centre] = good
     normals[~ok] = 0.0
     straight = (gaps <= config.max_neighbour_gap_m) & (lam_max > 0.0)
-    if config.normal_length_m > 0.0 and straight.any():
+    noise_ratio = math.nan
+    if straight.any():
         # the scan's own noise against Eq. 8's: the short lines' spread about themselves
         # (every window without a depth jump, thin or not; the median, robust to corners and
         # clutter) against the median of χ² with k − 2 degrees of freedom
-        nx, ny = -np.sin(phi), np.cos(phi)
+        nx, ny = -np.sin(phi[straight]), np.cos(phi[straight])
+        ws = idx[straight]
         var = (
-            nx**2 * q11[idx].mean(axis=1)
-            + 2.0 * nx * ny * q12[idx].mean(axis=1)
-            + ny**2 * q22[idx].mean(axis=1)
+            nx**2 * q11[ws].mean(axis=1)
+            + 2.0 * nx * ny * q12[ws].mean(axis=1)
+            + ny**2 * q22[ws].mean(axis=1)
         )
-        ratio = lam_min[straight] / np.maximum(var[straight], 1e-12)
-        noise_scale = max(1.0, float(np.median(ratio)) / _chi2_median(k - 2))
+        ratio = lam_min[straight] / np.maximum(var, 1e-12)
+        noise_ratio = float(np.median(ratio)) / _chi2_median(k - 2)
+    if config.normal_length_m > 0.0 and straight.any():
+        noise_scale = max(1.0, noise_ratio)
         _extend_lines(
             xy,
             q11,
@@ -285,7 +304,7 @@ def _local_lines(
             config.max_neighbour_gap_m,
             config.max_line_thickness,
         )
-    return normals, ok
+    return normals, ok, noise_ratio
 
 
 def _chi2_median(dof: int) -> float:
@@ -468,8 +487,9 @@ def scan_points(
         return ScanPoints(
             xy, q11, q12, q22, np.zeros((n, 2)), np.zeros(n, dtype=bool), np.full(n, -1)
         )
-    normals, ok = _local_lines(xy, q11, q12, q22, normal_half_window(b, config), config)
-    return ScanPoints(xy, q11, q12, q22, normals, ok, _segments(xy, ok, config))
+    h = normal_half_window(b, config)
+    normals, ok, noise_ratio = _local_lines(xy, q11, q12, q22, h, config)
+    return ScanPoints(xy, q11, q12, q22, normals, ok, _segments(xy, ok, config), noise_ratio)
 
 
 def _segments(xy: FloatArray, ok: NDArray[np.bool_], config: ScanMatchConfig) -> NDArray[np.int64]:

@@ -95,6 +95,7 @@ from slam.line_slam.passes import (
     fitted_pairs,
     with_pass_links,
 )
+from slam.line_slam.range_noise import RangeNoiseCheck
 from slam.line_slam.report import (
     COUNTERS,
     MIRRORED_P_VALUE,
@@ -169,6 +170,7 @@ class LineSlam:
         self.drift = DriftAccumulator(cfg.frontend.drift_xy_per_m, cfg.frontend.drift_theta_per_m)
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
+        self.range_noise = RangeNoiseCheck(self.linefit_config.noise.sigma_range_m)
         self._warned_mirrored = False
         self.line_noise = LineModelErrorEstimator(
             cfg.line_model_sigma_r_m, cfg.line_model_sigma_alpha_rad
@@ -259,6 +261,7 @@ class LineSlam:
         if self.config.frontend.scan_matching.enabled:
             with self.clock("frontend"):
                 points = self._scan_points(scan)
+            self.range_noise.add(points)
         report = self._keyframe(scan_no, step, lines, points)
         self.track.end_keyframe(step)
         self._record(scan, report.pose_index, np.zeros(3), True, t_start)
@@ -567,6 +570,10 @@ class LineSlam:
         stats["backend"] = self.backend.stats()
         stats["loop_closures_log"] = [a.as_log() for a in self.loop_closer.attempts]
         stats["odometry_noise"] = self.odometry_noise.summary()
+        stats["range_noise"] = self.range_noise.summary()
+        warning = self.range_noise.warning()
+        if warning is not None:
+            warnings.warn(warning, SlamWarning, stacklevel=2)
         if self.config.line_model_error == "estimated":
             stats["line_model_error"] = self.line_noise.summary()
         if self.pass_error is not None:
