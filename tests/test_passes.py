@@ -16,6 +16,7 @@ from slam.graph.linear import keys_of
 from slam.graph.problem import LineGraph
 from slam.graph.relative import RunCovariances, line_graph_from_file
 from slam.io.g2o import read_line_graph_g2o, write_line_graph_g2o
+from slam.line_slam.line_noise import excess_is_significant
 from slam.line_slam.passes import (
     MIN_PAIRS,
     PassError,
@@ -234,6 +235,36 @@ def test_without_a_pass_error_the_estimate_is_small():
     err = estimate_pass_error(passes, fitted_pairs(g, passes))
     # against the 1 cm / 5 mrad of each factor and 2 cm of the pass error above
     assert err.sigma_offset_m < 0.004 and err.sigma_angle_rad < 0.0015
+
+
+def test_without_a_pass_error_none_is_estimated_in_most_runs():
+    # the moment estimate alone is positive in most runs where the walls have none (14 of
+    # these 20); the significance test leaves most at exactly zero (2 of 20: the pairs share
+    # passes, so they are fewer independent pairs than they count)
+    nonzero = 0
+    for seed in range(30, 50):
+        g, stamps = _laps(seed, 0.0, 0.0)
+        passes = find_passes(g, stamps, gap_s=30.0)
+        err = estimate_pass_error(passes, fitted_pairs(g, passes))
+        nonzero += err.sigma_offset_m > 0.0 or err.sigma_angle_rad > 0.0
+    assert nonzero <= 4
+
+
+def test_the_excess_test_holds_its_level_and_finds_an_excess():
+    rng = np.random.default_rng(12)
+    # residuals with exactly their variances: significant about 1 % of the time
+    false_alarms = sum(
+        excess_is_significant(rng.normal(0.0, 1.0, 100) ** 2, np.ones(100), 0.99)
+        for _ in range(2000)
+    )
+    assert 5 <= false_alarms <= 40
+    # variance half again as large as the residuals' own, 300 of them: found
+    found = sum(
+        excess_is_significant(rng.normal(0.0, math.sqrt(1.5), 300) ** 2, np.ones(300), 0.99)
+        for _ in range(200)
+    )
+    assert found >= 190
+    assert not excess_is_significant(np.zeros(0), np.zeros(0), 0.99)
 
 
 def test_no_pass_error_links_nothing():

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 from scipy.special import gammainc
+from scipy.stats import gamma
 
 from slam.graph.factors import line_factor_residuals
 from slam.graph.problem import LineGraph
@@ -84,8 +85,34 @@ def midpoint_residuals(
     return em, np.stack([C[:, 0, 0], C[:, 1, 1]], axis=-1)
 
 
+# Var[min(X, c)] for X ~ χ²₁: E[X²; X < c] = 3 P(χ²₅ < c), plus c² · P(X > c), less the mean²
+_WINSOR_VAR = float(
+    3.0 * gammainc(2.5, _WINSOR_C / 2)
+    + _WINSOR_C**2 * (1.0 - gammainc(0.5, _WINSOR_C / 2))
+    - _WINSOR_MEAN**2
+)
+
+
 def _winsorized_mean(e2: FloatArray, var: FloatArray, s2: float) -> float:
     return float(np.mean(np.minimum(e2 / (var + s2), _WINSOR_C)))
+
+
+def excess_is_significant(e2: FloatArray, var: FloatArray, probability: float) -> bool:
+    """Whether the residuals ``e²`` exceed their variances ``var`` beyond chance.
+
+    The one-sided test of "no model error" (``σ² = 0``): the mean of ``min(e² / var, c)``
+    over ``n`` independent residuals against the ``probability`` quantile of its
+    distribution without one, taken as the gamma distribution of the same mean and
+    variance (``_WINSOR_MEAN``, ``_WINSOR_VAR / n``; the mean is skewed to the right, which a
+    normal approximation would miss).
+    """
+    e2 = np.asarray(e2, dtype=float)
+    n = e2.size
+    if n == 0:
+        return False
+    shape = n * _WINSOR_MEAN**2 / _WINSOR_VAR
+    limit = float(gamma.ppf(probability, shape, scale=_WINSOR_MEAN / shape))
+    return _winsorized_mean(e2, var, 0.0) > limit
 
 
 def _sigma2_for_moment(e2: FloatArray, var: FloatArray) -> float:

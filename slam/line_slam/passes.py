@@ -35,7 +35,8 @@ the line factors' model error is (:mod:`slam.line_slam.line_noise`, Huber's Prop
 the angle part of each pair's difference and on its offset at the pair's middle place, with
 the difference's covariance at the fit (:meth:`Passes.fitted_pair_terms`: the measurement
 noise's part, and the part of each pass's own error the fit leaves in it)
-(:func:`estimate_pass_error`).  In the graph each pass of a wall seen in two passes or more
+(:func:`estimate_pass_error`), where the pairs disagree beyond chance (:data:`SIGNIFICANCE`).
+In the graph each pass of a wall seen in two passes or more
 becomes a landmark of its own, anchored as the wall, holding its factors and linked to the
 wall by ``v_pass − v_wall ~ N(0, B_p)``
 (:meth:`slam.graph.problem.LineGraph.add_landmark_links`): the observations of a pass share
@@ -63,7 +64,7 @@ from slam.graph.linear import keys_of
 from slam.graph.problem import LineGraph
 from slam.graph.relative import information_factor, line_graph_from_file
 from slam.io.g2o import read_line_graph_g2o
-from slam.line_slam.line_noise import _sigma2_for_moment
+from slam.line_slam.line_noise import _sigma2_for_moment, excess_is_significant
 from slam.models.anchored import r_alpha_from_anchored
 
 __all__ = [
@@ -551,6 +552,12 @@ MIN_PAIRS = 20
 """Fewest pairs of passes for an estimate of the pass error (else none is used)."""
 
 
+SIGNIFICANCE = 0.99
+"""A pass error is estimated only when the pairs of passes disagree beyond their covariances
+with this one-sided significance (:func:`slam.line_slam.line_noise.excess_is_significant`, on
+the angle part or the offset part of the differences): where the walls have none, chance
+alone would give a positive estimate about half the time."""
+
 ESTIMATE_ROUNDS = 6
 """Rounds of the alternating estimate of the pass error's angle and offset."""
 
@@ -563,7 +570,8 @@ def estimate_pass_error(passes: Passes, pairs: FittedPairs | None = None) -> Pas
     ``T_a = I``, ``T_b = −I``), linear in ``σ_o²`` and ``σ_a²``.  They are found in turn, each
     holding the other, by the moment of :mod:`slam.line_slam.line_noise` (Huber's Proposal 2)
     on the angle part of ``d`` and on its offset at the pair's middle place.  With fewer than
-    :data:`MIN_PAIRS` pairs both σ are 0 (no pass error).
+    :data:`MIN_PAIRS` pairs, or differences that the measurement noise alone explains
+    (:data:`SIGNIFICANCE`), both σ are 0 (no pass error).
     """
     if pairs is None:
         a, b = passes.pairs()
@@ -578,6 +586,13 @@ def estimate_pass_error(passes: Passes, pairs: FittedPairs | None = None) -> Pas
     u_a, u_b = passes.place[a], passes.place[b]
     u_m = 0.5 * (u_a + u_b)
     h = np.column_stack([np.ones_like(u_m), -u_m])  # the offset at u_m
+    d_o = np.einsum("ki,ki->k", h, d)
+    # no pass error unless the pairs disagree beyond chance, in the angle or the offset
+    if not (
+        excess_is_significant(d[:, 1] ** 2, S[:, 1, 1], SIGNIFICANCE)
+        or excess_is_significant(d_o**2, np.einsum("ki,kij,kj->k", h, S, h), SIGNIFICANCE)
+    ):
+        return PassError(passes.gap_s, 0.0, 0.0, int(a.size))
 
     def spread(T: FloatArray, B: FloatArray) -> FloatArray:
         return np.asarray(T @ B @ np.swapaxes(T, 1, 2))
@@ -588,7 +603,6 @@ def estimate_pass_error(passes: Passes, pairs: FittedPairs | None = None) -> Pas
     def along_h(V: FloatArray) -> FloatArray:
         return np.asarray(np.einsum("ki,kij,kj->k", h, V, h))
 
-    d_o = np.einsum("ki,ki->k", h, d)
     s2_o = s2_a = 0.0
     for _ in range(ESTIMATE_ROUNDS):
         k = K_a[:, 1, 1]
