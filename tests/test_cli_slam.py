@@ -156,21 +156,35 @@ def test_default_demo_run_is_consistent_with_the_estimated_model_error(tmp_path,
     assert metrics["relations"]["abs_trans_m"]["mean"] > 2.0 * error
 
 
-def test_the_pass_error_changes_the_covariances_not_the_estimate(tmp_path, capsys):
-    """A simulated laboratory driven through more than once (``lab``, seed 11): with
-    ``line_pass_error = "estimated"`` (the default) the walls seen in several passes get
-    linked passes in ``graph.g2o`` and the covariances differ from those with ``"off"``, the
-    trajectory and the map do not; ``lineslam evaluate`` reads the linked graph."""
+def test_the_pass_error_changes_the_covariances_not_the_estimate(tmp_path, capsys, monkeypatch):
+    """A simulated laboratory driven through more than once (``lab``, seed 11): its walls
+    have no pass error, and with ``line_pass_error = "estimated"`` (the default) none is
+    estimated (its pairs of passes disagree no more than chance allows): the covariances are
+    those of ``"off"``.  Estimated without the significance test (a pass error of about
+    1 mm), the walls seen in several passes get linked passes in ``graph.g2o`` and the
+    covariances differ from those with ``"off"``, the trajectory and the map do not;
+    ``lineslam evaluate`` reads the linked graph."""
+    from slam.line_slam import passes
+
     sim = tmp_path / "lab"
     assert run(["simulate", "lab", "--seed", "11", "--out", str(sim), "--quiet"], capsys)[0] == 0
     option = tmp_path / "off.toml"
     option.write_text('[slam]\nline_pass_error = "off"\n')
     runs = {}
-    for name, extra in (("off", ["--config", str(option)]), ("passes", [])):
+    for name, extra in (("off", ["--config", str(option)]), ("default", []), ("passes", [])):
+        if name == "passes":
+            monkeypatch.setattr(passes, "SIGNIFICANCE", 0.5)  # any excess at all
         out = tmp_path / name
         args = ["slam", str(sim / "log.clf"), "--out", str(out), "--quiet", *extra]
         assert run(args, capsys)[0] == 0
         runs[name] = out
+    default = json.loads((runs["default"] / "summary.json").read_text())["line_pass_error"]
+    assert default["pairs"] >= 20 and default["linked_passes"] == 0
+    assert default["sigma_offset_m"] == 0.0 and default["sigma_angle_rad"] == 0.0
+    np.testing.assert_array_equal(
+        np.loadtxt(runs["default"] / "trajectory_covariance.txt"),
+        np.loadtxt(runs["off"] / "trajectory_covariance.txt"),
+    )
     summary = json.loads((runs["passes"] / "summary.json").read_text())
     est = summary["line_pass_error"]
     assert est["pairs"] >= 20 and est["linked_passes"] > 0
