@@ -270,8 +270,9 @@ def _local_lines(
     good = (gaps <= config.max_neighbour_gap_m) & (lam_max > 0.0)
     good &= lam_min <= config.max_line_thickness * np.where(lam_max > 0.0, lam_max, 1.0)
     centre = np.arange(h, n - h)
-    normals[centre, 0] = -np.sin(phi)
-    normals[centre, 1] = np.cos(phi)
+    nx, ny = -np.sin(phi), np.cos(phi)
+    normals[centre, 0] = nx
+    normals[centre, 1] = ny
     ok[centre] = good
     normals[~ok] = 0.0
     straight = (gaps <= config.max_neighbour_gap_m) & (lam_max > 0.0)
@@ -280,15 +281,8 @@ def _local_lines(
         # the scan's own noise against Eq. 8's: the short lines' spread about themselves
         # (every window without a depth jump, thin or not; the median, robust to corners and
         # clutter) against the median of χ² with k − 2 degrees of freedom
-        nx, ny = -np.sin(phi[straight]), np.cos(phi[straight])
-        ws = idx[straight]
-        var = (
-            nx**2 * q11[ws].mean(axis=1)
-            + 2.0 * nx * ny * q12[ws].mean(axis=1)
-            + ny**2 * q22[ws].mean(axis=1)
-        )
-        ratio = lam_min[straight] / np.maximum(var, 1e-12)
-        noise_ratio = float(np.median(ratio)) / _chi2_median(k - 2)
+        noise_ratio = _median_spread_ratio(lam_min, nx, ny, q11, q12, q22, straight)
+        noise_ratio /= _chi2_median(k - 2)
     if config.normal_length_m > 0.0 and straight.any():
         noise_scale = max(1.0, noise_ratio)
         _extend_lines(
@@ -305,6 +299,40 @@ def _local_lines(
             config.max_line_thickness,
         )
     return normals, ok, noise_ratio
+
+
+@njit(cache=True, nogil=True)
+def _median_spread_ratio(
+    lam_min: FloatArray,
+    nx: FloatArray,
+    ny: FloatArray,
+    q11: FloatArray,
+    q12: FloatArray,
+    q22: FloatArray,
+    use: NDArray[np.bool_],
+) -> float:
+    """Median over the windows ``use`` of ``lam_min`` over the mean Eq. 8 variance along ``n``.
+
+    Window ``i`` holds points ``i .. i + k − 1`` (``k = q11.size − lam_min.size + 1``).
+    """
+    m = lam_min.shape[0]
+    k = q11.shape[0] - m + 1
+    ratio = np.empty(m)
+    count = 0
+    for i in range(m):
+        if not use[i]:
+            continue
+        a = 0.0
+        b = 0.0
+        c = 0.0
+        for j in range(i, i + k):
+            a += q11[j]
+            b += q12[j]
+            c += q22[j]
+        var = (nx[i] * nx[i] * a + 2.0 * nx[i] * ny[i] * b + ny[i] * ny[i] * c) / k
+        ratio[count] = lam_min[i] / max(var, 1e-12)
+        count += 1
+    return float(np.median(ratio[:count]))
 
 
 def _chi2_median(dof: int) -> float:
