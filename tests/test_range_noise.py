@@ -139,3 +139,26 @@ def test_a_run_reports_its_range_noise_and_warns_when_the_scans_are_noisier() ->
     summary, warned = run(5.0)
     assert summary["sigma_ratio"] == pytest.approx(5.0, rel=0.2)
     assert sum("scatter" in m for m in warned) == 1
+
+
+def test_the_real_logs_read_as_their_ranges_are_written(shared_data):
+    # ACES's ranges are written in steps of 2.5-5 cm: its points scatter several times as
+    # much as Eq. 8 with 5 mm says; Intel's (whole centimetres) about as Eq. 8 says.  Every
+    # 10th of the first 3,000 scans, as the check counts keyframes.
+    from itertools import islice
+
+    from slam.inputs import InputPolicy, read_log_scans
+    from slam.io.catalog import resolve_log
+
+    noise = SensorNoiseConfig()
+    ratio = {}
+    for name in ("intel", "aces"):
+        check = RangeNoiseCheck(noise.sigma_range_m)
+        log = resolve_log(name, root=shared_data).log
+        for scan in islice(read_log_scans(log, InputPolicy()), 0, 3000, 10):
+            check.add(
+                scan_points(scan.ranges, scan.bearings, scan.max_range_m, noise, ScanMatchConfig())
+            )
+        ratio[name] = check.sigma_ratio
+    assert ratio["intel"] is not None and ratio["intel"] < 1.5
+    assert ratio["aces"] is not None and ratio["aces"] > WARN_SIGMA_RATIO
