@@ -51,6 +51,7 @@ from numpy.typing import NDArray
 
 from linefit.config import SensorNoiseConfig
 from linefit.noise import point_covariance_entries
+from slam import interrupts
 from slam.validate import nonneg, positive, require
 
 __all__ = [
@@ -281,7 +282,8 @@ def _local_lines(
         # the scan's own noise against Eq. 8's: the short lines' spread about themselves
         # (every window without a depth jump, thin or not; the median, robust to corners and
         # clutter) against the median of χ² with k − 2 degrees of freedom
-        noise_ratio = _median_spread_ratio(lam_min, nx, ny, q11, q12, q22, straight)
+        with interrupts.deferred():  # compiled code (the first call loads it)
+            noise_ratio = _median_spread_ratio(lam_min, nx, ny, q11, q12, q22, straight)
         noise_ratio /= _chi2_median(k - 2)
     if config.normal_length_m > 0.0 and straight.any():
         noise_scale = max(1.0, noise_ratio)
