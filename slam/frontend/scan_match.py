@@ -277,15 +277,16 @@ def _local_lines(
     ok[centre] = good
     normals[~ok] = 0.0
     straight = (gaps <= config.max_neighbour_gap_m) & (lam_max > 0.0)
+    any_straight = bool(straight.any())
     noise_ratio = math.nan
-    if straight.any():
+    if any_straight:
         # the scan's own noise against Eq. 8's: the short lines' spread about themselves
         # (every window without a depth jump, thin or not; the median, robust to corners and
         # clutter) against the median of χ² with k − 2 degrees of freedom
         with interrupts.deferred():  # compiled code (the first call loads it)
             noise_ratio = _median_spread_ratio(lam_min, nx, ny, q11, q12, q22, straight)
         noise_ratio /= _chi2_median(k - 2)
-    if config.normal_length_m > 0.0 and straight.any():
+    if config.normal_length_m > 0.0 and any_straight:
         noise_scale = max(1.0, noise_ratio)
         _extend_lines(
             xy,

@@ -587,10 +587,15 @@ def estimate_pass_error(passes: Passes, pairs: FittedPairs | None = None) -> Pas
     u_m = 0.5 * (u_a + u_b)
     h = np.column_stack([np.ones_like(u_m), -u_m])  # the offset at u_m
     d_o = np.einsum("ki,ki->k", h, d)
+
+    def along_h(V: FloatArray) -> FloatArray:
+        return np.asarray(np.einsum("ki,kij,kj->k", h, V, h))
+
+    S_o = along_h(S)
     # no pass error unless the pairs disagree beyond chance, in the angle or the offset
     if not (
         excess_is_significant(d[:, 1] ** 2, S[:, 1, 1], SIGNIFICANCE)
-        or excess_is_significant(d_o**2, np.einsum("ki,kij,kj->k", h, S, h), SIGNIFICANCE)
+        or excess_is_significant(d_o**2, S_o, SIGNIFICANCE)
     ):
         return PassError(passes.gap_s, 0.0, 0.0, int(a.size))
 
@@ -599,16 +604,12 @@ def estimate_pass_error(passes: Passes, pairs: FittedPairs | None = None) -> Pas
 
     K_o = spread(T_a, pass_covariance(u_a, 1.0, 0.0)) + spread(T_b, pass_covariance(u_b, 1.0, 0.0))
     K_a = spread(T_a, pass_covariance(u_a, 0.0, 1.0)) + spread(T_b, pass_covariance(u_b, 0.0, 1.0))
-
-    def along_h(V: FloatArray) -> FloatArray:
-        return np.asarray(np.einsum("ki,kij,kj->k", h, V, h))
-
     s2_o = s2_a = 0.0
     for _ in range(ESTIMATE_ROUNDS):
         k = K_a[:, 1, 1]
         s2_a = _sigma2_for_moment(d[:, 1] ** 2 / k, (S[:, 1, 1] + s2_o * K_o[:, 1, 1]) / k)
         k = along_h(K_o)
-        s2_o = _sigma2_for_moment(d_o**2 / k, (along_h(S) + s2_a * along_h(K_a)) / k)
+        s2_o = _sigma2_for_moment(d_o**2 / k, (S_o + s2_a * along_h(K_a)) / k)
     return PassError(passes.gap_s, math.sqrt(s2_o), math.sqrt(s2_a), int(a.size))
 
 
