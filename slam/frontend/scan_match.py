@@ -65,6 +65,7 @@ __all__ = [
     "normal_half_window",
     "refine_scan",
     "scan_points",
+    "scan_view",
     "visible_points",
 ]
 
@@ -205,6 +206,11 @@ class ScanPoints:
         more for rough or cluttered walls.  Ranges written in steps much coarser than their
         noise read as flat runs and steps rather than scatter, which the median can miss.
         NaN without local lines (``with_normals`` False) or without such a window.
+    view : tuple of float, optional
+        ``(first_bearing_rad, span_rad, max_range_m)``: what these points could see, for
+        :func:`visible_points`; None (a single scan's points in beam order): from the
+        points themselves.  Points merged from several scans (a local map) state the view of
+        the scan whose frame they are in.
     """
 
     xy: FloatArray
@@ -215,6 +221,7 @@ class ScanPoints:
     has_normal: NDArray[np.bool_]
     segment: NDArray[np.int64]
     noise_ratio: float = math.nan
+    view: tuple[float, float, float] | None = None
 
     def __len__(self) -> int:
         return int(self.xy.shape[0])
@@ -1045,21 +1052,33 @@ def visible_points(reference: ScanPoints, current: ScanPoints, delta: FloatArray
     """
     if len(reference) == 0 or len(current) == 0:
         return 0
-    ref = reference.xy
-    bearings = np.unwrap(np.arctan2(ref[:, 1], ref[:, 0]))
-    first, span = float(bearings[0]), float(bearings[-1] - bearings[0])
-    if span < 0.0:  # clockwise beam order
-        first, span = float(bearings[-1]), -span
-    # each beam covers half a step on either side
-    steps = np.abs(np.diff(bearings))
-    half_step = 0.5 * float(np.median(steps)) if steps.size else 0.0
-    first, span = first - half_step, span + 2.0 * half_step
+    first, span, max_range = reference.view if reference.view is not None else scan_view(reference)
     c, s = math.cos(float(delta[2])), math.sin(float(delta[2]))
     qx = c * current.xy[:, 0] - s * current.xy[:, 1] + float(delta[0])
     qy = s * current.xy[:, 0] + c * current.xy[:, 1] + float(delta[1])
     within_fov = np.mod(np.arctan2(qy, qx) - first, 2.0 * math.pi) <= span
-    within_range = np.hypot(qx, qy) <= float(np.max(np.hypot(ref[:, 0], ref[:, 1])))
+    within_range = np.hypot(qx, qy) <= max_range
     return int(np.count_nonzero(within_fov & within_range))
+
+
+def scan_view(points: ScanPoints) -> tuple[float, float, float]:
+    """``(first_bearing_rad, span_rad, max_range_m)`` of one scan's points in beam order.
+
+    The field of view runs from the first to the last valid point, widened by half the
+    median step between them on either side (each beam covers half a step on either side);
+    the range is the farthest valid point's.
+    """
+    ref = points.xy
+    if ref.shape[0] == 0:
+        return 0.0, 0.0, 0.0
+    bearings = np.unwrap(np.arctan2(ref[:, 1], ref[:, 0]))
+    first, span = float(bearings[0]), float(bearings[-1] - bearings[0])
+    if span < 0.0:  # clockwise beam order
+        first, span = float(bearings[-1]), -span
+    steps = np.abs(np.diff(bearings))
+    half_step = 0.5 * float(np.median(steps)) if steps.size else 0.0
+    max_range = float(np.max(np.hypot(ref[:, 0], ref[:, 1])))
+    return first - half_step, span + 2.0 * half_step, max_range
 
 
 def _coarse_starts(
