@@ -83,6 +83,34 @@ def _errors(
     return float(np.sqrt(np.mean(e**2))), float(np.percentile(e, 95)), float(e.max())
 
 
+def _print_worst(
+    poses: np.ndarray,
+    reference: np.ndarray,
+    paired: np.ndarray,
+    span: int,
+    k: int,
+    scans: list[Any],
+) -> None:
+    """The ``k`` worst relative poses ``span`` scans apart, one per stretch of ``span`` scans."""
+    errors = []
+    for a, b in zip(paired[:-span], paired[span:], strict=True):
+        d_ref = pose_between(reference[a], reference[b])
+        d_odo = pose_between(poses[a], poses[b])
+        errors.append((float(np.hypot(*(d_ref[:2] - d_odo[:2]))), int(a), int(b)))
+    shown: list[int] = []
+    for err, a, b in sorted(errors, reverse=True):
+        if any(abs(a - s) < span for s in shown):
+            continue
+        shown.append(a)
+        moved = float(np.hypot(*pose_between(reference[a], reference[b])[:2]))
+        print(
+            f"    scans {a}-{b} (t {scans[a].timestamp:.1f} s): error {err:.3f} m, "
+            f"the reference moves {moved:.3f} m"
+        )
+        if len(shown) >= k:
+            break
+
+
 def _stalls(poses: np.ndarray, reference: np.ndarray, paired: np.ndarray) -> int:
     """Consecutive scans the reference moves > 4 cm between and the odometry < 30 % of that."""
     n = 0
@@ -101,6 +129,13 @@ def main() -> None:
     parser.add_argument("--reference", required=True, help="TUM trajectory (laser frame)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument("--spans", type=int, nargs="+", default=[10, 50])
+    parser.add_argument(
+        "--worst",
+        type=int,
+        default=0,
+        metavar="K",
+        help="also print the K stretches of the first span where the laser odometry errs most",
+    )
     args = parser.parse_args()
     config, matching, noise = _settings(args.set)
     scans = list(read_log_scans(args.log, InputPolicy()))
@@ -127,6 +162,8 @@ def main() -> None:
             parts.append(f"{span} scans: RMS {rms:.4f} p95 {p95:.4f} max {worst:.3f} m")
         stalls = _stalls(trajectory, reference, paired)
         print(f"  {name:16s} " + " | ".join(parts) + f" | stalls {stalls}")
+    if args.worst > 0:
+        _print_worst(poses, reference, paired, args.spans[0], args.worst, scans)
     print(
         f"  laser odometry: matched {laser.matched}, unmatched {laser.unmatched}, "
         f"rescued {laser.rescued}; {cpu_s:.1f} s of CPU"
