@@ -17,8 +17,10 @@ odometry, whose ``summary.json`` says ``"frame": "laser"``); scans are paired wi
 stamp.  Printed for the laser odometry and for the log's own odometry alike: the RMS, 95th
 percentile and largest translation error of the relative poses ``k`` scans apart
 (``--spans``, default 10 and 50), and the scans where the reference moves more than 4 cm
-while the odometry moves less than 30 % of that (``stalls``); then the laser odometry's
-matched, unmatched and rescued scans and its process CPU time.  Nothing is written.
+while the odometry moves less than 30 % of that (``stalls``); with ``--worst K`` the ``K``
+stretches of the first span where the laser odometry errs most (scans, time stamp, error and
+the reference's motion); then the laser odometry's matched, unmatched and rescued scans and
+its process CPU time.  Nothing is written.
 """
 
 from __future__ import annotations

@@ -81,8 +81,12 @@ moves, every scan passes as logged (a robot that stood still at the start); wher
 laser poses stand still while the odometry poses move, the laser odometry is the odometry
 pose composed with the mounting (an :class:`InputWarning`; ``laser_odometry`` ``"base"``).
 Once the scans have moved :data:`STILL_ODOMETRY_M` or :data:`STILL_ODOMETRY_RAD` from the
-first scan without it, the odometry is taken for absent: an :class:`InputWarning` says so and
-every scan gets the laser odometry's pose (from the first scan's logged pose).
+first scan without it, and the first scan no longer registers the current one where it was
+(their overlap at the identity, :func:`slam.frontend.scan_match.overlap_at`, below the laser
+odometry's ``min_overlap``: the scans themselves show the motion, not only the chained
+matches, which along a corridor with no visible end follow their constant-velocity
+prediction), the odometry is taken for absent: an :class:`InputWarning` says so and every scan
+gets the laser odometry's pose (from the first scan's logged pose).
 ``"scan_matching"`` always uses the laser odometry, ``"log"`` never.  The laser odometry's
 settings are the ``[scanner.scan_odometry]`` table
 (:class:`~slam.frontend.laser_odometry.LaserOdometryConfig`); its points carry the run's
@@ -110,7 +114,7 @@ from numpy.typing import NDArray
 from linefit.config import SensorNoiseConfig
 from slam.errors import ConfigError, InputError, LogFormatError
 from slam.frontend.laser_odometry import LaserOdometry, LaserOdometryConfig
-from slam.frontend.scan_match import ScanMatchConfig
+from slam.frontend.scan_match import ScanMatchConfig, ScanPoints, overlap_at
 from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse
 from slam.types import Scan
 from slam.validate import require
@@ -709,6 +713,7 @@ class LogInput:
             yield from scans
             return
         laser = LaserOdometry(self.scanner.scan_odometry, self.noise, self.matching)
+        first_points: ScanPoints | None = None  # the first scan's, for the scans' own motion
         origin: FloatArray | None = None  # the first scan's logged pose (else zero)
         first: FloatArray | None = None  # the first scan's logged pose, if it has one
         held: list[tuple[Scan, FloatArray]] = []
@@ -752,8 +757,16 @@ class LogInput:
                 yield self._with_laser_pose(scan, pose, origin)
                 continue
             held.append((scan, pose))
+            if first_points is None:
+                first_points = laser.points(scan)
             away = math.hypot(pose[0], pose[1])
-            if away > STILL_ODOMETRY_M or abs(pose[2]) > STILL_ODOMETRY_RAD:
+            moved = away > STILL_ODOMETRY_M or abs(pose[2]) > STILL_ODOMETRY_RAD
+            # ... and the scans themselves show it: the first no longer registers this one
+            # where it was (not only the chained matches' constant-velocity drift)
+            if moved and (
+                overlap_at(first_points, laser.points(scan), np.zeros(3), laser.matching)
+                < laser.matching.min_overlap
+            ):
                 decided = "scan_matching"
                 warnings.warn(
                     f"{self.log}: the log's odometry "

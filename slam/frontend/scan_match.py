@@ -63,6 +63,7 @@ __all__ = [
     "match_any_heading",
     "match_scans",
     "normal_half_window",
+    "overlap_at",
     "refine_scan",
     "scan_points",
     "scan_view",
@@ -1260,6 +1261,21 @@ def _posterior(
         except np.linalg.LinAlgError:
             ok = False
     return cov, float(overlap), inl, ok and overlap >= matcher.cfg.min_overlap
+
+
+def overlap_at(
+    reference: ScanPoints, current: ScanPoints, delta: FloatArray, config: ScanMatchConfig
+) -> float:
+    """The overlap of ``current`` with ``reference`` at ``delta``, without matching.
+
+    The fraction of ``current``'s points that ``reference`` could see at ``delta``
+    (:func:`visible_points`) lying within ``inlier_m`` of a reference line: the measure
+    :func:`match_scans` accepts a match by (``min_overlap``), at a given pose.
+    """
+    x = np.asarray(delta, dtype=float)
+    matcher = _Matcher(reference, current, config, x, np.zeros((3, 3)), lambda x: 0.0)
+    inliers = matcher.inliers(x) if matcher.p.shape[0] >= 3 else 0
+    return inliers / max(visible_points(reference, current, x), inliers, 1)
 
 
 def refine_scan(
