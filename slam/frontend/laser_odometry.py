@@ -135,11 +135,13 @@ class LaserOdometry:
     noise : SensorNoiseConfig, optional
         The range-bearing noise of the points (default: the paper's).
     matching : ScanMatchConfig, optional
-        The scan matcher's settings, with the config's ``min_overlap``.  Its slip mixture
-        (``slip_probability``) stays: the constant-velocity prediction fails as wheel odometry
-        slips, at a sudden turn or across a gap in the log, and the mixture lets the points
-        decide there (on the ``*-no-odometry`` rows, one run each: Intel 0.059 m against
-        0.227 m without it, ACES 1.13 against 1.16 m, fr079 0.043 m either way).
+        The scan matcher's settings, with the config's ``min_overlap`` and
+        ``normal_length_m``.  Its slip mixture (``slip_probability``) stays: the
+        constant-velocity prediction fails as wheel odometry slips, at a sudden turn or across
+        a gap in the log, and the mixture lets the points decide there (on the
+        ``*-no-odometry`` rows, one run each, with each scan matched against the previous key
+        scan alone: Intel 0.059 m against 0.227 m without it, ACES 1.13 against 1.16 m, fr079
+        0.043 m either way).
 
     Attributes
     ----------
