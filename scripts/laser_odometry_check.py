@@ -72,16 +72,23 @@ def _settings(
     return config, matching, noise
 
 
-def _errors(
+def _window_errors(
     poses: np.ndarray, reference: np.ndarray, paired: np.ndarray, span: int
-) -> tuple[float, float, float]:
-    """RMS, 95th percentile and largest translation error of relative poses ``span`` apart."""
+) -> list[tuple[float, int, int]]:
+    """``(error, a, b)``: the translation error of each relative pose ``span`` scans apart."""
     out = []
     for a, b in zip(paired[:-span], paired[span:], strict=True):
         d_ref = pose_between(reference[a], reference[b])
         d_odo = pose_between(poses[a], poses[b])
-        out.append(float(np.hypot(*(d_ref[:2] - d_odo[:2]))))
-    e = np.asarray(out)
+        out.append((float(np.hypot(*(d_ref[:2] - d_odo[:2]))), int(a), int(b)))
+    return out
+
+
+def _errors(
+    poses: np.ndarray, reference: np.ndarray, paired: np.ndarray, span: int
+) -> tuple[float, float, float]:
+    """RMS, 95th percentile and largest translation error of relative poses ``span`` apart."""
+    e = np.array([err for err, _, _ in _window_errors(poses, reference, paired, span)])
     return float(np.sqrt(np.mean(e**2))), float(np.percentile(e, 95)), float(e.max())
 
 
@@ -94,13 +101,8 @@ def _print_worst(
     scans: list[Any],
 ) -> None:
     """The ``k`` worst relative poses ``span`` scans apart, one per stretch of ``span`` scans."""
-    errors = []
-    for a, b in zip(paired[:-span], paired[span:], strict=True):
-        d_ref = pose_between(reference[a], reference[b])
-        d_odo = pose_between(poses[a], poses[b])
-        errors.append((float(np.hypot(*(d_ref[:2] - d_odo[:2]))), int(a), int(b)))
     shown: list[int] = []
-    for err, a, b in sorted(errors, reverse=True):
+    for err, a, b in sorted(_window_errors(poses, reference, paired, span), reverse=True):
         if any(abs(a - s) < span for s in shown):
             continue
         shown.append(a)

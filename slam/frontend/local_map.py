@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -117,10 +118,7 @@ class LocalMap:
         newest_pose, newest, _, _ = self._keys[-1]
         view = scan_view(newest)
         if len(self._keys) == 1:
-            return ScanPoints(
-                newest.xy, newest.q11, newest.q12, newest.q22, newest.normals,
-                newest.has_normal, newest.segment, newest.noise_ratio, view,
-            )  # fmt: skip
+            return replace(newest, view=view)
         parts = [newest]
         for pose, points, _, _ in list(self._keys)[:-1]:
             parts.append(transform_points(points, pose_between(newest_pose, pose)))
