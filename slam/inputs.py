@@ -86,7 +86,9 @@ first scan without it, and the first scan no longer registers the current one wh
 odometry's ``min_overlap``: the scans themselves show the motion, not only the chained
 matches, which along a corridor with no visible end follow their constant-velocity
 prediction), the odometry is taken for absent: an :class:`InputWarning` says so and every scan
-gets the laser odometry's pose (from the first scan's logged pose).
+gets the laser odometry's pose (from the first scan's logged pose) and the covariance of its
+step from the previous scan (:attr:`Scan.odometry_step_cov`; scans with the log's odometry
+have none).
 ``"scan_matching"`` always uses the laser odometry, ``"log"`` never.  The laser odometry's
 settings are the ``[scanner.scan_odometry]`` table
 (:class:`~slam.frontend.laser_odometry.LaserOdometryConfig`); its points carry the run's
@@ -716,7 +718,7 @@ class LogInput:
         first_points: ScanPoints | None = None  # the first scan's, for the scans' own motion
         origin: FloatArray | None = None  # the first scan's logged pose (else zero)
         first: FloatArray | None = None  # the first scan's logged pose, if it has one
-        held: list[tuple[Scan, FloatArray]] = []
+        held: list[tuple[Scan, FloatArray, FloatArray]] = []
         decided: str | None = mode if mode == "scan_matching" else None
         first_base: FloatArray | None = None  # the first scan's odometry (base) pose
         for scan in scans:
@@ -733,7 +735,7 @@ class LogInput:
                 first_base = scan.pose_odom_base
             if decided is None and _moved(odom, first):
                 decided = "log"  # the log's odometry moves: everything as logged
-                yield from (s for s, _ in held)
+                yield from (s for s, _, _ in held)
                 held = []
                 yield scan
                 continue
@@ -748,15 +750,16 @@ class LogInput:
                     stacklevel=2,
                 )
                 self.policy = replace(self.policy, laser_odometry="base")
-                yield from (self._with_base_pose(s) for s, _ in held)
+                yield from (self._with_base_pose(s) for s, _, _ in held)
                 held = []
                 yield self._with_base_pose(scan)
                 continue
             pose = laser.add(scan)
+            cov = laser.step_cov.copy()
             if decided is not None:
-                yield self._with_laser_pose(scan, pose, origin)
+                yield self._with_laser_pose(scan, pose, origin, cov)
                 continue
-            held.append((scan, pose))
+            held.append((scan, pose, cov))
             if first_points is None:
                 first_points = laser.points(scan)
             away = math.hypot(pose[0], pose[1])
@@ -777,16 +780,16 @@ class LogInput:
                     InputWarning,
                     stacklevel=2,
                 )
-                yield from (self._with_laser_pose(s, p, origin) for s, p in held)
+                yield from (self._with_laser_pose(s, p, origin, c) for s, p, c in held)
                 held = []
         if decided is None and held:
             # neither the odometry nor the scans moved: the scans as logged, those without
             # odometry at the laser odometry's pose (as still as they are)
             assert origin is not None
-            absent = [s.pose_odom_laser is None and s.pose_odom_base is None for s, _ in held]
+            absent = [s.pose_odom_laser is None and s.pose_odom_base is None for s, _, _ in held]
             yield from (
-                self._with_laser_pose(s, p, origin) if a else s
-                for (s, p), a in zip(held, absent, strict=True)
+                self._with_laser_pose(s, p, origin, c) if a else s
+                for (s, p, c), a in zip(held, absent, strict=True)
             )
             decided = "scan_matching" if any(absent) else "log"
         if decided == "scan_matching":
@@ -806,11 +809,15 @@ class LogInput:
         pose = pose_compose(np.asarray(scan.pose_odom_base, dtype=float), self.policy.mount)
         return replace(scan, pose_odom_laser=pose)
 
-    def _with_laser_pose(self, scan: Scan, pose: FloatArray, origin: FloatArray) -> Scan:
-        """``scan`` with the laser odometry's pose (moved to start at ``origin``)."""
+    def _with_laser_pose(
+        self, scan: Scan, pose: FloatArray, origin: FloatArray, step_cov: FloatArray
+    ) -> Scan:
+        """``scan`` with the laser odometry's pose (from ``origin``) and step covariance."""
         pose_laser = pose_compose(origin, pose)
         pose_base = pose_compose(pose_laser, pose_inverse(self.policy.mount))
-        return replace(scan, pose_odom_laser=pose_laser, pose_odom_base=pose_base)
+        return replace(
+            scan, pose_odom_laser=pose_laser, pose_odom_base=pose_base, odometry_step_cov=step_cov
+        )
 
     def _note_geometry(self, scan: Scan) -> None:
         g = self.geometry

@@ -43,6 +43,29 @@ def _good_pose(value: Any) -> bool:
     )
 
 
+def _good_cov(value: Any) -> bool:
+    return value is None or (
+        type(value) is np.ndarray
+        and value.shape == (3, 3)
+        and value.dtype.kind == "f"
+        and bool(np.all(np.isfinite(value)))
+    )
+
+
+def _cov(value: Any, what: str, fail: Any) -> FloatArray | None:
+    if value is None:
+        return None
+    try:
+        value = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise fail(f"{what} must be a 3x3 covariance") from None
+    if value.shape != (3, 3):
+        raise fail(f"{what} must have shape (3, 3), got {value.shape}")
+    if not np.all(np.isfinite(value)):
+        raise fail(f"{what} must be finite")
+    return value
+
+
 def _pose(value: Any, what: str, fail: Any) -> FloatArray | None:
     if value is None:
         return None
@@ -84,6 +107,10 @@ class Scan:
         ``ROBOTLASER1 laser_x laser_y laser_theta``), if the log has one.
     source : str
         Where the scan came from, for messages (``"path:line"``).
+    odometry_step_cov : ndarray, shape (3, 3) or None
+        Covariance of the odometry's step from the previous scan to this one (in the previous
+        laser pose's frame, right perturbation), where the odometry states one (the laser
+        odometry's matches); None: the estimator's motion model gives it.
     """
 
     index: int
@@ -94,6 +121,7 @@ class Scan:
     pose_odom_base: FloatArray | None = None
     pose_odom_laser: FloatArray | None = None
     source: str = ""
+    odometry_step_cov: FloatArray | None = None
 
     def __post_init__(self) -> None:
         """Check the fields (lists become float arrays); raise :class:`InputError` naming them."""
@@ -110,6 +138,7 @@ class Scan:
             and type(self.index) is int
             and _good_pose(self.pose_odom_base)
             and _good_pose(self.pose_odom_laser)
+            and _good_cov(self.odometry_step_cov)
             and isinstance(self.max_range_m, float)
             and self.max_range_m > 0.0
         ):
@@ -144,11 +173,13 @@ class Scan:
             raise fail(f"max_range_m must be > 0 (inf: no limit), got {self.max_range_m}")
         base = _pose(self.pose_odom_base, "pose_odom_base", fail)
         laser = _pose(self.pose_odom_laser, "pose_odom_laser", fail)
+        step_cov = _cov(self.odometry_step_cov, "odometry_step_cov", fail)
         for name, value in (
             ("ranges", ranges),
             ("bearings", bearings),
             ("pose_odom_base", base),
             ("pose_odom_laser", laser),
+            ("odometry_step_cov", step_cov),
         ):
             if value is not getattr(self, name):
                 object.__setattr__(self, name, value)

@@ -93,6 +93,7 @@ def test_scan_accepts_lists_and_checks_its_fields():
         "timestamp": (float("nan"), "timestamp must be finite, got nan"),
         "max_range_m": (0.0, "max_range_m must be > 0"),
         "index": (1.5, "index must be a whole number"),
+        "odometry_step_cov": (np.eye(2), r"odometry_step_cov must have shape \(3, 3\)"),
     }
     for name, (value, message) in bad.items():
         with pytest.raises(InputError, match=message) as info:
@@ -100,6 +101,9 @@ def test_scan_accepts_lists_and_checks_its_fields():
         assert str(info.value).startswith("run.clf:12: Scan ")
     with pytest.raises(InputError, match="timestamp must be a number"):
         scan(timestamp="now")
+    with pytest.raises(InputError, match="odometry_step_cov must be finite"):
+        scan(odometry_step_cov=np.full((3, 3), np.nan))
+    assert scan(odometry_step_cov=np.eye(3).tolist()).odometry_step_cov.shape == (3, 3)
 
 
 @pytest.mark.parametrize("make", [LineSlam, EkfSlam])

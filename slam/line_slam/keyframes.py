@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.geometry import pose_between
+from slam.geometry import adjoint_pose2, pose_between, pose_inverse
 from slam.graph.problem import GrowableArray
 from slam.line_slam.config import KeyframeConfig
 from slam.models.motion import moved_enough
@@ -45,12 +45,17 @@ class OdometryStep:
         The first scan of the run.
     keyframe : bool
         Whether the scan becomes a keyframe.
+    cov : ndarray, shape (3, 3) or None
+        Covariance of ``delta`` (its frame, right perturbation) where every scan since the
+        last keyframe stated its odometry step's (:attr:`slam.types.Scan.odometry_step_cov`);
+        None: the motion model's.
     """
 
     pose_odom_laser: FloatArray
     delta: FloatArray
     first: bool
     keyframe: bool
+    cov: FloatArray | None = None
 
 
 class KeyframeTrack:
@@ -60,6 +65,7 @@ class KeyframeTrack:
         self.config = config
         self._last_kf_odom: FloatArray | None = None
         self._last_odom: FloatArray | None = None
+        self._cov: FloatArray | None = np.zeros((3, 3))  # of the motion since the keyframe
         self._progress = 0.0
         self.path_m = 0.0
         """Odometry path driven since the first scan (m)."""
@@ -95,19 +101,31 @@ class KeyframeTrack:
                 last = odom
         return out
 
-    def step(self, pose_odom_laser: FloatArray) -> OdometryStep:
-        """Advance the path by one scan's odometry and decide whether it is a keyframe."""
+    def step(self, pose_odom_laser: FloatArray, step_cov: FloatArray | None = None) -> OdometryStep:
+        """Advance the path by one scan's odometry and decide whether it is a keyframe.
+
+        ``step_cov`` ``(3, 3)``: the covariance of the odometry's step from the previous scan
+        (its frame), where the odometry states one; the steps' covariances since the last
+        keyframe are composed into :attr:`OdometryStep.cov`.
+        """
         odom = pose_odom_laser
         if self._last_odom is not None:
             step = pose_between(self._last_odom, odom)
             inc = float(np.hypot(step[0], step[1]))
             self.path_m += inc
             self._progress += inc + ANGLE_WEIGHT_M_PER_RAD * abs(float(step[2]))
+            if step_cov is None or self._cov is None:
+                self._cov = None
+            else:
+                # D ∘ s perturbed on the right: the earlier motion's error seen from after s
+                Ad = adjoint_pose2(pose_inverse(step))
+                self._cov = Ad @ self._cov @ Ad.T + np.asarray(step_cov, dtype=float)
         self._last_odom = odom
         if self._last_kf_odom is None:
             return OdometryStep(odom, np.zeros(3), True, True)
         delta = pose_between(self._last_kf_odom, odom)
-        return OdometryStep(odom, delta, False, self.is_keyframe(delta))
+        cov = None if self._cov is None else self._cov.copy()
+        return OdometryStep(odom, delta, False, self.is_keyframe(delta), cov)
 
     # -- records -----------------------------------------------------------------------------
     def begin_keyframe(self, step: OdometryStep, scan_no: int) -> None:
@@ -120,6 +138,7 @@ class KeyframeTrack:
     def end_keyframe(self, step: OdometryStep) -> None:
         """The keyframe is in the graph: later motion is measured from it."""
         self._last_kf_odom = step.pose_odom_laser
+        self._cov = np.zeros((3, 3))
 
     def record_scan(
         self,

@@ -244,7 +244,7 @@ class LineSlam:
         if lines is not None:
             lines = check_lines(lines, scan)
         t_start = time.perf_counter()
-        step = self.track.step(self.policy.pose_odom_laser(scan))
+        step = self.track.step(self.policy.pose_odom_laser(scan), scan.odometry_step_cov)
         scan_no = self.track.n_scans
         if not step.keyframe:
             kf = self.graph.n_poses - 1
@@ -281,13 +281,24 @@ class LineSlam:
             return step.delta, None
         with self.clock("frontend"):
             points = self._scan_points(scan, with_normals=False)  # matched, never a reference
-            Q = self.odometry_noise.model.covariance(step.delta)
+            Q = self._step_covariance(step)
             match = refine_scan(self._points, points, step.delta, Q, smc)
         if not match.accepted:
             self.counters["scan_matches_between_rejected"] += 1
             return step.delta, None
         self.counters["scan_matches_between"] += 1
         return match.delta, match.cov
+
+    def _step_covariance(self, step: OdometryStep) -> FloatArray:
+        """The covariance of the odometry's motion since the last keyframe.
+
+        The odometry's own where it states one (the laser odometry's matches, composed by
+        the keyframe track: large along a corridor whose walls show nothing along it, where
+        its steps are the constant-velocity prediction's), else the motion model's.
+        """
+        if step.cov is not None:
+            return step.cov
+        return self.odometry_noise.model.covariance(step.delta)
 
     def _check_turn(self, turn_odom: float, Q: FloatArray, match: ScanMatch) -> None:
         """Count a turn the odometry is sure of (beyond 3σ) against the match's rotation.
@@ -359,7 +370,7 @@ class LineSlam:
         x_pred = (
             step.pose_odom_laser.copy() if step.first else pose_compose(g.poses[prev], step.delta)
         )
-        Q = self.odometry_noise.model.covariance(step.delta)
+        Q = self._step_covariance(step)
         x_odo = x_pred
         slip: ScanMatch | None = None
         step_delta = step.delta  # the step's odometry factor: the odometry, or what replaces it
