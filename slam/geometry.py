@@ -179,6 +179,16 @@ def adjoint_pose2(pose: FloatArray) -> FloatArray:
     return Ad
 
 
+def compose_covariance(cov_a: FloatArray, b: FloatArray, cov_b: FloatArray) -> FloatArray:
+    """Covariance ``(3, 3)`` of ``a ∘ b`` from those of ``a`` and of ``b`` (independent).
+
+    Right perturbations, each in its own pose's frame: ``a Exp(ξ) ∘ b = a ∘ b Exp(Ad(b⁻¹) ξ)``,
+    so ``Cov = Ad(b⁻¹) Cov_a Ad(b⁻¹)ᵀ + Cov_b``.
+    """
+    Ad = adjoint_pose2(pose_inverse(np.asarray(b, dtype=float)))
+    return np.asarray(Ad @ np.asarray(cov_a, dtype=float) @ Ad.T + np.asarray(cov_b, dtype=float))
+
+
 def right_jacobian_pose2(xi: FloatArray) -> FloatArray:
     """Right Jacobian ``J_r(ξ)`` of SE(2)'s exponential (Solà et al. 2018, Eq. 163), vectorised."""
     x = np.asarray(xi, dtype=float)

@@ -85,7 +85,7 @@ from slam.ekf.update import (
     observability_constrained,
 )
 from slam.errors import InputError
-from slam.geometry import pose_between
+from slam.geometry import compose_covariance, pose_between
 from slam.inputs import InputPolicy
 from slam.lines import chi2_gate
 from slam.lines.lineset import LineSet, supported_lines
@@ -160,6 +160,10 @@ class EkfSlam:
         self._lm_first: list[FloatArray] = []
         self._touched: set[int] = set()
         self._update_odom: FloatArray | None = None
+        # covariance of the odometry since the last update, where every scan states its step's
+        # (the laser odometry: Scan.odometry_step_cov); None: the motion model's
+        self._update_cov: FloatArray | None = np.zeros((3, 3))
+        self._last_odom: FloatArray | None = None
         self._n_updates = 0
         self._started = False
         self.stopped = False
@@ -510,8 +514,16 @@ class EkfSlam:
             delta = np.zeros(3)
             self._update_odom = odom
         else:
-            assert self._update_odom is not None
+            assert self._update_odom is not None and self._last_odom is not None
             delta = pose_between(self._update_odom, odom)
+            if scan.odometry_step_cov is None or self._update_cov is None:
+                self._update_cov = None
+            else:
+                step = pose_between(self._last_odom, odom)
+                self._update_cov = compose_covariance(
+                    self._update_cov, step, scan.odometry_step_cov
+                )
+        self._last_odom = odom
         # the graph's keyframe rule on the odometry since the last update
         due = first_scan or moved_enough(
             delta, self.config.update_min_distance_m, self.config.update_min_angle_rad
@@ -525,8 +537,9 @@ class EkfSlam:
             self._record(scan.timestamp, report, delta)
             return report
         if not first_scan:
-            self.predict(delta)
+            self.predict(delta, self._update_cov)
             self._update_odom = odom
+            self._update_cov = np.zeros((3, 3))
         short_before = self.stats["lines_too_short"]
         ls = self._as_lineset(scan, lines)
         report.n_lines = len(ls)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.geometry import adjoint_pose2, pose_between, pose_inverse
+from slam.geometry import compose_covariance, pose_between
 from slam.graph.problem import GrowableArray
 from slam.line_slam.config import KeyframeConfig
 from slam.models.motion import moved_enough
@@ -117,9 +117,7 @@ class KeyframeTrack:
             if step_cov is None or self._cov is None:
                 self._cov = None
             else:
-                # D ∘ s perturbed on the right: the earlier motion's error seen from after s
-                Ad = adjoint_pose2(pose_inverse(step))
-                self._cov = Ad @ self._cov @ Ad.T + np.asarray(step_cov, dtype=float)
+                self._cov = compose_covariance(self._cov, step, step_cov)
         self._last_odom = odom
         if self._last_kf_odom is None:
             return OdometryStep(odom, np.zeros(3), True, True)
