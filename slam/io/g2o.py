@@ -25,7 +25,8 @@ The whole line-SLAM graph (``graph.g2o`` of ``lineslam slam``)
 * ``VERTEX_SE2 i x y θ`` — keyframe ``i`` (0-based, in keyframe order), the **laser** pose in
   the world frame as optimised;
 * ``EDGE_SE2 i j dx dy dθ I…`` — every odometry factor (``x_i⁻¹ x_j``), information = the
-  inverse of the motion model's covariance;
+  inverse of the factor's covariance (the motion model's, or the laser odometry's steps'
+  composed);
 * ``FIX 0`` — the first pose (the prior that fixes the world frame);
 
 all of which ``gtsam.readG2o`` and g2o read as a pose graph, and the extension (lines that
