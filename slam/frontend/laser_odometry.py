@@ -170,8 +170,8 @@ class LaserOdometry:
         self.matching = replace(
             matching or ScanMatchConfig(),
             min_overlap=self.config.min_overlap,
+            normal_length_m=self.config.normal_length_m,
         )
-        self.matching = replace(self.matching, normal_length_m=self.config.normal_length_m)
         self.matched = 0
         self.unmatched = 0
         self.rescued = 0
