@@ -8,7 +8,7 @@ from scipy.optimize import lsq_linear
 from scipy.stats import chi2
 
 from slam.frontend.config import FrontendConfig
-from slam.geometry import pose_between, pose_compose
+from slam.geometry import pose_between, pose_compose, pose_exp, pose_log
 from slam.line_slam.drift import DriftAccumulator
 from slam.line_slam.front_end import correction_consistency
 from slam.line_slam.odometry_noise import MotionNoiseEstimator, bounded_least_squares
@@ -160,3 +160,63 @@ def test_bounded_least_squares_is_the_constrained_minimum():
     A = rng.standard_normal((20, 3))
     x = np.array([0.5, 1.0, 2.0])
     np.testing.assert_allclose(bounded_least_squares(A, A @ x, np.zeros(3)), x, atol=1e-12)
+
+
+def _chain_draws(steps, perturb, a, b):
+    """Relative poses ``a → b`` of chains whose steps are moved by ``perturb(i)`` (right)."""
+    poses = [np.zeros(3)]
+    for i, s in enumerate(steps):
+        poses.append(pose_compose(poses[-1], pose_compose(s, pose_exp(perturb(i)))))
+    return pose_between(poses[a], poses[b])
+
+
+@pytest.mark.parametrize("a, b", [(2, 27), (27, 2)])
+def test_chain_covariance_is_the_composed_steps_with_their_lever_arms(rng, a, b):
+    # a curving chain of 30 steps, each with its own covariance; Monte Carlo of the relative
+    # pose against relative_cov (either direction): the heading errors' lever arms included
+    n = 30
+    steps = [np.array([0.5, 0.0, 0.12]) for _ in range(n)]
+    covs = []
+    for _ in range(n):
+        L = rng.normal(0.0, 1.0, (3, 3)) * np.array([0.01, 0.01, 0.004])[:, None]
+        covs.append(L @ L.T + np.diag([1e-5, 1e-5, 1e-6]))
+    d = DriftAccumulator()
+    d.add_step(np.zeros((3, 3)), 0.0, None)
+    for k, (s, C) in enumerate(zip(steps, covs, strict=True)):
+        d.add_step(C, 0.5 * (k + 1), s)
+    nominal = d.relative(a, b)
+    chol = [np.linalg.cholesky(C) for C in covs]
+    draws = 8000
+    errors = np.empty((draws, 3))
+    for k in range(draws):
+        z = rng.normal(size=(n, 3))
+        # step i ends at keyframe i + 1
+        F = _chain_draws(steps, lambda i, z=z: chol[i] @ z[i], a, b)
+        errors[k] = pose_log(pose_between(nominal, F))
+    empirical = np.cov(errors.T)
+    predicted = d.relative_cov(a, b)
+    # the isotropic sums (no lever arm) fall well short of the spread of the translation
+    assert float(d.between(a, b)[0]) < 0.75 * np.sqrt(max(empirical[0, 0], empirical[1, 1]))
+    np.testing.assert_allclose(np.sqrt(np.diag(empirical)), np.sqrt(np.diag(predicted)), rtol=0.06)
+    corr_e = empirical / np.sqrt(np.outer(np.diag(empirical), np.diag(empirical)))
+    corr_p = predicted / np.sqrt(np.outer(np.diag(predicted), np.diag(predicted)))
+    np.testing.assert_allclose(corr_e, corr_p, atol=0.05)
+
+
+def test_chain_covariance_carries_a_systematic_heading_rate(rng):
+    # no random part: every step turns by κ_θ · (its length) · u, one u ~ N(0, 1) per chain
+    kappa = 0.01
+    steps = [np.array([0.4, 0.0, 0.1 * np.sin(0.3 * k)]) for k in range(25)]
+    d = DriftAccumulator(theta_per_m=kappa)
+    d.add_step(np.zeros((3, 3)), 0.0, None)
+    for k, s in enumerate(steps):
+        d.add_step(np.zeros((3, 3)), 0.4 * (k + 1), s)
+    nominal = d.relative(0, 25)
+    errors = []
+    for u in rng.normal(size=4000):
+        F = _chain_draws(steps, lambda i, u=u: np.array([0.0, 0.0, kappa * 0.4 * u]), 0, 25)
+        errors.append(pose_log(pose_between(nominal, F)))
+    empirical = np.cov(np.asarray(errors).T)
+    predicted = d.relative_cov(0, 25)
+    np.testing.assert_allclose(predicted[2, 2], (kappa * 10.0) ** 2, rtol=1e-9)
+    np.testing.assert_allclose(np.sqrt(np.diag(empirical)), np.sqrt(np.diag(predicted)), rtol=0.08)

@@ -12,8 +12,9 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    is not judged again (``skip_repeated_rejections``).
 3. **Consistency.**  The hypothesis, as a relative pose between the old keyframe and the
    current one, is compared with the front end's own trajectory between them (free of loop
-   closures, so an earlier wrong closure cannot bias it) under the drift between them: the
-   squared Mahalanobis distance is logged (``correction_chi2``), not used as a gate.  With
+   closures, so an earlier wrong closure cannot bias it) under that trajectory's covariance
+   (:meth:`DriftAccumulator.relative_cov`): the squared Mahalanobis distance is logged
+   (``correction_chi2``), not used as a gate.  With
    ``confirmations`` of 1 or more it must agree with that many other recent hypotheses
    (pairwise consistency through the front end's chains, as in PCM, Mangelson et al. 2018;
    within the ``consistency_probability`` quantile of χ²): a revisit is then recognised twice
@@ -599,14 +600,14 @@ class LoopCloser:
         """How far the hypothesis is from the front end's own trajectory, in its drift.
 
         ``e = Log(F⁻¹ z)`` with ``F`` the front end's relative pose from ``k_old`` to the
-        current keyframe (free of loop closures) and covariance the drift between them
-        (:mod:`slam.line_slam.drift`) plus the match tolerances; squared Mahalanobis distance
-        (two degrees of freedom along a corridor, three otherwise).
+        current keyframe (free of loop closures) and covariance the chain's between them
+        (:meth:`DriftAccumulator.relative_cov`: the steps composed with their heading's lever
+        arm) plus the match tolerances; squared Mahalanobis distance (two degrees of freedom
+        along a corridor, three otherwise).  Logged (``correction_chi2``), not used.
         """
         F = self.drift.relative(h.k_old, h.keyframe)
         e = pose_log(pose_between(F, h.z))
-        sxy, sth = self.drift.between(h.k_old, h.keyframe)
-        S = np.diag([float(sxy) ** 2, float(sxy) ** 2, float(sth) ** 2]) + self._z_cov()
+        S = self.drift.relative_cov(h.k_old, h.keyframe) + self._z_cov()
         return self._mahalanobis(e, S, [] if h.normal is None else [h.normal])[0]
 
     def pair_chi2(self, a: Hypothesis, b: Hypothesis) -> float:
