@@ -18,8 +18,7 @@ chain's relative pose instead: the steps' covariances composed along the chain, 
 error turning the rest of the path about its step (``Σ Ad(T_i) C_i Ad(T_i)ᵀ`` between the two
 keyframes, moved to the later one's frame), the systematic heading part as a heading rate
 ``κ_θ`` per metre carried along the same chain, and ``(κ_xy·d)²`` in each direction.  Over a
-loop of tens of metres the lever arms dominate: on fr079 the accepted closures' relative poses
-lie within χ²₃ 0.0-2.4 of the chain by it, against up to 44 with the isotropic sums.
+loop of tens of metres the lever arms dominate the translation.
 
 The heading part's lever arm (a landmark seen from elsewhere moves when the robot's heading is
 off) is added where the drift is used (:func:`slam.models.anchored.drift_covariance`, a rotation
