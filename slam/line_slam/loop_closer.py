@@ -158,9 +158,11 @@ class ClosureAttempt:
 
     ``kind`` is ``"not_found"`` (the search found nothing: ``local``, ``old`` landmarks and the
     ``window`` (m, rad) searched), ``"repeated"`` (repeats a rejected hypothesis: ``reason``),
-    ``"gated"`` (turned away by the marginals' gate) or ``"judged"``.  Keyframes and scans are
-    0-based; ``correction`` is ``(t_x, t_y, dθ)`` (m, m, rad) about the current pose;
-    ``correction_chi2`` its squared Mahalanobis distance under the joint marginal;
+    ``"gated"`` (not judged now: awaiting a confirming hypothesis, or contradicting a recent
+    closure: ``reason``) or ``"judged"``.  Keyframes and scans are 0-based; ``correction`` is
+    ``(t_x, t_y, dθ)`` (m, m, rad) about the current pose; ``correction_chi2`` the hypothesis'
+    squared Mahalanobis distance from the front end's own trajectory
+    (:meth:`LoopCloser.chain_chi2`);
     ``pose_before``/``old_pose_before`` the two keyframes' estimates before the attempt;
     ``consistent_pairs`` of ``pairs`` were explained by the judge, whose worst pair left
     ``worst_pair_chi2``; along a corridor (``single_direction``) ``corridor_normal`` is the
@@ -253,7 +255,7 @@ class LoopCloser:
     book, track, drift, audit
         The run's landmark book, keyframe track, drift accumulator and merge audit.
     backend : BatchBackend or Isam2Backend
-        The online back-end (joint marginals for the gate; converged after a closure).
+        The online back-end (brought to the graph and converged after an accepted closure).
     config : SlamConfig
         ``loop_closure``, ``association.max_range_m``, the front end's drift model, the
         solver settings of the judge, ``fusion.audit_max_median_chi2``.
