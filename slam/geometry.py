@@ -37,6 +37,8 @@ from linefit.line import wrap_angle
 
 __all__ = [
     "adjoint_pose2",
+    "chain_covariance",
+    "compose_covariance",
     "line_residual",
     "line_to_child",
     "line_to_parent",
@@ -187,6 +189,20 @@ def compose_covariance(cov_a: FloatArray, b: FloatArray, cov_b: FloatArray) -> F
     """
     Ad = adjoint_pose2(pose_inverse(np.asarray(b, dtype=float)))
     return np.asarray(Ad @ np.asarray(cov_a, dtype=float) @ Ad.T + np.asarray(cov_b, dtype=float))
+
+
+def chain_covariance(
+    cov: FloatArray | None, step: FloatArray, step_cov: FloatArray | None
+) -> FloatArray | None:
+    """A running composed covariance (:func:`compose_covariance`) carried one step on.
+
+    ``cov`` is the covariance of the motion so far (None: unknown); ``step`` ``(3,)`` and
+    ``step_cov`` ``(3, 3)`` the next step and its covariance (None: unknown).  Once any step
+    lacks a covariance the result stays None until the caller starts a new chain.
+    """
+    if cov is None or step_cov is None:
+        return None
+    return compose_covariance(cov, step, step_cov)
 
 
 def right_jacobian_pose2(xi: FloatArray) -> FloatArray:

@@ -85,7 +85,7 @@ from slam.ekf.update import (
     observability_constrained,
 )
 from slam.errors import InputError
-from slam.geometry import compose_covariance, pose_between
+from slam.geometry import chain_covariance, pose_between
 from slam.inputs import InputPolicy
 from slam.lines import chi2_gate
 from slam.lines.lineset import LineSet, supported_lines
@@ -516,13 +516,9 @@ class EkfSlam:
         else:
             assert self._update_odom is not None and self._last_odom is not None
             delta = pose_between(self._update_odom, odom)
-            if scan.odometry_step_cov is None or self._update_cov is None:
-                self._update_cov = None
-            else:
-                step = pose_between(self._last_odom, odom)
-                self._update_cov = compose_covariance(
-                    self._update_cov, step, scan.odometry_step_cov
-                )
+            self._update_cov = chain_covariance(
+                self._update_cov, pose_between(self._last_odom, odom), scan.odometry_step_cov
+            )
         self._last_odom = odom
         # the graph's keyframe rule on the odometry since the last update
         due = first_scan or moved_enough(

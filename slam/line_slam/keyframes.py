@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.geometry import compose_covariance, pose_between
+from slam.geometry import chain_covariance, pose_between
 from slam.graph.problem import GrowableArray
 from slam.line_slam.config import KeyframeConfig
 from slam.models.motion import moved_enough
@@ -114,10 +114,7 @@ class KeyframeTrack:
             inc = float(np.hypot(step[0], step[1]))
             self.path_m += inc
             self._progress += inc + ANGLE_WEIGHT_M_PER_RAD * abs(float(step[2]))
-            if step_cov is None or self._cov is None:
-                self._cov = None
-            else:
-                self._cov = compose_covariance(self._cov, step, step_cov)
+            self._cov = chain_covariance(self._cov, step, step_cov)
         self._last_odom = odom
         if self._last_kf_odom is None:
             return OdometryStep(odom, np.zeros(3), True, True)
