@@ -31,6 +31,7 @@ from slam.frontend.scan_match import (
     _chi2_median,
     _Matcher,
     _OdometryPrior,
+    contradicted_covariance,
     match_any_heading,
     match_scans,
     normal_half_window,
@@ -478,6 +479,29 @@ def test_slip_covariance_spreads_the_translation_along_the_heading_slip(length_m
     assert Q[2, 2] == _odometry_cov(odo)[2, 2]
 
 
+@pytest.mark.parametrize(("length_m", "turn_rad", "phi"), [(0.4, 0.0, 0.2), (0.3, 0.6, -0.5)])
+def test_a_contradicted_step_spreads_as_far_as_the_odometry(length_m, turn_rad, phi):
+    """A contradicted match ``φ`` away from the odometry's heading: the step's covariance is
+    the slip component's shape with the spread ``|φ|`` (not ``slip_sigma_rad``), so that the
+    odometry's step, the match moved back along the slip, lies about one standard deviation
+    from the centre, where the fixed spread puts a disagreement below it at a fraction of one
+    and one above it at more."""
+    cfg = ScanMatchConfig()
+    odo = _driven(length_m, turn_rad)
+    match = _driven(length_m, turn_rad + phi)
+    Q = _odometry_cov(odo)
+    for body in (False, True):
+        cov = contradicted_covariance(Q, cfg, odo, match, body=body)
+        d = pose_log(pose_between(odo, match)) if body else match - odo
+        np.testing.assert_allclose(
+            cov, slip_covariance(Q, cfg, odo, body=body, sigma_rad=abs(phi)), rtol=1e-9
+        )
+        m2 = float(d @ np.linalg.solve(cov, d))
+        assert 0.8 < m2 < 1.2, m2  # Q shortens it; the slip's curvature lengthens it a little
+        wide = float(d @ np.linalg.solve(slip_covariance(Q, cfg, odo, body=body), d))
+        assert wide < 0.7 * m2 if abs(phi) < cfg.slip_sigma_rad else wide > m2
+
+
 def test_overconfidence_of_the_summed_cost():
     """κ = tr(H C)/3 (:meth:`_Matcher.overconfidence`), by which the points' summed cost
     overstates their evidence.  Noise-free points without a model error: the cost's curvature
@@ -773,7 +797,7 @@ def test_bad_scan_matching_table_in_a_config_file_raises_config_error(tmp_path):
 # 6. pipeline
 
 
-def _with_scan_matching(**changes: float) -> RunConfig:
+def _with_scan_matching(**changes: float | str) -> RunConfig:
     """The defaults with ``[slam.frontend.scan_matching]`` values changed."""
     cfg = RunConfig()
     sm = replace(cfg.slam.frontend.scan_matching, **changes)
@@ -1002,15 +1026,19 @@ def _odometry_edges(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, e[:, 2:5], sigma_theta
 
 
-def test_a_contradicted_step_is_the_match_in_the_graph(tmp_path):
+@pytest.mark.parametrize(("spread", "slip_deg"), [("slip", 20.0), ("disagreement", 11.0)])
+def test_a_contradicted_step_is_the_match_in_the_graph(tmp_path, spread, slip_deg):
     """The same slip and untrusted matches: of the run's odometry factors exactly one turns
     more than 10° away from the logged odometry, the contradicted step's; it turns as the
-    ground truth does (within 1°, where the log is 20° off), with the slip component's heading
-    spread (at least ``slip_sigma_rad``, 0.35 rad): centred where the points put it, as
-    uncertain as a slip."""
+    ground truth does (within 1°, where the log is 20° (11°) off), centred where the points
+    put it, with the slip component's heading spread (at least ``slip_sigma_rad``, 0.35 rad:
+    as uncertain as a slip), or with ``contradicted_spread = "disagreement"`` as wide as its
+    disagreement with the odometry (:func:`contradicted_covariance`: the odometry's heading
+    one standard deviation away)."""
     log = tmp_path / "slip.clf"
-    _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(20.0))
-    summary = run_slam(log, tmp_path / "doubted", _with_scan_matching(min_overlap=0.99))
+    _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(slip_deg))
+    cfg = _with_scan_matching(min_overlap=0.99, contradicted_spread=spread)
+    summary = run_slam(log, tmp_path / "doubted", cfg)
     assert summary["scan_match_contradictions"] == 1
     t, z, sigma_theta = _odometry_edges(tmp_path / "doubted")
     truth, logged = read_tum(DEMO / "ground_truth.tum"), scan_trajectory(log, frame="laser")
@@ -1022,8 +1050,12 @@ def test_a_contradicted_step_is_the_match_in_the_graph(tmp_path):
 
     off_log = np.abs(np.remainder(z[:, 2] - turn(logged, t) + np.pi, 2.0 * np.pi) - np.pi)
     (k,) = np.flatnonzero(off_log > np.deg2rad(10.0))
-    assert off_log[k] == pytest.approx(np.deg2rad(20.0), abs=np.deg2rad(1.0))
+    assert off_log[k] == pytest.approx(np.deg2rad(slip_deg), abs=np.deg2rad(1.0))
     assert abs(_angle(float(z[k, 2] - turn(truth, t)[k]))) < np.deg2rad(1.0)
-    slip_sigma = RunConfig().slam.frontend.scan_matching.slip_sigma_rad
-    assert slip_sigma <= sigma_theta[k] < 1.1 * slip_sigma
-    assert np.all(np.delete(sigma_theta, k) < 0.5 * slip_sigma)
+    spread_rad = (
+        RunConfig().slam.frontend.scan_matching.slip_sigma_rad
+        if spread == "slip"
+        else float(off_log[k])
+    )
+    assert spread_rad <= sigma_theta[k] < 1.1 * spread_rad
+    assert np.all(np.delete(sigma_theta, k) < 0.5 * spread_rad)

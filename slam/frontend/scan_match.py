@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 from numba import njit
@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 from linefit.config import SensorNoiseConfig
 from linefit.noise import point_covariance_entries
 from slam import interrupts
+from slam.geometry import pose_between, pose_log
 from slam.validate import nonneg, positive, require
 
 __all__ = [
@@ -60,6 +61,7 @@ __all__ = [
     "ScanMatch",
     "ScanMatchConfig",
     "ScanPoints",
+    "contradicted_covariance",
     "match_any_heading",
     "match_scans",
     "normal_half_window",
@@ -67,6 +69,7 @@ __all__ = [
     "refine_scan",
     "scan_points",
     "scan_view",
+    "slip_covariance",
     "visible_points",
 ]
 
@@ -132,6 +135,11 @@ class ScanMatchConfig:
         Standard deviation of a slip's heading error (rad), added to the odometry's, with the
         translation the odometry integrated along it (:func:`slip_covariance`); the search's
         ``rotation_window_rad`` covers two of them.
+    contradicted_spread : {"slip", "disagreement"}
+        The heading spread of a step centred on a contradicted match
+        (:attr:`ScanMatch.contradicted`): the slip component's (``slip_sigma_rad``,
+        :func:`slip_covariance`), or as far as the odometry's heading
+        (:func:`contradicted_covariance`; ``docs/real-logs.md``, Opt-in settings).
     between_keyframes : bool
         Also match every scan between two keyframes against the last keyframe, from its
         odometry since the keyframe (:func:`refine_scan`): an accepted match is the scan's
@@ -160,6 +168,7 @@ class ScanMatchConfig:
     min_overlap: float = 0.5
     slip_probability: float = 0.01
     slip_sigma_rad: float = 0.35
+    contradicted_spread: Literal["slip", "disagreement"] = "slip"
     between_keyframes: bool = False
 
     def __post_init__(self) -> None:
@@ -177,6 +186,10 @@ class ScanMatchConfig:
         require(0.0 <= self.min_overlap <= 1.0, "min_overlap must be in [0, 1]")
         require(0.0 <= self.slip_probability < 1.0, "slip_probability must be in [0, 1)")
         positive("slip_sigma_rad", self.slip_sigma_rad)
+        require(
+            self.contradicted_spread in ("slip", "disagreement"),
+            f"contradicted_spread must be slip or disagreement: {self.contradicted_spread!r}",
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -573,8 +586,10 @@ class ScanMatch:
     contradicted : bool
         Not accepted, yet the slip component is the more probable at the match: the points
         contradict the odometry's heading, with too little overlap to be trusted as a
-        measurement.  The pipeline then centres the step on ``delta`` with the slip
-        component's covariance (:func:`slip_covariance`), not the odometry's Gaussian.
+        measurement.  The pipeline then centres the step on ``delta``, with the slip
+        component's covariance (:func:`slip_covariance`), or with
+        ``contradicted_spread = "disagreement"`` spread along the slip as far as the
+        odometry's heading (:func:`contradicted_covariance`).
     """
 
     delta: FloatArray
@@ -1003,7 +1018,11 @@ class _OdometryPrior:
 
 
 def slip_covariance(
-    Q: FloatArray, config: ScanMatchConfig, delta: FloatArray | None = None, body: bool = False
+    Q: FloatArray,
+    config: ScanMatchConfig,
+    delta: FloatArray | None = None,
+    body: bool = False,
+    sigma_rad: float | None = None,
 ) -> FloatArray:
     """The slip component's covariance: ``Q + σ_slip² v vᵀ`` (``slip_sigma_rad``).
 
@@ -1023,6 +1042,8 @@ def slip_covariance(
         ``v`` in the step's end frame (the right tangent space of an odometry factor:
         its translation rotated by ``−dθ``) instead of the start frame (the match's
         coordinates).
+    sigma_rad : float, optional
+        The slip's spread ``σ_slip`` (rad) in place of ``config.slip_sigma_rad``.
     """
     cov = np.array(Q, dtype=np.float64)
     v = np.array([0.0, 0.0, 1.0])
@@ -1033,8 +1054,43 @@ def slip_covariance(
             c, s = math.cos(float(t[2])), math.sin(float(t[2]))
             lever = np.array([c * lever[0] + s * lever[1], -s * lever[0] + c * lever[1]])
         v[:2] = lever
-    cov += config.slip_sigma_rad**2 * np.outer(v, v)
+    sigma = config.slip_sigma_rad if sigma_rad is None else float(sigma_rad)
+    cov += sigma**2 * np.outer(v, v)
     return cov
+
+
+def contradicted_covariance(
+    Q: FloatArray,
+    config: ScanMatchConfig,
+    delta_odometry: FloatArray,
+    delta_match: FloatArray,
+    body: bool = False,
+) -> FloatArray:
+    """Covariance of a step centred on a contradicted match: ``Q + φ² v vᵀ``.
+
+    A contradicted match (:attr:`ScanMatch.contradicted`) turns the step by ``φ`` against the
+    odometry, ``φ`` the heading of ``δ_match ⊖ δ_odometry``, with too little overlap to be
+    trusted: either may be right.  Centred on the match, the step gets the slip component's
+    shape (:func:`slip_covariance`: the heading, with the translation the odometry integrated
+    along it) with the spread ``|φ|``, the disagreement itself, in place of the prior
+    ``slip_sigma_rad``: the odometry's heading lies one standard deviation from the centre,
+    so the covariance holds both explanations along the slip (a covariance union of the two,
+    Uhlmann 2003), and no more.  A fixed spread wider than the disagreement leaves the
+    heading there nearly free, and a line paired on the far side of the building's next
+    corner (a wall 90° away) can turn the trajectory at that step.
+
+    Parameters
+    ----------
+    Q : ndarray, shape (3, 3)
+        The odometry's covariance of the step.
+    config : ScanMatchConfig
+    delta_odometry, delta_match : ndarray, shape (3,)
+        The odometry's step and the match's ``(t_x, t_y, dθ)``.
+    body : bool
+        As :func:`slip_covariance`.
+    """
+    d = pose_log(pose_between(np.asarray(delta_odometry, float), np.asarray(delta_match, float)))
+    return slip_covariance(Q, config, delta_odometry, body=body, sigma_rad=abs(float(d[2])))
 
 
 def _symmetric_inverse(c: FloatArray) -> FloatArray:

@@ -64,6 +64,7 @@ from slam.extraction import extract_lines_of_scans, extract_scan_lines
 from slam.frontend.scan_match import (
     ScanMatch,
     ScanPoints,
+    contradicted_covariance,
     match_scans,
     refine_scan,
     scan_points,
@@ -396,8 +397,13 @@ class LineSlam:
                     if match.contradicted:
                         # the points say the odometry's heading slipped, with too little
                         # overlap to be trusted as a measurement: the step is centred where
-                        # they put it, with the slip component's spread
-                        Q = slip_covariance(Q, cfg.frontend.scan_matching, step.delta, body=True)
+                        # they put it, with the slip component's spread (or as far as the
+                        # odometry's heading)
+                        smc = cfg.frontend.scan_matching
+                        if smc.contradicted_spread == "disagreement":
+                            Q = contradicted_covariance(Q, smc, step.delta, match.delta, body=True)
+                        else:
+                            Q = slip_covariance(Q, smc, step.delta, body=True)
                         step_delta = match.delta
                         x_pred = pose_compose(g.poses[prev], match.delta)
                         contradicted = True
