@@ -1073,11 +1073,10 @@ def contradicted_covariance(
     trusted: either may be right.  Centred on the match, the step gets the slip component's
     shape (:func:`slip_covariance`: the heading, with the translation the odometry integrated
     along it) with the spread ``|φ|``, the disagreement itself, in place of the prior
-    ``slip_sigma_rad``: the odometry's heading lies one standard deviation from the centre,
-    so the covariance holds both explanations along the slip (a covariance union of the two,
-    Uhlmann 2003), and no more.  A fixed spread wider than the disagreement leaves the
-    heading there nearly free, and a line paired on the far side of the building's next
-    corner (a wall 90° away) can turn the trajectory at that step.
+    ``slip_sigma_rad``: the odometry's heading lies about one standard deviation from the
+    centre, so that the covariance holds both explanations along the slip, and no more.  A
+    fixed spread wider than the disagreement leaves the heading there nearly free, and a line
+    paired with a wall at right angles to it can then turn the trajectory at that step.
 
     Parameters
     ----------
