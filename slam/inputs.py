@@ -760,14 +760,16 @@ class LogInput:
                 yield self._with_laser_pose(scan, pose, origin, cov)
                 continue
             held.append((scan, pose, cov))
+            points = laser.last_points
+            assert points is not None  # laser.add has just computed them
             if first_points is None:
-                first_points = laser.points(scan)
+                first_points = points
             away = math.hypot(pose[0], pose[1])
             moved = away > STILL_ODOMETRY_M or abs(pose[2]) > STILL_ODOMETRY_RAD
             # ... and the scans themselves show it: the first no longer registers this one
             # where it was (not only the chained matches' constant-velocity drift)
             if moved and (
-                overlap_at(first_points, laser.points(scan), np.zeros(3), laser.matching)
+                overlap_at(first_points, points, np.zeros(3), laser.matching)
                 < laser.matching.min_overlap
             ):
                 decided = "scan_matching"

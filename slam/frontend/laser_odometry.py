@@ -183,6 +183,7 @@ class LaserOdometry:
         self.step_cov = np.zeros((3, 3))
         """Covariance of the last scan's pose given the one before (its match's posterior, or
         the prediction's spread where it was not matched), ``(3, 3)``."""
+        self._last_points: ScanPoints | None = None
         self._time: float | None = None  # the last scan's time stamp (s)
         self._intervals: deque[float] = deque(maxlen=50)  # the last scans' intervals (s)
 
@@ -191,10 +192,15 @@ class LaserOdometry:
         """The last scan's laser pose, in the first scan's frame ``(x, y, θ)``."""
         return self._pose.copy()
 
+    @property
+    def last_points(self) -> ScanPoints | None:
+        """The last scan's points as :meth:`add` matched them (None before the first)."""
+        return self._last_points
+
     def add(self, scan: Scan) -> FloatArray:
         """Register ``scan``; return its laser pose ``(3,)`` in the first scan's frame."""
         cfg = self.config
-        points = self.points(scan)
+        points = self._last_points = self.points(scan)
         if len(self._map) == 0:
             self._map.add(self._pose, points)
             return self._pose.copy()
