@@ -775,6 +775,7 @@ def test_empty_reference_rejects_the_match():
         {"rotation_step_rad": 0.0},
         {"coarse_iterations": 0},
         {"max_iterations": 0},
+        {"contradicted_spread": "wide"},
     ],
 )
 def test_bad_config_values_raise_config_error(bad):
@@ -787,6 +788,13 @@ def test_bad_scan_matching_table_in_a_config_file_raises_config_error(tmp_path):
     path.write_text("[slam.frontend.scan_matching]\nenabled = true\nmin_overlap = 2.0\n")
     with pytest.raises(ConfigError, match="min_overlap"):
         RunConfig.from_toml(path)
+    path.write_text('[slam.frontend.scan_matching]\ncontradicted_spread = "both"\n')
+    with pytest.raises(ConfigError, match="contradicted_spread"):
+        RunConfig.from_toml(path)
+    # the opt-in is read from a file
+    path.write_text('[slam.frontend.scan_matching]\ncontradicted_spread = "disagreement"\n')
+    cfg = RunConfig.from_toml(path)
+    assert cfg.slam.frontend.scan_matching.contradicted_spread == "disagreement"
     # the former key says what replaced it
     path.write_text("[slam.frontend.scan_matching]\nenabled = true\nnormal_points = 5\n")
     with pytest.raises(ConfigError, match=r"normal_points.*replaced by normal_span_rad"):
