@@ -72,6 +72,22 @@ def test_laser_odometry_on_the_demo_beats_its_odometry_against_the_ground_truth(
         assert ours < 0.5 * theirs
 
 
+def test_last_points_are_the_points_the_scan_was_matched_with():
+    """``last_points`` (what :mod:`slam.inputs` tests the overlap with) are the points of the
+    scan just added, as :meth:`LaserOdometry.points` makes them, and None before any scan."""
+    log = open_log(DEMO / "log.clf", ScannerConfig(odometry_source="log"))
+    laser = LaserOdometry()
+    assert laser.last_points is None
+    for i, scan in enumerate(log.scans()):
+        laser.add(scan)
+        got, want = laser.last_points, laser.points(scan)
+        assert got is not None
+        np.testing.assert_array_equal(got.xy, want.xy)
+        np.testing.assert_array_equal(got.normals, want.normals)
+        if i == 3:
+            break
+
+
 def test_laser_odometry_config_is_validated():
     with pytest.raises(ConfigError, match="sigma_xy_m"):
         LaserOdometryConfig(sigma_xy_m=0.0)
