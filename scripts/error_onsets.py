@@ -5,6 +5,7 @@ Usage::
     python scripts/error_onsets.py RESULTS_DIR --log intel [--threshold-m 0.2]
     python scripts/error_onsets.py RESULTS_DIR --relations FILE
     python scripts/error_onsets.py RESULTS_DIR --log fr079 --fill   # a decimated variant's run
+    python scripts/error_onsets.py RESULTS_DIR --log aces --threshold-deg 20   # by rotation
 
 ``RESULTS_DIR`` is a ``lineslam slam`` results folder (``trajectory.tum``, ``summary.json``);
 ``--log`` the dataset whose relations score it (a variant of a catalogued log made by
@@ -16,7 +17,10 @@ by the log's odometry, as ``scripts/robustness.py`` scores such a run
 is the relations metric's (:func:`slam.evaluation.relations_metric.relation_errors`); a
 relation erring by more than ``--threshold-m`` is bad, and
 :func:`slam.evaluation.onsets.error_onsets` finds the times that the bad relations span and
-the good ones do not: where a wrong step entered the trajectory.
+the good ones do not: where a wrong step entered the trajectory.  With ``--threshold-deg`` a
+relation is bad when its rotation error is above that many degrees instead: a heading error
+made where the robot turns on the spot shows in the translation of a relation only once the
+robot has driven on, so the translation's onset can lie well after the turn that made it.
 Printed for each onset: its interval (seconds from the run's first scan, and the run's scans
 in it),
 the bad and good relations spanning it, their mean error, and the loop closures the run
@@ -48,6 +52,11 @@ def main() -> None:
     ap.add_argument("--log", help="dataset whose relations score the run")
     ap.add_argument("--relations", type=Path, help="relations file (instead of --log)")
     ap.add_argument("--threshold-m", type=float, default=0.2, help="bad: error above this (m)")
+    ap.add_argument(
+        "--threshold-deg",
+        type=float,
+        help="bad: rotation error above this (deg), instead of the translation's threshold",
+    )
     ap.add_argument("--min-relations", type=int, default=3, help="bad minus good, at least")
     ap.add_argument("--max-onsets", type=int, default=10)
     ap.add_argument("--near-s", type=float, default=20.0, help="closures this close (s)")
@@ -77,18 +86,23 @@ def main() -> None:
     if not used.any():
         ap.error("no relation has both stamps in the run")
     rel = relations.subset(used)
-    err, _ = relation_errors(run.poses[i1[used]], run.poses[i2[used]], rel)
+    err, rot = relation_errors(run.poses[i1[used]], run.poses[i2[used]], rel)
+    if args.threshold_deg is None:
+        bad_err, threshold, unit = err, args.threshold_m, "m"
+    else:
+        bad_err, threshold, unit = np.rad2deg(rot), args.threshold_deg, "deg"
     t0 = float(run.timestamps[0])
     print(
         f"{args.results} against {rel_path}: {int(used.sum())} relations "
         f"({int((~used).sum())} without both scans in the run), mean error {err.mean():.4f} m, "
-        f"{int(np.count_nonzero(err > args.threshold_m))} above {args.threshold_m:g} m"
+        f"{np.rad2deg(rot).mean():.3f} deg; "
+        f"{int(np.count_nonzero(bad_err > threshold))} above {threshold:g} {unit}"
     )
     onsets = error_onsets(
         rel.t1,
         rel.t2,
-        err,
-        args.threshold_m,
+        bad_err,
+        threshold,
         min_relations=args.min_relations,
         max_onsets=args.max_onsets,
     )
@@ -97,7 +111,8 @@ def main() -> None:
         return
     closures = [e for e in summary.get("loop_closures_log", []) if e.get("accepted")]
     n_scans = kept.shape[0]
-    print(f"{'from (s)':>9} {'until (s)':>9} {'scans':>13} {'bad':>5} {'good':>5} {'mean (m)':>9}")
+    mean_head = f"mean ({unit})"
+    print(f"{'from (s)':>9} {'until (s)':>9} {'scans':>13} {'bad':>5} {'good':>5} {mean_head:>9}")
     for o in onsets:
         first = int(np.searchsorted(kept, o.from_s))
         last = int(np.searchsorted(kept, o.until_s))

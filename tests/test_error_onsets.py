@@ -110,3 +110,34 @@ def test_a_wrong_step_in_the_demo_trajectory_is_found_by_its_relations():
     assert onsets[0].from_s <= when < onsets[0].until_s
     spanning = (np.minimum(rel.t1, rel.t2) < when) & (np.maximum(rel.t1, rel.t2) > when)
     assert onsets[0].bad == int(np.count_nonzero(spanning & (err > 0.1)))
+
+
+def test_a_turn_made_standing_still_is_placed_by_the_rotation_error():
+    """A robot drives, stands still from 50 to 70 s and drives on; at 55 s, standing, the
+    estimate turns 0.5 rad too far (every later pose rotated about where it stands).  The
+    relations spanning 55 s but ending before 70 s err in rotation only, so by translation
+    the good relations outnumber the bad ones everywhere and no onset holds 55 s; by
+    rotation the onset holds it (``scripts/error_onsets.py --threshold-deg``)."""
+    t = np.arange(0.0, 120.0, 0.5)
+    speed = np.where((t >= 50.0) & (t < 70.0), 0.0, 0.5)
+    x = np.concatenate([[0.0], np.cumsum(speed[1:] * 0.5)])
+    truth = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    est = truth.copy()
+    after = t > 55.0
+    pivot = truth[np.searchsorted(t, 55.0), :2]
+    c, s = np.cos(0.5), np.sin(0.5)
+    d = est[after, :2] - pivot
+    est[after, :2] = pivot + np.column_stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]])
+    est[after, 2] += 0.5
+    rng = np.random.default_rng(3)
+    i1 = rng.integers(0, t.size - 2, 1500)
+    i2 = np.minimum(i1 + rng.integers(1, 61, 1500), t.size - 1)
+    d_est, d_true = pose_between(est[i1], est[i2]), pose_between(truth[i1], truth[i2])
+    trans = np.hypot(*(d_est[:, :2] - d_true[:, :2]).T)
+    rot_deg = np.rad2deg(np.abs(np.angle(np.exp(1j * (d_est[:, 2] - d_true[:, 2])))))
+    by_rotation = error_onsets(t[i1], t[i2], rot_deg, threshold_m=10.0)
+    by_translation = error_onsets(t[i1], t[i2], trans, threshold_m=0.2)
+    assert by_rotation[0].from_s <= 55.0 < by_rotation[0].until_s
+    assert by_rotation[0].good == 0
+    assert np.count_nonzero(trans > 0.2) > 30  # the step does show in translation
+    assert not any(o.from_s <= 55.0 < o.until_s for o in by_translation)

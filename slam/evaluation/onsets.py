@@ -84,7 +84,9 @@ def error_onsets(
         The relations' two time stamps (s); either may be the later.
     errors_m : array_like, shape (n,)
         Each relation's translation error (m), e.g. from
-        :func:`slam.evaluation.relations_metric.relation_errors`.
+        :func:`slam.evaluation.relations_metric.relation_errors`.  Any other error per
+        relation works the same, with ``threshold_m`` and the onsets' ``mean_error_m`` in its
+        unit (``scripts/error_onsets.py --threshold-deg``: the rotation error in degrees).
     threshold_m : float
         A relation erring by more than this is bad (m).
     min_relations : int
