@@ -481,16 +481,19 @@ def test_slip_covariance_spreads_the_translation_along_the_heading_slip(length_m
 
 @pytest.mark.parametrize(("length_m", "turn_rad", "phi"), [(0.4, 0.0, 0.2), (0.3, 0.6, -0.5)])
 def test_a_contradicted_step_spreads_as_far_as_the_odometry(length_m, turn_rad, phi):
-    """A contradicted match ``φ`` away from the odometry's heading: the step's covariance is
-    the slip component's shape with the spread ``|φ|`` (not ``slip_sigma_rad``), so that the
+    """A contradicted match ``φ`` away from the odometry's heading: by default the step's
+    covariance is the slip component's; with ``contradicted_spread = "disagreement"`` its
+    shape with the spread ``|φ|`` (not ``slip_sigma_rad``), so that the
     odometry's step, the match moved back along the slip, lies about one standard deviation
     from the centre, where the fixed spread puts a disagreement below it at a fraction of one
     and one above it at more."""
-    cfg = ScanMatchConfig()
+    cfg = ScanMatchConfig(contradicted_spread="disagreement")
     odo = _driven(length_m, turn_rad)
     match = _driven(length_m, turn_rad + phi)
     Q = _odometry_cov(odo)
     for body in (False, True):
+        default = contradicted_covariance(Q, ScanMatchConfig(), odo, match, body=body)
+        np.testing.assert_array_equal(default, slip_covariance(Q, cfg, odo, body=body))
         cov = contradicted_covariance(Q, cfg, odo, match, body=body)
         d = pose_log(pose_between(odo, match)) if body else match - odo
         np.testing.assert_allclose(

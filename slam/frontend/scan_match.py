@@ -586,10 +586,10 @@ class ScanMatch:
     contradicted : bool
         Not accepted, yet the slip component is the more probable at the match: the points
         contradict the odometry's heading, with too little overlap to be trusted as a
-        measurement.  The pipeline then centres the step on ``delta``, with the slip
-        component's covariance (:func:`slip_covariance`), or with
+        measurement.  The pipeline then centres the step on ``delta`` with
+        :func:`contradicted_covariance`: the slip component's covariance, or with
         ``contradicted_spread = "disagreement"`` spread along the slip as far as the
-        odometry's heading (:func:`contradicted_covariance`).
+        odometry's heading.
     """
 
     delta: FloatArray
@@ -1066,17 +1066,19 @@ def contradicted_covariance(
     delta_match: FloatArray,
     body: bool = False,
 ) -> FloatArray:
-    """Covariance of a step centred on a contradicted match: ``Q + φ² v vᵀ``.
+    """Covariance of a step centred on a contradicted match (``contradicted_spread``).
 
-    A contradicted match (:attr:`ScanMatch.contradicted`) turns the step by ``φ`` against the
-    odometry, ``φ`` the heading of ``δ_match ⊖ δ_odometry``, with too little overlap to be
-    trusted: either may be right.  Centred on the match, the step gets the slip component's
-    shape (:func:`slip_covariance`: the heading, with the translation the odometry integrated
-    along it) with the spread ``|φ|``, the disagreement itself, in place of the prior
+    ``"slip"`` (the default): the slip component's, ``Q + σ_slip² v vᵀ``
+    (:func:`slip_covariance`).  ``"disagreement"``: ``Q + φ² v vᵀ``.  A contradicted match
+    (:attr:`ScanMatch.contradicted`) turns the step by ``φ`` against the odometry, ``φ`` the
+    heading of ``δ_match ⊖ δ_odometry``, with too little overlap to be trusted: either may be
+    right.  Centred on the match, the step then gets the slip component's shape
+    (:func:`slip_covariance`: the heading, with the translation the odometry integrated along
+    it) with the spread ``|φ|``, the disagreement itself, in place of the prior
     ``slip_sigma_rad``: the odometry's heading lies about one standard deviation from the
-    centre, so that the covariance holds both explanations along the slip, and no more.  A
-    fixed spread wider than the disagreement leaves the heading there nearly free, and a line
-    paired with a wall at right angles to it can then turn the trajectory at that step.
+    centre, so that the covariance holds both explanations along the slip, and no more.  A fixed
+    spread wider than the disagreement leaves the heading there nearly free, and a line paired
+    with a wall at right angles to it can then turn the trajectory at that step.
 
     Parameters
     ----------
@@ -1088,6 +1090,8 @@ def contradicted_covariance(
     body : bool
         As :func:`slip_covariance`.
     """
+    if config.contradicted_spread == "slip":
+        return slip_covariance(Q, config, delta_odometry, body=body)
     d = pose_log(pose_between(np.asarray(delta_odometry, float), np.asarray(delta_match, float)))
     return slip_covariance(Q, config, delta_odometry, body=body, sigma_rad=abs(float(d[2])))
 

@@ -68,7 +68,6 @@ from slam.frontend.scan_match import (
     match_scans,
     refine_scan,
     scan_points,
-    slip_covariance,
 )
 from slam.geometry import pose_between, pose_compose, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
@@ -399,11 +398,9 @@ class LineSlam:
                         # overlap to be trusted as a measurement: the step is centred where
                         # they put it, with the slip component's spread (or as far as the
                         # odometry's heading)
-                        smc = cfg.frontend.scan_matching
-                        if smc.contradicted_spread == "disagreement":
-                            Q = contradicted_covariance(Q, smc, step.delta, match.delta, body=True)
-                        else:
-                            Q = slip_covariance(Q, smc, step.delta, body=True)
+                        Q = contradicted_covariance(
+                            Q, cfg.frontend.scan_matching, step.delta, match.delta, body=True
+                        )
                         step_delta = match.delta
                         x_pred = pose_compose(g.poses[prev], match.delta)
                         contradicted = True
