@@ -482,18 +482,20 @@ def test_slip_covariance_spreads_the_translation_along_the_heading_slip(length_m
 @pytest.mark.parametrize(("length_m", "turn_rad", "phi"), [(0.4, 0.0, 0.2), (0.3, 0.6, -0.5)])
 def test_a_contradicted_step_spreads_as_far_as_the_odometry(length_m, turn_rad, phi):
     """A contradicted match ``φ`` away from the odometry's heading: by default the step's
-    covariance is the slip component's; with ``contradicted_spread = "disagreement"`` its
-    shape with the spread ``|φ|`` (not ``slip_sigma_rad``), so that the
-    odometry's step, the match moved back along the slip, lies about one standard deviation
-    from the centre, where the fixed spread puts a disagreement below it at a fraction of one
-    and one above it at more."""
-    cfg = ScanMatchConfig(contradicted_spread="disagreement")
+    covariance has the slip component's shape with the spread ``|φ|`` (not
+    ``slip_sigma_rad``), so that the odometry's step, the match moved back along the slip,
+    lies about one standard deviation from the centre, where the fixed spread (the slip
+    component's covariance, ``contradicted_spread = "slip"``) puts a disagreement below it at
+    a fraction of one and one above it at more."""
+    cfg = ScanMatchConfig()
+    assert cfg.contradicted_spread == "disagreement"
+    fixed = ScanMatchConfig(contradicted_spread="slip")
     odo = _driven(length_m, turn_rad)
     match = _driven(length_m, turn_rad + phi)
     Q = _odometry_cov(odo)
     for body in (False, True):
-        default = contradicted_covariance(Q, ScanMatchConfig(), odo, match, body=body)
-        np.testing.assert_array_equal(default, slip_covariance(Q, cfg, odo, body=body))
+        slip = contradicted_covariance(Q, fixed, odo, match, body=body)
+        np.testing.assert_array_equal(slip, slip_covariance(Q, cfg, odo, body=body))
         cov = contradicted_covariance(Q, cfg, odo, match, body=body)
         d = pose_log(pose_between(odo, match)) if body else match - odo
         np.testing.assert_allclose(
@@ -795,9 +797,9 @@ def test_bad_scan_matching_table_in_a_config_file_raises_config_error(tmp_path):
     with pytest.raises(ConfigError, match="contradicted_spread"):
         RunConfig.from_toml(path)
     # the opt-in is read from a file
-    path.write_text('[slam.frontend.scan_matching]\ncontradicted_spread = "disagreement"\n')
+    path.write_text('[slam.frontend.scan_matching]\ncontradicted_spread = "slip"\n')
     cfg = RunConfig.from_toml(path)
-    assert cfg.slam.frontend.scan_matching.contradicted_spread == "disagreement"
+    assert cfg.slam.frontend.scan_matching.contradicted_spread == "slip"
     # the former key says what replaced it
     path.write_text("[slam.frontend.scan_matching]\nenabled = true\nnormal_points = 5\n")
     with pytest.raises(ConfigError, match=r"normal_points.*replaced by normal_span_rad"):
@@ -1042,10 +1044,10 @@ def test_a_contradicted_step_is_the_match_in_the_graph(tmp_path, spread, slip_de
     """The same slip and untrusted matches: of the run's odometry factors exactly one turns
     more than 10° away from the logged odometry, the contradicted step's; it turns as the
     ground truth does (within 1°, where the log is 20° (11°) off), centred where the points
-    put it, with the slip component's heading spread (at least ``slip_sigma_rad``, 0.35 rad:
-    as uncertain as a slip), or with ``contradicted_spread = "disagreement"`` as wide as its
-    disagreement with the odometry (:func:`contradicted_covariance`: the odometry's heading
-    one standard deviation away)."""
+    put it, by default with a heading spread as wide as its disagreement with the odometry
+    (:func:`contradicted_covariance`: the odometry's heading one standard deviation away), or
+    with ``contradicted_spread = "slip"`` the slip component's (at least ``slip_sigma_rad``,
+    0.35 rad: as uncertain as a slip)."""
     log = tmp_path / "slip.clf"
     _slipped_log(DEMO / "log.clf", log, at_scan=200, angle_rad=np.deg2rad(slip_deg))
     cfg = _with_scan_matching(min_overlap=0.99, contradicted_spread=spread)

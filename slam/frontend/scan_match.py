@@ -135,11 +135,11 @@ class ScanMatchConfig:
         Standard deviation of a slip's heading error (rad), added to the odometry's, with the
         translation the odometry integrated along it (:func:`slip_covariance`); the search's
         ``rotation_window_rad`` covers two of them.
-    contradicted_spread : {"slip", "disagreement"}
+    contradicted_spread : {"disagreement", "slip"}
         The heading spread of a step centred on a contradicted match
-        (:attr:`ScanMatch.contradicted`): the slip component's (``slip_sigma_rad``,
-        :func:`slip_covariance`), or as far as the odometry's heading
-        (:func:`contradicted_covariance`; ``docs/real-logs.md``, Opt-in settings).
+        (:attr:`ScanMatch.contradicted`): as far as the odometry's heading (the default,
+        :func:`contradicted_covariance`), or the slip component's (``slip_sigma_rad``,
+        :func:`slip_covariance`; ``docs/real-logs.md``, Opt-in settings).
     between_keyframes : bool
         Also match every scan between two keyframes against the last keyframe, from its
         odometry since the keyframe (:func:`refine_scan`): an accepted match is the scan's
@@ -168,7 +168,7 @@ class ScanMatchConfig:
     min_overlap: float = 0.5
     slip_probability: float = 0.01
     slip_sigma_rad: float = 0.35
-    contradicted_spread: Literal["slip", "disagreement"] = "slip"
+    contradicted_spread: Literal["disagreement", "slip"] = "disagreement"
     between_keyframes: bool = False
 
     def __post_init__(self) -> None:
@@ -587,9 +587,8 @@ class ScanMatch:
         Not accepted, yet the slip component is the more probable at the match: the points
         contradict the odometry's heading, with too little overlap to be trusted as a
         measurement.  The pipeline then centres the step on ``delta`` with
-        :func:`contradicted_covariance`: the slip component's covariance, or with
-        ``contradicted_spread = "disagreement"`` spread along the slip as far as the
-        odometry's heading.
+        :func:`contradicted_covariance`: spread along the slip as far as the odometry's
+        heading (or, with ``contradicted_spread = "slip"``, the slip component's covariance).
     """
 
     delta: FloatArray
@@ -1068,8 +1067,8 @@ def contradicted_covariance(
 ) -> FloatArray:
     """Covariance of a step centred on a contradicted match (``contradicted_spread``).
 
-    ``"slip"`` (the default): the slip component's, ``Q + σ_slip² v vᵀ``
-    (:func:`slip_covariance`).  ``"disagreement"``: ``Q + φ² v vᵀ``.  A contradicted match
+    ``"disagreement"`` (the default): ``Q + φ² v vᵀ``.  ``"slip"``: the slip component's,
+    ``Q + σ_slip² v vᵀ`` (:func:`slip_covariance`).  A contradicted match
     (:attr:`ScanMatch.contradicted`) turns the step by ``φ`` against the odometry, ``φ`` the
     heading of ``δ_match ⊖ δ_odometry``, with too little overlap to be trusted: either may be
     right.  Centred on the match, the step then gets the slip component's shape

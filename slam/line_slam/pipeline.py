@@ -20,8 +20,9 @@ For each keyframe:
    replaces the keyframe's odometry factor (the match's posterior under the slip component:
    the points' rotation, the translation moved with it), and the step is left out of the
    odometry-noise estimate.  A match not used (too little overlap) whose best solution is
-   still a slip (``contradicted``) centres the step too, with the slip component's covariance:
-   the points refute the odometry's heading but are not trusted as a measurement of it.
+   still a slip (``contradicted``) centres the step too, spread along the slip as far as the
+   odometry's heading (:func:`~slam.frontend.scan_match.contradicted_covariance`): the points
+   refute the odometry's heading but are not trusted as a measurement of it.
 4. **Front end** (:mod:`~slam.line_slam.local_map`, :mod:`~slam.line_slam.front_end`): the
    lines are registered against the local map around ``x̂``; the registered pose is the
    keyframe's initial estimate and the registration's pairs are the data association.
@@ -396,8 +397,7 @@ class LineSlam:
                     if match.contradicted:
                         # the points say the odometry's heading slipped, with too little
                         # overlap to be trusted as a measurement: the step is centred where
-                        # they put it, with the slip component's spread (or as far as the
-                        # odometry's heading)
+                        # they put it, spread along the slip as far as the odometry's heading
                         Q = contradicted_covariance(
                             Q, cfg.frontend.scan_matching, step.delta, match.delta, body=True
                         )
