@@ -3,9 +3,10 @@
 Every scan of a log is matched against the one before it (:func:`slam.frontend.scan_match.
 match_scans`, the run configuration's ``[slam.frontend.scan_matching]``, the configured motion
 model as the odometry's prior, the odometry the estimators read); a match that is not accepted
-leaves the odometry step with its prior covariance, or with the slip component's where the
-match contradicts it (:attr:`~slam.frontend.scan_match.ScanMatch.contradicted`, as the
-pipeline does).  The matches are chained
+leaves the odometry step with its prior covariance, and one that contradicts the odometry
+(:attr:`~slam.frontend.scan_match.ScanMatch.contradicted`) centres the step with
+:func:`~slam.frontend.scan_match.contradicted_covariance`, as the pipeline does.  The matches
+are chained
 (:func:`slam.lines.transform.compose_chain`, independent steps) and, for every relation
 shorter than ``--max-gap-s`` seconds, the chain's relative pose between the relation's two
 scans is compared with the relation in the relation's frame (the base, through the log's
@@ -32,7 +33,7 @@ from tqdm import tqdm
 
 from slam.config import RunConfig
 from slam.evaluation.timestamps import match_timestamps
-from slam.frontend.scan_match import match_scans, scan_points, slip_covariance
+from slam.frontend.scan_match import contradicted_covariance, match_scans, scan_points
 from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse, pose_log
 from slam.inputs import open_log
 from slam.io.relations import read_relations
@@ -67,8 +68,15 @@ def main() -> None:
             n_used += int(m.accepted)
             n_slips += int(m.slip)
             n_contradicted += int(m.contradicted)
-            steps.append(m.delta if m.accepted else delta)
-            covs.append(m.cov if m.accepted else slip_covariance(Q, sm) if m.contradicted else Q)
+            if m.accepted:
+                steps.append(m.delta)
+                covs.append(m.cov)
+            elif m.contradicted:
+                steps.append(m.delta)
+                covs.append(contradicted_covariance(Q, sm, delta, m.delta, body=True))
+            else:
+                steps.append(delta)
+                covs.append(Q)
             odo_steps.append(delta)
         stamps.append(scan.timestamp)
         mounts.append(pose_between(scan.pose_odom_base, scan.pose_odom_laser))

@@ -381,7 +381,7 @@ class LineSlam:
         # paired); then the lines registered against the local map = initial guess +
         # association.  The match moves the prediction (its covariance stays the odometry's);
         # it enters the graph only where it finds a slip, as that step's odometry factor (5.);
-        # a match not used that finds a slip centres the step, with the slip's spread
+        # a match not used that finds a slip centres the step, spread as far as the odometry
         with self.clock("frontend"):
             if points is not None and self._points is not None and not step.first:
                 match = match_scans(self._points, points, step.delta, Q, cfg.frontend.scan_matching)
