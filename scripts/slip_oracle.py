@@ -4,10 +4,10 @@
 odometry as the prior (``slam.frontend.scan_match``).  A match whose best solution lies in the
 prior's slip component is a *slip* when the matcher accepts it (it replaces the step's
 odometry factor) and *contradicted* when it does not (too little overlap; it centres the step,
-spread as far as the odometry's heading: ``contradicted_spread``).  This script runs the pipeline on LOG, records the heading
-step of every such keyframe (odometry, match) and compares both with the reference's heading
-step between the same two scans, found by time stamp (so a reference run of the unmodified
-log serves its decimated variants too).
+spread as far as the odometry's heading: ``contradicted_spread``).  This script runs the
+pipeline on LOG, records the heading step of every such keyframe (odometry, match) and
+compares both with the reference's heading step between the same two scans, found by time
+stamp (so a reference run of the unmodified log serves its decimated variants too).
 
     python scripts/slip_oracle.py LOG --reference other/trajectory.tum [--config FILE]
 
