@@ -599,6 +599,27 @@ def test_robust_second_chance_needs_every_pair_explained_and_an_agreeing_hypothe
     assert _judge(True, 1, seed=4, judge_max_f=between)[0] == 0
 
 
+def test_closure_judged_alone_must_pass_the_f_test_in_both_costs():
+    """``judge_alone_both_costs``: a closure that no recent hypothesis agrees with is accepted
+    only when its F statistic is within ``judge_max_f`` in χ² and in the solver's robust cost;
+    one that another hypothesis agrees with needs only one of them.
+
+    The loop of seed 5 has the robust F of its three right pairs above the Gaussian one (over
+    seeds 1-8 two loops do), so a limit between the two separates the rules."""
+    _, entry = _judge(False, seed=5, judge_max_f=np.inf)
+    f_gauss, f_robust = entry["f_statistic"], entry["f_statistic_robust"]
+    assert entry["consistent_pairs"] == entry["pairs"] == 3
+    assert 0.0 < f_gauss < f_robust  # the premise: the robust cost grew more
+    between = 0.5 * (f_gauss + f_robust)
+    alone, entry = _judge(False, 0, seed=5, judge_max_f=between)
+    assert alone == 0 and entry["agreeing_hypotheses"] == 0
+    assert _judge(False, 1, seed=5, judge_max_f=between)[0] == 1
+    assert _judge(False, 0, seed=5, judge_max_f=between, judge_alone_both_costs=False)[0] == 1
+    # below both: rejected either way; above both: accepted alone too
+    assert _judge(False, 0, seed=5, judge_max_f=0.5 * f_gauss)[0] == 0
+    assert _judge(False, 0, seed=5, judge_max_f=2.0 * f_robust)[0] == 1
+
+
 def test_judge_cost_counts_an_outlier_line_as_the_solver_does(loop_runs):
     """The judge's loop cost in the solver's kernel (``judge_robust_cost``): each line factor
     adds ``2ρ(‖e‖)`` (Cauchy: ``k² log(1 + χ²/k²)``), the odometry its χ².  One line moved

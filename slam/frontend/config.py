@@ -312,6 +312,15 @@ class LoopClosureConfig:
         leaves hundreds of σ off, then weighs as the outlier the solver treats it as, not as
         evidence against the closure.  The log has ``f_statistic_robust`` and
         ``agreeing_hypotheses``.
+    judge_alone_both_costs : bool
+        A closure that no recent hypothesis agrees with (``agreeing_hypotheses`` 0: judged on
+        its own, e.g. late with ``judge_unconfirmed``) is accepted only when its F statistic
+        is within ``judge_max_f`` in both costs: in χ² and in the solver's robust cost
+        (``f_statistic_robust``; with ``judge_robust_cost``, else both are χ² and this adds
+        nothing).  The judge's solve minimises the robust cost, and a merge that raises it
+        beyond the limit has not been explained by it, even where the loop's χ² falls; with
+        no second hypothesis to vouch for the closure, both readings must accept it.  One
+        that another hypothesis agrees with keeps the robust second chance.
     confirmations : int
         How many hypotheses found at other keyframes within the last ``local_keyframes`` must
         agree with one before it is judged at once (0: none, every hypothesis is judged when
@@ -404,6 +413,7 @@ class LoopClosureConfig:
     consistent_with_accepted: bool = True
     judge_max_f: float = 100.0
     judge_robust_cost: bool = True
+    judge_alone_both_costs: bool = True
     min_consistent_fraction: float = 0.6
     skip_repeated_rejections: bool = True
     judge_hopeless_after: int = 5

@@ -37,7 +37,8 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    (:class:`slam.line_slam.audit.MergeAudit`) and the loop's cost rises little per merged
    degree of freedom (an F test in χ², or, for a closure whose every pair is explained and
    that a recent hypothesis agrees with, in the solver's robust cost:
-   ``judge_robust_cost``), else the landmark book is restored to its snapshot and the
+   ``judge_robust_cost``; for a closure no hypothesis agrees with, in both costs:
+   ``judge_alone_both_costs``), else the landmark book is restored to its snapshot and the
    back-end never sees it.  An accepted closure with a large correction
    restarts the back-end from the judged estimate; a small one reaches it incrementally.
 
@@ -822,6 +823,8 @@ class LoopCloser:
             and good == len(records)
             and f_robust <= lcc.judge_max_f
         )
+        if lcc.judge_alone_both_costs and agree == 0:
+            f_ok = f_ok and f_robust <= lcc.judge_max_f
         if explained and f_ok:
             # explained (up to a few wrong pairs, which are undone)
             self.audit.audit(records)
