@@ -11,6 +11,7 @@ must beat odometry by far.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from itertools import islice
 from pathlib import Path
 
@@ -99,6 +100,19 @@ def test_fr079_odometry_repaired_where_the_log_hides_reversing(shared_data):
     assert errors["velocity"] <= 0.7 * errors["logged"]
 
 
+def _variant_excerpt(name, config, max_scans, shared_data, tmp_path, monkeypatch):
+    """A robustness row's log (``make_variant``) run for its first ``max_scans`` scans with
+    ``config``; ``(relations inside the excerpt, relations metric on them)``."""
+    from slam.experiments.robustness import make_variant, variant_by_name
+
+    monkeypatch.setenv("LINESLAM_DATA", str(shared_data))
+    files = make_variant(variant_by_name(name), tmp_path / "variants", root=shared_data)
+    run_slam(files.log, tmp_path / "run", config, max_scans=max_scans)
+    ours = read_tum(tmp_path / "run" / "trajectory.tum")
+    relations = relations_within(read_relations(files.relations), ours.timestamps)
+    return len(relations), relations_metric(ours, relations)
+
+
 @pytest.mark.parametrize(
     ("spread", "within"), [("disagreement", True), ("slip", False)], ids=["default", "slip"]
 )
@@ -115,21 +129,14 @@ def test_narrow_field_of_view_keeps_its_heading_through_a_turn_on_the_spot(
     angles turns the trajectory there (measured 0.69 m, 2.3°; docs/real-logs.md, Opt-in
     settings).
     """
-    from dataclasses import replace
-
-    from slam.experiments.robustness import make_variant, variant_by_name
-
-    monkeypatch.setenv("LINESLAM_DATA", str(shared_data))
-    files = make_variant(variant_by_name("aces-fov60"), tmp_path / "variants", root=shared_data)
     config = RunConfig()
     sm = replace(config.slam.frontend.scan_matching, contradicted_spread=spread)
     frontend = replace(config.slam.frontend, scan_matching=sm)
     config = replace(config, slam=replace(config.slam, frontend=frontend))
-    run_slam(files.log, tmp_path / "run", config, max_scans=4500)
-    ours = read_tum(tmp_path / "run" / "trajectory.tum")
-    relations = relations_within(read_relations(files.relations), ours.timestamps)
-    assert len(relations) >= 500
-    metric = relations_metric(ours, relations)
+    n_relations, metric = _variant_excerpt(
+        "aces-fov60", config, 4500, shared_data, tmp_path, monkeypatch
+    )
+    assert n_relations >= 500
     print(f"aces-fov60[:4500] {spread}: {metric.abs_trans_m} m, {metric.abs_rot_deg} deg")
     ok = metric.abs_trans_m.mean <= 0.06 and metric.abs_rot_deg.mean <= 1.2
     assert ok == within
@@ -151,19 +158,12 @@ def test_narrow_field_of_view_rejects_a_wrong_closure_judged_alone(
     0.07 m of the relations (measured 0.041 m).  With the χ² test alone it is accepted
     (measured 0.148 m; docs/real-logs.md, Opt-in settings).
     """
-    from dataclasses import replace
-
-    from slam.experiments.robustness import make_variant, variant_by_name
-
-    monkeypatch.setenv("LINESLAM_DATA", str(shared_data))
-    files = make_variant(variant_by_name("intel-fov60"), tmp_path / "variants", root=shared_data)
     config = RunConfig()
     lc = replace(config.slam.loop_closure, judge_alone_both_costs=both_costs)
     config = replace(config, slam=replace(config.slam, loop_closure=lc))
-    run_slam(files.log, tmp_path / "run", config, max_scans=10_000)
-    ours = read_tum(tmp_path / "run" / "trajectory.tum")
-    relations = relations_within(read_relations(files.relations), ours.timestamps)
-    assert len(relations) >= 2000
-    metric = relations_metric(ours, relations)
+    n_relations, metric = _variant_excerpt(
+        "intel-fov60", config, 10_000, shared_data, tmp_path, monkeypatch
+    )
+    assert n_relations >= 2000
     print(f"intel-fov60[:10000] both costs {both_costs}: {metric.abs_trans_m} m")
     assert (metric.abs_trans_m.mean <= 0.07) == within
