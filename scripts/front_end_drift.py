@@ -23,6 +23,7 @@ import tempfile
 from dataclasses import replace
 from pathlib import Path
 
+from slam import blas as _blas  # noqa: F401  # isort: skip  (before numpy: slam.blas)
 import numpy as np
 
 from slam.config import RunConfig

@@ -25,6 +25,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from slam import blas as _blas  # noqa: F401  # isort: skip  (before numpy: slam.blas)
 import numpy as np
 
 import slam.line_slam.pipeline as pipeline

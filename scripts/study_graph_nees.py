@@ -14,6 +14,7 @@ import argparse
 import time
 import warnings
 
+from slam import blas as _blas  # noqa: F401  # isort: skip  (before numpy: slam.blas)
 import numpy as np
 from scipy.stats import chi2
 

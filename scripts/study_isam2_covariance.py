@@ -32,6 +32,7 @@ import warnings
 from dataclasses import replace
 from typing import Any
 
+from slam import blas as _blas  # noqa: F401  # isort: skip  (before numpy: slam.blas)
 import gtsam
 import numpy as np
 

@@ -212,6 +212,7 @@ def run_estimator_on_log(
         The log has no laser scans, or a malformed line (``LogFormatError``; with
         ``strict``, an anomaly).
     """
+    from slam.blas import kernels_in_use
     from slam.io.atomic import staged_dir
     from slam.io.carmen import CarmenStats
     from slam.io.results import write_summary
@@ -261,6 +262,7 @@ def run_estimator_on_log(
         summary["runtime_s"] = runtime
         summary["warnings"] = tallied.as_list()
         summary["log_anomalies"] = stats.anomalies.to_dict()
+        summary["blas"] = kernels_in_use()
         write_summary(work, summary)
     return summary
 

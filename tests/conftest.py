@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import slam  # noqa: F401  # isort: skip  (before numpy: selects the BLAS kernels, slam.blas)
 import numpy as np
 import pytest
 

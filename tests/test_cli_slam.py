@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from conftest import REPO_ROOT
 
+import slam.blas
 from slam.cli import main
 from slam.config import RunConfig
 from slam.geometry import pose_between, pose_log
@@ -62,6 +63,11 @@ def test_slam_writes_the_results_folder(tmp_path, capsys, backend):
     assert summary["frame"] == "base" and summary["scans"] == 60
     assert summary["backend"]["backend"] == backend
     assert {"read", "estimate", "optimize", "write", "total"} <= set(summary["runtime_s"])
+    # the BLAS kernels the run used, as loaded in this process (slam.blas)
+    assert summary["blas"]["selection"] == slam.blas.selection
+    assert summary["blas"]["libraries"] and all(
+        lib["architecture"] for lib in summary["blas"]["libraries"]
+    )
     line_map = read_map_json(out / "map.json")
     assert len(line_map) == summary["lines_merged"] > 5
     assert all(ln.r >= 0 and -np.pi < ln.alpha <= np.pi for ln in line_map.lines)

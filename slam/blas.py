@@ -1,0 +1,129 @@
+"""The BLAS kernels of a run, selected so that its results do not depend on the CPU.
+
+numpy and scipy call OpenBLAS for their matrix products and factorisations, and OpenBLAS picks
+its kernels for the CPU it runs on when it is loaded (``SkylakeX`` on a CPU with AVX-512,
+``Haswell`` or ``Zen`` on most others).  The kernels add in different orders, so the last bits of
+a product differ from one CPU to another.  Over a log of thousands of scans such differences
+change which loop closures pass, and with them the result: the whole Intel log gives 0.0185 m
+against its relations with the ``Haswell`` kernels and 0.0207 m with the ``SkylakeX`` ones, the
+same code on the same machine (``OPENBLAS_CORETYPE=Haswell python scripts/bench_slam.py intel
+--relations`` against the same command without the variable, on a CPU with AVX-512).
+
+Importing :mod:`slam` therefore selects OpenBLAS's ``Haswell`` kernels (:func:`select_kernels`)
+when
+
+* numpy is not loaded yet (OpenBLAS reads its kernel choice once, when it is loaded: import
+  :mod:`slam` before numpy, as the ``lineslam`` command does);
+* the CPU is x86-64 and has the instructions those kernels need (AVX2 and FMA, read from
+  ``/proc/cpuinfo`` on Linux; elsewhere nothing is selected);
+* ``OPENBLAS_CORETYPE`` is not set (a kernel set chosen by the user is kept) and
+  ``LINESLAM_NATIVE_BLAS`` is not ``1`` (which keeps OpenBLAS's own choice).
+
+A run's ``summary.json`` records what was loaded (:func:`kernels_in_use`).  This module must not
+import numpy.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+#: The OpenBLAS kernel set selected on x86-64 CPUs that have AVX2 and FMA.
+CORETYPE = "Haswell"
+
+#: Instructions the ``Haswell`` kernels use (``/proc/cpuinfo`` flag names).
+REQUIRED_FLAGS = frozenset({"avx2", "fma"})
+
+_X86_64 = frozenset({"x86_64", "amd64"})
+
+#: Why the kernels were or were not selected when :mod:`slam` was imported.
+selection: str = "not attempted"
+
+
+def cpu_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> frozenset[str]:
+    """The instruction-set flags of the first CPU in ``cpuinfo``; empty where it is unreadable."""
+    try:
+        with cpuinfo.open(encoding="ascii", errors="replace") as f:
+            for line in f:
+                key, sep, value = line.partition(":")
+                if sep and key.strip() == "flags":
+                    return frozenset(value.split())
+    except OSError:
+        pass
+    return frozenset()
+
+
+def selection_reason(
+    environ: Mapping[str, str],
+    numpy_loaded: bool,
+    machine: str,
+    flags: frozenset[str],
+) -> str:
+    """Whether to select the ``Haswell`` kernels: ``"selected"``, or why not (a sentence).
+
+    Parameters
+    ----------
+    environ
+        The process environment (``OPENBLAS_CORETYPE``, ``LINESLAM_NATIVE_BLAS``).
+    numpy_loaded
+        numpy is already imported, and OpenBLAS with it.
+    machine
+        ``platform.machine()``.
+    flags
+        The CPU's instruction-set flags (:func:`cpu_flags`).
+    """
+    if environ.get("LINESLAM_NATIVE_BLAS", "") == "1":
+        return "LINESLAM_NATIVE_BLAS=1 keeps OpenBLAS's own choice"
+    if "OPENBLAS_CORETYPE" in environ:
+        return f"OPENBLAS_CORETYPE={environ['OPENBLAS_CORETYPE']} was set before lineslam"
+    if numpy_loaded:
+        return "numpy was imported before slam, with OpenBLAS's own choice"
+    if machine.lower() not in _X86_64:
+        return f"not an x86-64 CPU ({machine})"
+    missing = REQUIRED_FLAGS - flags
+    if missing:
+        return f"the CPU lacks {' and '.join(sorted(missing))} (or its flags are unreadable)"
+    return "selected"
+
+
+def select_kernels() -> str:
+    """Select OpenBLAS's ``Haswell`` kernels where :func:`selection_reason` allows; the reason.
+
+    Sets ``OPENBLAS_CORETYPE`` in this process's environment (child processes inherit it) and
+    records the reason in :data:`selection`.
+    """
+    global selection
+    reason = selection_reason(
+        os.environ,
+        "numpy" in sys.modules,
+        platform.machine(),
+        cpu_flags() if sys.platform.startswith("linux") else frozenset(),
+    )
+    if reason == "selected":
+        os.environ["OPENBLAS_CORETYPE"] = CORETYPE
+    selection = reason
+    return reason
+
+
+def kernels_in_use() -> dict[str, Any]:
+    """The BLAS libraries loaded and their kernels, for ``summary.json``.
+
+    ``{"selection": ..., "libraries": [{"library", "architecture", "version"}, ...]}``, from
+    threadpoolctl (one entry per BLAS library loaded, numpy's and scipy's OpenBLAS each).
+    """
+    from threadpoolctl import threadpool_info
+
+    libraries = [
+        {
+            "library": str(info.get("internal_api", "")),
+            "architecture": str(info.get("architecture", "")),
+            "version": str(info.get("version", "")),
+        }
+        for info in threadpool_info()
+        if info.get("user_api") == "blas"
+    ]
+    return {"selection": selection, "libraries": libraries}
