@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from slam.blas import CORETYPE, kernels_in_use
 from slam.config import RunConfig
 from slam.evaluation import relations_metric, relations_within
 from slam.io.carmen import iter_scans
@@ -100,6 +101,17 @@ def test_fr079_odometry_repaired_where_the_log_hides_reversing(shared_data):
     assert errors["velocity"] <= 0.7 * errors["logged"]
 
 
+def _skip_unless_reference_kernels() -> None:
+    """Skip where the BLAS kernels are not those of the documented figures (slam.blas).
+
+    A setting that lets one wrong closure through is shown failing by that one decision; other
+    kernels change the last bits of the arithmetic and can change the decision.
+    """
+    architectures = {lib["architecture"] for lib in kernels_in_use()["libraries"]}
+    if architectures != {CORETYPE}:
+        pytest.skip(f"one closure decision, reproduced with the {CORETYPE} kernels only")
+
+
 def _variant_excerpt(name, config, max_scans, shared_data, tmp_path, monkeypatch):
     """A robustness row's log (``make_variant``) run for its first ``max_scans`` scans with
     ``config``; ``(relations inside the excerpt, relations metric on them)``."""
@@ -129,6 +141,8 @@ def test_narrow_field_of_view_keeps_its_heading_through_a_turn_on_the_spot(
     angles turns the trajectory there (measured 0.69 m, 2.3°; docs/real-logs.md, Opt-in
     settings).
     """
+    if not within:
+        _skip_unless_reference_kernels()
     config = RunConfig()
     sm = replace(config.slam.frontend.scan_matching, contradicted_spread=spread)
     frontend = replace(config.slam.frontend, scan_matching=sm)
@@ -158,6 +172,8 @@ def test_narrow_field_of_view_rejects_a_wrong_closure_judged_alone(
     0.07 m of the relations (measured 0.041 m).  With the χ² test alone it is accepted
     (measured 0.148 m; docs/real-logs.md, Opt-in settings).
     """
+    if not within:
+        _skip_unless_reference_kernels()
     config = RunConfig()
     lc = replace(config.slam.loop_closure, judge_alone_both_costs=both_costs)
     config = replace(config, slam=replace(config.slam, loop_closure=lc))
