@@ -6,8 +6,8 @@ its kernels for the CPU it runs on when it is loaded (``SkylakeX`` on a CPU with
 a product differ from one CPU to another.  Over a log of thousands of scans such differences
 change which loop closures pass, and with them the result: the whole Intel log gives 0.0185 m
 against its relations with the ``Haswell`` kernels and 0.0207 m with the ``SkylakeX`` ones, the
-same code on the same machine (``OPENBLAS_CORETYPE=Haswell python scripts/bench_slam.py intel
---relations`` against the same command without the variable, on a CPU with AVX-512).
+same code on the same machine (``python scripts/bench_slam.py intel --relations`` against the
+same command with ``LINESLAM_NATIVE_BLAS=1``, on a CPU with AVX-512).
 
 Importing :mod:`slam` therefore selects OpenBLAS's ``Haswell`` kernels (:func:`select_kernels`)
 when
