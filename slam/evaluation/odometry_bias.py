@@ -1,0 +1,202 @@
+"""Is a log's odometry biased?  Its relations' NEES under a random-walk model, and a calibration.
+
+The motion model (:class:`slam.models.motion.MotionNoiseConfig`) is a random walk: the
+variance of a chain of odometry steps grows with the distance travelled and the angle turned,
+and nothing else.  An odometry with a persistent error (wheels of slightly different size, a
+wrong wheel base, a miscalibrated gyro) errs the same way step after step, so its error grows
+faster than the model says.  Against a log's relations this shows as a NEES that rises with the
+relation's length: about 3 over relations of a few seconds, far above it over minutes.
+
+:func:`odometry_relations_nees` computes each relation's NEES of the raw odometry under a given
+noise model (the chained covariance, exact to first order, :func:`slam.lines.transform.
+compose_chain`), optionally with the odometry calibrated by :class:`OdometryCalibration`
+(translation scale, turn gain, heading drift per metre, applied to every step).
+:func:`fit_odometry_calibration` fits the calibration to a subset of the relations (e.g. the
+short ones) by robust least squares on the whitened errors.  If a calibration fitted on the
+short relations makes the long ones consistent too, the odometry's long-range error is a bias
+that three numbers describe, which a random-walk model cannot represent.
+``scripts/odometry_bias.py`` prints both for a log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from slam.errors import EvaluationError
+from slam.geometry import adjoint_pose2, pose_between, pose_inverse, pose_log
+from slam.lines.transform import compose_chain
+from slam.models.motion import MotionNoiseConfig
+
+__all__ = [
+    "OdometryCalibration",
+    "RelationPairs",
+    "fit_odometry_calibration",
+    "odometry_relations_nees",
+    "relation_pairs",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+@dataclass(frozen=True)
+class OdometryCalibration:
+    """A persistent odometry error, applied to each step ``(dx, dy, dθ)`` of path length ``d``.
+
+    The calibrated step is ``((1 + scale)·dx, (1 + scale)·dy, (1 + turn_gain)·dθ +
+    heading_drift_rad_per_m·d)``.
+
+    Attributes
+    ----------
+    scale : float
+        Relative translation error (0.01: the true motion is 1 % longer than logged).
+    turn_gain : float
+        Relative rotation error.
+    heading_drift_rad_per_m : float
+        Heading change per metre travelled that the odometry does not report (rad/m).
+    """
+
+    scale: float = 0.0
+    turn_gain: float = 0.0
+    heading_drift_rad_per_m: float = 0.0
+
+    def apply(self, steps: FloatArray) -> FloatArray:
+        """The calibrated steps, shape ``(N, 3)``."""
+        s = np.array(steps, dtype=float)
+        d = np.hypot(s[:, 0], s[:, 1])
+        s[:, :2] *= 1.0 + self.scale
+        s[:, 2] = s[:, 2] * (1.0 + self.turn_gain) + self.heading_drift_rad_per_m * d
+        return s
+
+
+@dataclass(frozen=True)
+class RelationPairs:
+    """Relations matched to the odometry's poses.
+
+    Attributes
+    ----------
+    first, second : ndarray of int, shape (m,)
+        Indices of the two poses of each relation in the odometry (``first < second``).
+    poses : ndarray, shape (m, 3)
+        The relation: the pose at ``second`` in the frame of the pose at ``first``.
+    duration_s : ndarray, shape (m,)
+        Time between the two poses.
+    """
+
+    first: IntArray
+    second: IntArray
+    poses: FloatArray
+    duration_s: FloatArray
+
+
+def relation_pairs(
+    timestamps: FloatArray,
+    t1: FloatArray,
+    t2: FloatArray,
+    poses: FloatArray,
+    tolerance_s: float = 1e-3,
+) -> RelationPairs:
+    """Match relations ``(t1, t2, poses)`` to odometry stamps within ``tolerance_s``.
+
+    ``timestamps`` are the odometry's, in its order (a log's file order; stamps that go back in
+    time are matched too).  Relations whose stamps have no odometry pose within the tolerance
+    are left out; a relation whose second pose comes first in that order is inverted.
+
+    Raises
+    ------
+    EvaluationError
+        No relation matches.
+    """
+    t = np.asarray(timestamps, dtype=float)
+    if t.shape[0] < 2:
+        raise EvaluationError("fewer than two odometry poses")
+    order = np.argsort(t, kind="stable")
+    ts = t[order]
+
+    def nearest(stamps: FloatArray) -> IntArray:
+        k = np.clip(np.searchsorted(ts, stamps), 1, len(ts) - 1)
+        k = np.where(np.abs(ts[k - 1] - stamps) <= np.abs(ts[k] - stamps), k - 1, k)
+        return np.asarray(order[k], dtype=np.intp)
+
+    a, b = nearest(np.asarray(t1, float)), nearest(np.asarray(t2, float))
+    ok = (np.abs(t[a] - t1) <= tolerance_s) & (np.abs(t[b] - t2) <= tolerance_s) & (a != b)
+    if not np.any(ok):
+        raise EvaluationError("no relation has both of its stamps in the odometry")
+    a, b, p = a[ok], b[ok], np.asarray(poses, float)[ok]
+    back = a > b
+    p = np.where(back[:, None], pose_inverse(p), p)
+    return RelationPairs(
+        np.where(back, b, a), np.where(back, a, b), p, np.abs(np.asarray(t2 - t1, float))[ok]
+    )
+
+
+def _whitened_errors(
+    odometry: FloatArray,
+    pairs: RelationPairs,
+    noise: MotionNoiseConfig,
+    calibration: OdometryCalibration,
+) -> FloatArray:
+    steps = pose_between(odometry[:-1], odometry[1:])
+    C = noise.covariance(steps)
+    poses, _ = compose_chain(calibration.apply(steps), C)
+    # world-frame sums of the steps' covariances; a relation's covariance in its end frame
+    Ad = adjoint_pose2(poses[1:])
+    S = np.concatenate([np.zeros((1, 3, 3)), np.cumsum(Ad @ C @ np.swapaxes(Ad, 1, 2), axis=0)])
+    i, j = pairs.first, pairs.second
+    xi = pose_log(pose_between(pairs.poses, pose_between(poses[i], poses[j])))
+    Aj = np.linalg.inv(adjoint_pose2(poses[j]))
+    P = Aj @ (S[j] - S[i]) @ np.swapaxes(Aj, 1, 2)
+    L = np.linalg.cholesky(0.5 * (P + np.swapaxes(P, 1, 2)))
+    return np.asarray(np.linalg.solve(L, xi[..., None])[..., 0], dtype=np.float64)
+
+
+def odometry_relations_nees(
+    odometry: FloatArray,
+    pairs: RelationPairs,
+    noise: MotionNoiseConfig,
+    calibration: OdometryCalibration | None = None,
+) -> FloatArray:
+    """The NEES (3 dof) of each relation's raw-odometry error under ``noise``.
+
+    Parameters
+    ----------
+    odometry : ndarray, shape (N, 3)
+        The odometry's pose at every stamp, in order.
+    pairs : RelationPairs
+        The relations, matched to those poses (:func:`relation_pairs`).
+    noise : MotionNoiseConfig
+        The model of every step (its floors apply per step, so they count the steps).
+    calibration : OdometryCalibration, optional
+        Applied to every step first.
+    """
+    z = _whitened_errors(odometry, pairs, noise, calibration or OdometryCalibration())
+    return np.asarray(np.sum(z**2, axis=1))
+
+
+def fit_odometry_calibration(
+    odometry: FloatArray,
+    pairs: RelationPairs,
+    noise: MotionNoiseConfig,
+    use: NDArray[np.bool_] | None = None,
+) -> OdometryCalibration:
+    """The calibration that best explains the relations ``use`` (default all) under ``noise``.
+
+    Robust least squares (``soft_l1`` at 3 σ) on the whitened errors, from no calibration.
+    """
+    sel = np.ones(pairs.first.shape[0], bool) if use is None else np.asarray(use, bool)
+    if np.count_nonzero(sel) < 3:
+        raise EvaluationError("fewer than 3 relations to fit an odometry calibration to")
+    sub = RelationPairs(
+        pairs.first[sel], pairs.second[sel], pairs.poses[sel], pairs.duration_s[sel]
+    )
+
+    def residuals(p: FloatArray) -> FloatArray:
+        cal = OdometryCalibration(float(p[0]), float(p[1]), float(p[2]))
+        return _whitened_errors(odometry, sub, noise, cal).ravel()
+
+    fit = least_squares(residuals, np.zeros(3), loss="soft_l1", f_scale=3.0)
+    return OdometryCalibration(float(fit.x[0]), float(fit.x[1]), float(fit.x[2]))

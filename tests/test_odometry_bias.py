@@ -1,0 +1,93 @@
+"""A persistent odometry error: seen in the relations' NEES, recovered from the short ones."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam.errors import EvaluationError
+from slam.evaluation.odometry_bias import (
+    OdometryCalibration,
+    fit_odometry_calibration,
+    odometry_relations_nees,
+    relation_pairs,
+)
+from slam.geometry import pose_between
+from slam.lines.transform import compose_chain
+from slam.models.motion import MotionNoiseConfig
+
+TRUE_BIAS = OdometryCalibration(scale=0.02, turn_gain=-0.03, heading_drift_rad_per_m=0.02)
+
+
+def _biased_odometry(rng, noise, bias, n=4000):
+    """A smooth true path, and the odometry that misreads every step by ``bias``, plus noise."""
+    true_steps = np.column_stack([np.full(n, 0.1), np.zeros(n), 0.08 * np.sin(np.arange(n) / 40.0)])
+    truth, _ = compose_chain(true_steps)
+    # invert the calibration step by step, then add the random walk of the model
+    c = bias
+    raw = true_steps.copy()
+    raw[:, :2] /= 1.0 + c.scale
+    d_raw = np.hypot(raw[:, 0], raw[:, 1])
+    raw[:, 2] = (true_steps[:, 2] - c.heading_drift_rad_per_m * d_raw) / (1.0 + c.turn_gain)
+    cov = noise.covariance(raw)
+    raw = raw + np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal((n, 3)))
+    odometry, _ = compose_chain(raw)
+    return truth, odometry
+
+
+def _relations(rng, truth, lag, count):
+    first = rng.choice(truth.shape[0] - lag, size=count, replace=False)
+    second = first + lag
+    t = np.arange(truth.shape[0], dtype=float)
+    return t, t[first], t[second], pose_between(truth[first], truth[second])
+
+
+def test_relation_pairs_match_stamps_and_invert_backward_relations():
+    t = np.array([0.0, 1.0, 2.0, 3.0])
+    poses = np.array([[1.0, 0.0, 0.5], [2.0, 1.0, -0.2], [0.0, 0.0, 0.0]])
+    pairs = relation_pairs(t, np.array([0.0, 3.0, 1.5]), np.array([2.0, 1.0005, 2.5]), poses)
+    # the third relation's stamps are not in the odometry (1 ms tolerance)
+    assert pairs.first.tolist() == [0, 1] and pairs.second.tolist() == [2, 3]
+    np.testing.assert_allclose(pairs.poses[0], poses[0])
+    np.testing.assert_allclose(pose_between(pairs.poses[1], np.zeros(3)), poses[1], atol=1e-12)
+    np.testing.assert_allclose(pairs.duration_s, [2.0, 1.9995])
+    # stamps out of order (a log's jitter): matched by stamp, ordered by position
+    shuffled = relation_pairs(
+        np.array([0.0, 2.0, 1.0, 3.0]), np.array([2.0]), np.array([1.0]), poses[:1]
+    )
+    assert shuffled.first.tolist() == [1] and shuffled.second.tolist() == [2]
+    np.testing.assert_allclose(shuffled.poses[0], poses[0])
+    with pytest.raises(EvaluationError, match="no relation"):
+        relation_pairs(t, np.array([10.0]), np.array([11.0]), poses[:1])
+
+
+def test_unbiased_odometry_is_consistent_at_every_length(rng):
+    noise = MotionNoiseConfig().scaled(0.5)
+    truth, odometry = _biased_odometry(rng, noise, OdometryCalibration())
+    # 300 relations of 3 dof each; the long ones overlap (4,000 steps hold four independent
+    # stretches of 1,000), so their mean scatters more
+    for lag, low, high in ((5, 2.5, 3.5), (1000, 1.5, 4.5)):
+        t, t1, t2, rel = _relations(rng, truth, lag, 300)
+        nees = odometry_relations_nees(odometry, relation_pairs(t, t1, t2, rel), noise)
+        assert low < nees.mean() < high, (lag, nees.mean())
+
+
+def test_short_relations_recover_the_bias_and_make_long_ones_consistent(rng):
+    noise = MotionNoiseConfig().scaled(0.5)
+    truth, odometry = _biased_odometry(rng, noise, TRUE_BIAS)
+    t, t1, t2, rel = _relations(rng, truth, 5, 600)  # 0.5 m of path each
+    short = relation_pairs(t, t1, t2, rel)
+    t, t1, t2, rel = _relations(rng, truth, 1000, 300)  # 100 m of path each
+    long = relation_pairs(t, t1, t2, rel)
+    # the random walk cannot explain the long relations of a biased odometry
+    assert odometry_relations_nees(odometry, short, noise).mean() < 5.0
+    assert odometry_relations_nees(odometry, long, noise).mean() > 30.0
+    fit = fit_odometry_calibration(odometry, short, noise)
+    assert fit.scale == pytest.approx(TRUE_BIAS.scale, abs=0.01)
+    assert fit.turn_gain == pytest.approx(TRUE_BIAS.turn_gain, abs=0.015)
+    assert fit.heading_drift_rad_per_m == pytest.approx(
+        TRUE_BIAS.heading_drift_rad_per_m, abs=0.005
+    )
+    assert 1.5 < odometry_relations_nees(odometry, long, noise, fit).mean() < 4.5
+    with pytest.raises(EvaluationError, match="fewer than 3"):
+        fit_odometry_calibration(odometry, short, noise, use=np.arange(len(short.first)) < 2)
