@@ -19,7 +19,7 @@ import numpy as np
 
 from linefit.line import Line, normal_form
 from slam.geometry import pose_between, pose_compose, pose_exp, pose_inverse
-from slam.models.motion import MotionNoiseConfig
+from slam.models.motion import MotionNoiseConfig, OdometryCalibration
 from slam.types import Scan
 
 
@@ -202,10 +202,21 @@ def simulate_run(
     seed: int,
     motion: MotionNoiseConfig,
     max_range: float = 6.0,
+    bias: OdometryCalibration | None = None,
 ) -> Run:
-    """Scans along ``poses_true`` with noisy odometry (odometry frame = world at the start)."""
+    """Scans along ``poses_true`` with noisy odometry (odometry frame = world at the start).
+
+    ``bias``: the odometry misreads every step so that ``bias.apply`` of its step is the true
+    one (then the random walk of ``motion`` is added).
+    """
     rng = np.random.default_rng(seed)
     rel = pose_between(poses_true[:-1], poses_true[1:])
+    if bias is not None:
+        raw = rel.copy()
+        raw[:, :2] /= 1.0 + bias.scale
+        d_raw = np.hypot(raw[:, 0], raw[:, 1])
+        raw[:, 2] = (rel[:, 2] - bias.heading_drift_rad_per_m * d_raw) / (1.0 + bias.turn_gain)
+        rel = raw
     cov = motion.covariance(rel)
     noise = np.einsum("eij,ej->ei", np.linalg.cholesky(cov), rng.standard_normal(rel.shape))
     rel_noisy = pose_compose(rel, pose_exp(noise))

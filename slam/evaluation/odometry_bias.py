@@ -29,7 +29,7 @@ from scipy.optimize import least_squares
 from slam.errors import EvaluationError
 from slam.geometry import adjoint_pose2, pose_between, pose_inverse, pose_log
 from slam.lines.transform import compose_chain
-from slam.models.motion import MotionNoiseConfig
+from slam.models.motion import MotionNoiseConfig, OdometryCalibration
 
 __all__ = [
     "OdometryCalibration",
@@ -41,36 +41,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
-
-
-@dataclass(frozen=True)
-class OdometryCalibration:
-    """A persistent odometry error, applied to each step ``(dx, dy, dθ)`` of path length ``d``.
-
-    The calibrated step is ``((1 + scale)·dx, (1 + scale)·dy, (1 + turn_gain)·dθ +
-    heading_drift_rad_per_m·d)``.
-
-    Attributes
-    ----------
-    scale : float
-        Relative translation error (0.01: the true motion is 1 % longer than logged).
-    turn_gain : float
-        Relative rotation error.
-    heading_drift_rad_per_m : float
-        Heading change per metre travelled that the odometry does not report (rad/m).
-    """
-
-    scale: float = 0.0
-    turn_gain: float = 0.0
-    heading_drift_rad_per_m: float = 0.0
-
-    def apply(self, steps: FloatArray) -> FloatArray:
-        """The calibrated steps, shape ``(N, 3)``."""
-        s = np.array(steps, dtype=float)
-        d = np.hypot(s[:, 0], s[:, 1])
-        s[:, :2] *= 1.0 + self.scale
-        s[:, 2] = s[:, 2] * (1.0 + self.turn_gain) + self.heading_drift_rad_per_m * d
-        return s
 
 
 @dataclass(frozen=True)

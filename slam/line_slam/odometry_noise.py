@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from slam.models.motion import MotionNoiseConfig
 
-__all__ = ["MotionNoiseEstimator"]
+__all__ = ["MotionNoiseEstimator", "odometry_error"]
 
 FloatArray = NDArray[np.float64]
 
@@ -111,6 +111,29 @@ def _fit_one(
     return p
 
 
+def odometry_error(
+    correction: FloatArray, prior_cov: FloatArray, posterior_cov: FloatArray
+) -> tuple[FloatArray, FloatArray] | None:
+    """The odometry's error on a step as a registration measured it, ``(ν, P_L)``, or None.
+
+    None unless the registration pins the pose down in every direction (its posterior below a
+    quarter of the prediction's); else ``ν = (I + P_L I_P) c`` and the lines' own covariance
+    ``P_L`` (module docstring).
+    """
+    P0 = np.asarray(prior_cov, dtype=float)
+    Pp = np.asarray(posterior_cov, dtype=float)
+    L = np.linalg.cholesky(P0)
+    Li = np.linalg.inv(L)
+    ratio = np.linalg.eigvalsh(Li @ Pp @ Li.T)
+    if ratio.max() > 0.25:
+        return None
+    I_P = np.linalg.inv(P0)
+    I_post = np.linalg.inv(Pp)
+    P_L = np.linalg.inv(I_post - I_P)
+    nu = (np.eye(3) + P_L @ I_P) @ np.asarray(correction, dtype=float)
+    return nu, P_L
+
+
 class MotionNoiseEstimator:
     """Collects registration residuals and fits the motion model (module docstring).
 
@@ -166,17 +189,10 @@ class MotionNoiseEstimator:
         prior_cov, posterior_cov : ndarray, shape (3, 3)
             The registration's prior (prediction) and posterior covariances.
         """
-        P0 = np.asarray(prior_cov, dtype=float)
-        Pp = np.asarray(posterior_cov, dtype=float)
-        L = np.linalg.cholesky(P0)
-        Li = np.linalg.inv(L)
-        ratio = np.linalg.eigvalsh(Li @ Pp @ Li.T)
-        if ratio.max() > 0.25:
+        measured = odometry_error(correction, prior_cov, posterior_cov)
+        if measured is None:
             return False
-        I_P = np.linalg.inv(P0)
-        I_post = np.linalg.inv(Pp)
-        P_L = np.linalg.inv(I_post - I_P)
-        nu = (np.eye(3) + P_L @ I_P) @ np.asarray(correction, dtype=float)
+        nu, P_L = measured
         d = float(np.hypot(delta[0], delta[1]))
         turn = abs(float(delta[2]))
         self._features.append((1.0, d, turn))

@@ -88,7 +88,8 @@ from slam.line_slam.line_noise import LineModelErrorEstimator, LineReweighting
 from slam.line_slam.local_map import LocalMap, build_local_map
 from slam.line_slam.loop_closer import LoopCloser
 from slam.line_slam.observations import usable_lines
-from slam.line_slam.odometry_noise import MotionNoiseEstimator
+from slam.line_slam.odometry_calibration import OdometryCalibrator
+from slam.line_slam.odometry_noise import MotionNoiseEstimator, odometry_error
 from slam.line_slam.passes import (
     PassError,
     estimate_pass_error,
@@ -170,6 +171,7 @@ class LineSlam:
         self.track = KeyframeTrack(cfg.keyframes)
         self.drift = DriftAccumulator(cfg.frontend.drift_xy_per_m, cfg.frontend.drift_theta_per_m)
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
+        self.odometry_calibrator = OdometryCalibrator()  # with odometry_calibration = "estimated"
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
         self.range_noise = RangeNoiseCheck(self.linefit_config.noise.sigma_range_m)
         self._warned_mirrored = False
@@ -361,6 +363,11 @@ class LineSlam:
     ) -> ScanReport:
         cfg = self.config
         g = self.graph
+        raw_delta = step.delta
+        calibrate = cfg.odometry_calibration == "estimated" and not step.first and step.cov is None
+        if calibrate:
+            # the odometry's persistent error, as estimated so far, taken out of the step
+            step = replace(step, delta=self.odometry_calibrator.apply(step.delta))
         # 2. usable lines
         obs, rejected = usable_lines(lines, cfg, self.line_noise.sigmas)
         K = len(obs)
@@ -428,7 +435,13 @@ class LineSlam:
                 else pose_log(pose_between(x_odo, reg.pose_world_laser))
             )
             self.odometry_noise.add(step.delta, c_odo, reg.prior_cov, reg.cov)
+            measured = odometry_error(c_odo, reg.prior_cov, reg.cov) if calibrate else None
+            if measured is not None:
+                nu, P_L = measured
+                self.odometry_calibrator.add(raw_delta, nu, Q + P_L)
         self.odometry_noise.keyframe()
+        if cfg.odometry_calibration == "estimated":
+            self.odometry_calibrator.keyframe()
         with self.clock("associate"):
             # 5. the pose and its odometry
             i = g.add_pose(reg.pose_world_laser)
@@ -584,6 +597,8 @@ class LineSlam:
         stats["backend"] = self.backend.stats()
         stats["loop_closures_log"] = [a.as_log() for a in self.loop_closer.attempts]
         stats["odometry_noise"] = self.odometry_noise.summary()
+        if self.config.odometry_calibration == "estimated":
+            stats["odometry_calibration"] = self.odometry_calibrator.summary()
         stats["range_noise"] = self.range_noise.summary()
         warning = self.range_noise.warning()
         if warning is not None:

@@ -2,6 +2,8 @@
 
 * :class:`MotionNoiseConfig`: a random walk in distance travelled and angle turned; the graph's
   odometry factors and the EKF's prediction use the same noise.
+* :class:`OdometryCalibration`: a persistent error of the odometry (scale, turn gain, heading
+  drift per metre), applied to its steps.
 * :func:`moved_enough`: the rule on the odometry since the last keyframe that makes a scan a
   keyframe (graph) or an update (EKF).
 """
@@ -15,7 +17,7 @@ from numpy.typing import NDArray
 
 from slam.validate import nonneg, positive
 
-__all__ = ["MotionNoiseConfig", "moved_enough"]
+__all__ = ["MotionNoiseConfig", "OdometryCalibration", "moved_enough"]
 
 FloatArray = NDArray[np.float64]
 
@@ -98,6 +100,60 @@ class MotionNoiseConfig:
         out[..., 1, 1] = var_xy
         out[..., 2, 2] = var_th
         return out
+
+
+@dataclass(frozen=True)
+class OdometryCalibration:
+    """A persistent odometry error, applied to each step ``(dx, dy, dθ)`` of path length ``d``.
+
+    The calibrated step is ``((1 + scale)·dx, (1 + scale)·dy, (1 + turn_gain)·dθ +
+    heading_drift_rad_per_m·d)``.
+
+    Attributes
+    ----------
+    scale : float
+        Relative translation error (0.01: the true motion is 1 % longer than logged).
+    turn_gain : float
+        Relative rotation error.
+    heading_drift_rad_per_m : float
+        Heading change per metre travelled that the odometry does not report (rad/m).
+    """
+
+    scale: float = 0.0
+    turn_gain: float = 0.0
+    heading_drift_rad_per_m: float = 0.0
+
+    def apply(self, steps: FloatArray) -> FloatArray:
+        """The calibrated steps, shape ``(..., 3)`` as ``steps``."""
+        s = np.array(steps, dtype=float)
+        d = np.hypot(s[..., 0], s[..., 1])
+        s[..., :2] *= 1.0 + self.scale
+        s[..., 2] = s[..., 2] * (1.0 + self.turn_gain) + self.heading_drift_rad_per_m * d
+        return s
+
+    def jacobian(self, step: FloatArray) -> FloatArray:
+        """``∂ Log(δ⁻¹ · calibrated(δ)) / ∂(scale, turn_gain, heading_drift)`` at zero, (3, 3).
+
+        The error of an uncalibrated step ``δ`` in its end frame (right perturbation), to first
+        order in the three parameters.
+        """
+        dx, dy, dth = (float(v) for v in step)
+        c, s = np.cos(dth), np.sin(dth)
+        return np.array(
+            [
+                [c * dx + s * dy, 0.0, 0.0],
+                [-s * dx + c * dy, 0.0, 0.0],
+                [0.0, dth, np.hypot(dx, dy)],
+            ]
+        )
+
+    def as_dict(self) -> dict[str, float]:
+        """The three parameters by name (``summary.json``)."""
+        return {
+            "scale": self.scale,
+            "turn_gain": self.turn_gain,
+            "heading_drift_rad_per_m": self.heading_drift_rad_per_m,
+        }
 
 
 def moved_enough(delta: FloatArray, min_distance_m: float, min_angle_rad: float) -> bool:
