@@ -50,7 +50,8 @@ class OdometryCalibrator:
     ) -> None:
         self.calibration = OdometryCalibration()
         self._info = np.diag(1.0 / np.square(np.asarray(prior_sigmas, dtype=float)))
-        self._vec = np.zeros(3)
+        self._prior_info = self._info.copy()
+        self._samples: list[tuple[FloatArray, FloatArray, FloatArray]] = []
         self.n_samples = 0
         self.min_samples = min_samples
         self.update_every = update_every
@@ -73,8 +74,7 @@ class OdometryCalibrator:
         )
         nu_raw = np.asarray(nu, dtype=float) + A @ theta
         W = np.linalg.inv(0.5 * (cov + cov.T))
-        self._info += A.T @ W @ A
-        self._vec += A.T @ W @ nu_raw
+        self._samples.append((A, W, nu_raw))
         self.n_samples += 1
 
     def keyframe(self) -> bool:
@@ -83,7 +83,22 @@ class OdometryCalibrator:
         if self.n_samples < self.min_samples or self._since < self.update_every:
             return False
         self._since = 0
-        theta = np.linalg.solve(self._info, self._vec)
+        keep = np.ones(len(self._samples), bool)
+        for _ in range(2):  # fit, leave out gross outliers (slips), refit
+            info = self._prior_info.copy()
+            vec = np.zeros(3)
+            for (A, W, nu), k in zip(self._samples, keep, strict=True):
+                if k:
+                    info += A.T @ W @ A
+                    vec += A.T @ W @ nu
+            theta = np.linalg.solve(info, vec)
+            keep = np.array(
+                [
+                    float((nu - A @ theta) @ W @ (nu - A @ theta)) <= 21.1
+                    for A, W, nu in self._samples
+                ]
+            )
+        self._info = info
         self.calibration = OdometryCalibration(float(theta[0]), float(theta[1]), float(theta[2]))
         self.fits += 1
         return True
