@@ -11,9 +11,11 @@ to first order as
 ``ν ≈ A(δ) θ + ε``,   ``ε ~ N(0, Q(δ) + P_L)``,
 
 with ``A`` the calibration's Jacobian at the raw step ``δ``, ``Q`` the motion noise and ``P_L``
-the lines' covariance.  ``θ`` is the weighted least-squares solution over every sample, with a
+the lines' covariance.  ``θ`` is the weighted least-squares solution over the samples, with a
 zero-mean Gaussian prior (``prior_sigmas``), refitted every ``update_every`` keyframes once
-``min_samples`` are in; later steps are calibrated before the front end and the graph use them.
+``min_samples`` are in: a first fit, then the samples whose squared Mahalanobis residual
+exceeds χ²₃'s 99.99 % quantile (21.1: a wheel slip the scan matcher let through) left out,
+and a second fit; later steps are calibrated before the front end and the graph use them.
 A sample is measured against the calibrated prediction; it is referred back to the raw step by
 adding ``A(δ) θ_applied``.  Steps whose covariance the log states (laser odometry) are not
 calibrated.
@@ -29,6 +31,9 @@ from slam.models.motion import OdometryCalibration
 __all__ = ["OdometryCalibrator"]
 
 FloatArray = NDArray[np.float64]
+
+#: χ² (3 dof) at 99.99 %: a sample beyond it under the first fit is left out of the second.
+_OUTLIER_CHI2 = 21.1
 
 
 class OdometryCalibrator:
@@ -74,7 +79,7 @@ class OdometryCalibrator:
         )
         nu_raw = np.asarray(nu, dtype=float) + A @ theta
         W = np.linalg.inv(0.5 * (cov + cov.T))
-        self._samples.append((A, W, nu_raw))
+        self._samples.append((A, np.asarray(W, np.float64), np.asarray(nu_raw, np.float64)))
         self.n_samples += 1
 
     def keyframe(self) -> bool:
@@ -94,7 +99,7 @@ class OdometryCalibrator:
             theta = np.linalg.solve(info, vec)
             keep = np.array(
                 [
-                    float((nu - A @ theta) @ W @ (nu - A @ theta)) <= 21.1
+                    float((nu - A @ theta) @ W @ (nu - A @ theta)) <= _OUTLIER_CHI2
                     for A, W, nu in self._samples
                 ]
             )
