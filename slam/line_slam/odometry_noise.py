@@ -192,13 +192,16 @@ class MotionNoiseEstimator:
         measured = odometry_error(correction, prior_cov, posterior_cov)
         if measured is None:
             return False
-        nu, P_L = measured
+        self.add_error(delta, *measured)
+        return True
+
+    def add_error(self, delta: FloatArray, nu: FloatArray, P_L: FloatArray) -> None:
+        """One sample already measured by :func:`odometry_error`: ``nu`` and ``P_L``."""
         d = float(np.hypot(delta[0], delta[1]))
         turn = abs(float(delta[2]))
         self._features.append((1.0, d, turn))
         self._y_xy.append(0.5 * (nu[0] ** 2 + nu[1] ** 2) - 0.5 * (P_L[0, 0] + P_L[1, 1]))
         self._y_th.append(float(nu[2] ** 2 - P_L[2, 2]))
-        return True
 
     def keyframe(self) -> bool:
         """Count a keyframe; refit when due.  Returns whether the model changed."""

@@ -434,11 +434,12 @@ class LineSlam:
                 if x_pred is x_odo
                 else pose_log(pose_between(x_odo, reg.pose_world_laser))
             )
-            self.odometry_noise.add(step.delta, c_odo, reg.prior_cov, reg.cov)
-            measured = odometry_error(c_odo, reg.prior_cov, reg.cov) if calibrate else None
+            measured = odometry_error(c_odo, reg.prior_cov, reg.cov)
             if measured is not None:
                 nu, P_L = measured
-                self.odometry_calibrator.add(raw_delta, nu, Q + P_L)
+                self.odometry_noise.add_error(step.delta, nu, P_L)
+                if calibrate:
+                    self.odometry_calibrator.add(raw_delta, nu, Q + P_L)
         self.odometry_noise.keyframe()
         if cfg.odometry_calibration == "estimated":
             self.odometry_calibrator.keyframe()
