@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from slam.errors import EvaluationError
+from slam.evaluation.timestamps import match_timestamps
 from slam.geometry import adjoint_pose2, pose_between, pose_inverse, pose_log
 from slam.lines.transform import compose_chain
 from slam.models.motion import MotionNoiseConfig, OdometryCalibration
@@ -84,23 +85,20 @@ def relation_pairs(
     t = np.asarray(timestamps, dtype=float)
     if t.shape[0] < 2:
         raise EvaluationError("fewer than two odometry poses")
-    order = np.argsort(t, kind="stable")
-    ts = t[order]
-
-    def nearest(stamps: FloatArray) -> IntArray:
-        k = np.clip(np.searchsorted(ts, stamps), 1, len(ts) - 1)
-        k = np.where(np.abs(ts[k - 1] - stamps) <= np.abs(ts[k] - stamps), k - 1, k)
-        return np.asarray(order[k], dtype=np.intp)
-
-    a, b = nearest(np.asarray(t1, float)), nearest(np.asarray(t2, float))
-    ok = (np.abs(t[a] - t1) <= tolerance_s) & (np.abs(t[b] - t2) <= tolerance_s) & (a != b)
+    t1, t2 = np.asarray(t1, float), np.asarray(t2, float)
+    a, found_a = match_timestamps(t1, t, tolerance_s)
+    b, found_b = match_timestamps(t2, t, tolerance_s)
+    ok = found_a & found_b & (a != b)
     if not np.any(ok):
         raise EvaluationError("no relation has both of its stamps in the odometry")
     a, b, p = a[ok], b[ok], np.asarray(poses, float)[ok]
     back = a > b
     p = np.where(back[:, None], pose_inverse(p), p)
     return RelationPairs(
-        np.where(back, b, a), np.where(back, a, b), p, np.abs(np.asarray(t2 - t1, float))[ok]
+        np.asarray(np.where(back, b, a), np.intp),
+        np.asarray(np.where(back, a, b), np.intp),
+        p,
+        np.abs(t2 - t1)[ok],
     )
 
 

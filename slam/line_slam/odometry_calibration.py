@@ -88,25 +88,29 @@ class OdometryCalibrator:
         if self.n_samples < self.min_samples or self._since < self.update_every:
             return False
         self._since = 0
-        keep = np.ones(len(self._samples), bool)
-        for _ in range(2):  # fit, leave out gross outliers (slips), refit
-            info = self._prior_info.copy()
-            vec = np.zeros(3)
-            for (A, W, nu), k in zip(self._samples, keep, strict=True):
-                if k:
-                    info += A.T @ W @ A
-                    vec += A.T @ W @ nu
-            theta = np.linalg.solve(info, vec)
-            keep = np.array(
-                [
-                    float((nu - A @ theta) @ W @ (nu - A @ theta)) <= _OUTLIER_CHI2
-                    for A, W, nu in self._samples
-                ]
-            )
+        theta, info = self._fit(np.ones(len(self._samples), bool))
+        # gross outliers (slips) under the first fit left out of the second
+        keep = np.array(
+            [
+                float((nu - A @ theta) @ W @ (nu - A @ theta)) <= _OUTLIER_CHI2
+                for A, W, nu in self._samples
+            ]
+        )
+        theta, info = self._fit(keep)
         self._info = info
         self.calibration = OdometryCalibration(float(theta[0]), float(theta[1]), float(theta[2]))
         self.fits += 1
         return True
+
+    def _fit(self, keep: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+        """Weighted least squares with the prior over the samples ``keep``: (θ, information)."""
+        info = self._prior_info.copy()
+        vec = np.zeros(3)
+        for (A, W, nu), k in zip(self._samples, keep, strict=True):
+            if k:
+                info += A.T @ W @ A
+                vec += A.T @ W @ nu
+        return np.linalg.solve(info, vec), info
 
     def summary(self) -> dict[str, float | int]:
         """``summary.json`` ``odometry_calibration``: the estimate and its standard deviations."""
