@@ -110,7 +110,7 @@ class OdometryCalibrator:
             if k:
                 info += A.T @ W @ A
                 vec += A.T @ W @ nu
-        return np.linalg.solve(info, vec), info
+        return np.asarray(np.linalg.solve(info, vec), dtype=np.float64), info
 
     def summary(self) -> dict[str, float | int]:
         """``summary.json`` ``odometry_calibration``: the estimate and its standard deviations."""
