@@ -553,6 +553,129 @@ def _judge(with_wrong_pair, agree=0, seed=3, **loop_closure):
     return got, slam.loop_closer.attempts[-1].as_log()
 
 
+def _with_wrong_closure():
+    """The fixture's loop with its wrong pair merged and converged, registered as a closure
+    accepted five keyframes ago whose hypothesis lies 3 m off the front end's trajectory; and
+    the three right pairs as a hypothesis on that trajectory."""
+    from slam.frontend.loop_closure import LoopClosure
+    from slam.geometry import pose_compose
+    from slam.line_slam.loop_closer import Hypothesis, _Accepted
+
+    slam, right, (a, b) = _undone_merges_and_a_wrong_pair()
+    g, closer = slam.graph, slam.loop_closer
+    n_log = len(g.merge_log)
+    slam.book.merge(b, a)
+    wrong_record = g.merge_log[n_log]
+    slam.backend.update(g)
+    slam.backend.optimize(g)
+    slam.book.refresh_extents()
+    pose = g.n_poses - 1
+    k_old = 5
+    chain = closer.drift.relative(k_old, pose)
+    off = Hypothesis(pose - 5, k_old, pose_compose(chain, np.array([3.0, 0.0, 0.0])))
+    closer._accepted = [off]
+    closer._overturnable = [_Accepted(off, 50.0, [wrong_record])]  # the only one
+    h = Hypothesis(pose, k_old, chain)
+    found = LoopClosure(np.zeros(3), [(k, k) for k in range(3)], 10.0, 1.0)
+    local = np.array([r.drop for r in right])
+    old = np.array([r.keep for r in right])
+    return slam, (a, b), h, found, local, old
+
+
+def _reconsidering(slam, n=20):
+    lcc = replace(slam.config.loop_closure, reconsider_keyframes=n)
+    slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
+
+
+def test_a_recent_closure_is_reconsidered_only_by_a_hypothesis_that_disagrees_and_fits_better():
+    """``rival``: the accepted closure is a rival of a hypothesis that agrees with the front
+    end's trajectory (χ² 0 < its 50) and not with it (3 m apart); not when the hypothesis'
+    own χ² is beyond the quantile or above the closure's, not when the two agree, not when
+    the closure is older than ``reconsider_keyframes`` or when that is 0 (the default)."""
+    slam, _, h, *_ = _with_wrong_closure()
+    closer = slam.loop_closer
+    rival = closer._overturnable[0]
+    assert closer.rival(h, 0.0) is None  # off by default
+    _reconsidering(slam)
+    assert closer.rival(h, 0.0) is rival
+    assert closer.rival(h, 60.0) is None  # beyond the quantile (and above the closure's)
+    closer._overturnable[0] = replace(rival, chain_chi2=0.0)
+    assert closer.rival(h, 0.0) is None  # the closure fitted the trajectory as well
+    z = closer.drift.relative(h.k_old, rival.keyframe)  # on the front end's trajectory
+    agreeing = replace(rival.hypothesis, z=z)
+    closer._overturnable[0] = replace(rival, hypothesis=agreeing)
+    assert closer.rival(h, 0.0) is None  # the two agree
+    closer._overturnable[0] = rival
+    _reconsidering(slam, 4)
+    assert closer.rival(h, 0.0) is None  # accepted 5 keyframes before h
+
+
+@pytest.mark.parametrize("accepted", [True, False])
+def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepted):
+    """The right pairs judged with the wrong closure's merge undone.  Accepted (a permissive
+    judge): the wrong pair is apart again and vetoed, the right pairs merged, the closure
+    dropped, counted and no longer turning hypotheses away, the judgement logged with the
+    dropped closure's keyframe.  Rejected (a judge that accepts nothing): the graph, the
+    estimate and the merge log are exactly as before, the closure still accepted."""
+    slam, (a, b), h, found, local, old = _with_wrong_closure()
+    g, closer = slam.graph, slam.loop_closer
+    rival = closer._overturnable[0]
+    limit = np.inf if accepted else 1e-9  # no pair is explained to within 1e-9
+    lcc = replace(
+        slam.config.loop_closure,
+        judge_max_f=np.inf,
+        judge_max_pair_chi2=limit,
+        reconsider_keyframes=20,
+    )
+    closer.config = replace(slam.config, loop_closure=lcc)
+    before = (g.factor_landmark.copy(), g.landmark_alive.copy(), g.poses.copy(), len(g.merge_log))
+    got = closer.reconsider(rival, local, old, found, g.n_poses - 1, 0.0, 0, h)
+    entry = closer.attempts[-1].as_log()
+    assert entry["reconsidered_closure"] == rival.keyframe
+    if accepted:
+        assert got == 1 and entry["accepted"]
+        assert g.landmark_alive[a] and g.landmark_alive[b]
+        assert (min(a, b), max(a, b)) in closer.audit.vetoed
+        assert not np.any(g.landmark_alive[local])  # the right pairs merged
+        assert slam.counters["loop_closures_dropped"] == 1
+        assert rival not in closer._overturnable
+        assert rival.hypothesis not in closer._accepted
+    else:
+        assert got == 0 and not entry["accepted"]
+        np.testing.assert_array_equal(g.factor_landmark, before[0])
+        np.testing.assert_array_equal(g.landmark_alive, before[1])
+        np.testing.assert_array_equal(g.poses, before[2])
+        assert len(g.merge_log) == before[3] and not g.landmark_alive[a]
+        assert slam.counters["loop_closures_dropped"] == 0
+        assert rival in closer._overturnable and rival.hypothesis in closer._accepted
+
+
+def test_a_rejected_hypothesis_reconsiders_the_closure_it_contradicts(monkeypatch):
+    """Through ``apply``: a hypothesis the judge rejects reconsiders its rival (the wrong
+    closure) once; one that is accepted, or judged while reconsidering, does not."""
+    slam, _, h, found, local, old = _with_wrong_closure()
+    closer = slam.loop_closer
+    rival = closer._overturnable[0]
+    calls = []
+    monkeypatch.setattr(closer, "reconsider", lambda r, *args: calls.append(r) or 0)
+    lcc = replace(
+        slam.config.loop_closure,
+        judge_max_f=np.inf,
+        judge_max_pair_chi2=1e-9,  # no pair is explained
+        reconsider_keyframes=20,
+    )
+    closer.config = replace(slam.config, loop_closure=lcc)
+    pose = slam.graph.n_poses - 1
+    assert closer.apply(local, old, found, pose, 0.0, 0, h) == 0
+    assert calls == [rival]
+    assert closer.apply(local, old, found, pose, 0.0, 0, h, reconsidering=rival) == 0
+    assert calls == [rival]
+    lcc = replace(lcc, judge_max_pair_chi2=np.inf)
+    closer.config = replace(closer.config, loop_closure=lcc)
+    assert closer.apply(local, old, found, pose, 0.0, 0, h) == 1
+    assert calls == [rival]
+
+
 @pytest.mark.parametrize(
     ("max_pair_chi2", "max_f", "accepted"),
     [(np.inf, np.inf, 1), (1000.0, np.inf, 0), (np.inf, 100.0, 0)],

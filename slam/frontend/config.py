@@ -351,6 +351,14 @@ class LoopClosureConfig:
         is accepted the newer one, which does not agree with it, is dropped (its log entry's
         reason says so); if not, the newer one waits.  So every hypothesis that passes the
         gate is judged, at once when another agrees with it, else a few keyframes late.
+    reconsider_keyframes : int
+        A closure accepted at most this many keyframes ago is reconsidered when a later
+        hypothesis is rejected that agrees with the front end's own trajectory better than
+        that closure did (``correction_chi2`` within the ``consistency_probability`` quantile
+        and below the closure's) and disagrees with the closure (pairwise, as
+        ``confirmations``): the closure's merges are undone and the hypothesis is judged
+        again; if it is accepted the earlier closure stays dropped (its pairs vetoed), else
+        both are as before.  0: never.
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -419,10 +427,12 @@ class LoopClosureConfig:
     judge_hopeless_after: int = 5
     large_correction_m: float = 0.1
     large_correction_rad: float = 0.01
+    reconsider_keyframes: int = 0
 
     def __post_init__(self) -> None:
         require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
         require(self.judge_iterations >= 1, "judge_iterations must be >= 1")
+        require(self.reconsider_keyframes >= 0, "reconsider_keyframes must be >= 0")
         require(self.judge_hopeless_after >= 0, "judge_hopeless_after must be >= 0")
         require(self.local_keyframes >= 1, "local_keyframes must be >= 1")
         require(self.max_updates >= 1, "max_updates must be >= 1")

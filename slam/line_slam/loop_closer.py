@@ -65,6 +65,7 @@ from slam.frontend.loop_closure import (
 from slam.geometry import pose_between, pose_compose, pose_inverse, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend
 from slam.graph.batch import BatchSolver
+from slam.graph.problem import MergeRecord
 from slam.graph.robust import RobustKernel
 from slam.line_slam.audit import MergeAudit, residual_chi2
 from slam.line_slam.clock import StageClock
@@ -101,6 +102,7 @@ _ORDER = {
         "f_statistic",
         "f_statistic_robust",
         "agreeing_hypotheses",
+        "reconsidered_closure",
         "judged_late",
         "judged_at_keyframe",
         "correction_chi2",
@@ -153,6 +155,19 @@ class _Pending:
     hypothesis: Hypothesis
 
 
+@dataclass(frozen=True, eq=False)
+class _Accepted:
+    """An accepted closure: its hypothesis, its chain χ² and the merges it made."""
+
+    hypothesis: Hypothesis
+    chain_chi2: float
+    records: list[MergeRecord]
+
+    @property
+    def keyframe(self) -> int:
+        return self.hypothesis.keyframe
+
+
 @dataclass
 class ClosureAttempt:
     """One loop-closure attempt that found a hypothesis or searched in vain.
@@ -195,6 +210,7 @@ class ClosureAttempt:
     f_statistic: float | None = None
     f_statistic_robust: float | None = None
     agreeing_hypotheses: int | None = None
+    reconsidered_closure: int | None = None
     judged_late: bool | None = None
     judged_at_keyframe: int | None = None
     where: dict[str, Any] = field(default_factory=dict)
@@ -292,6 +308,8 @@ class LoopCloser:
         self._recent: list[Hypothesis] = []
         # recently accepted closures (consistent_with_accepted)
         self._accepted: list[Hypothesis] = []
+        # accepted closures that a later hypothesis may still overturn (reconsider_keyframes)
+        self._overturnable: list[_Accepted] = []
         # the hypothesis awaiting confirmation, judged late (judge_unconfirmed), and the one it
         # has just replaced, to be judged now (judge_replaced)
         self._pending: _Pending | None = None
@@ -708,6 +726,7 @@ class LoopCloser:
         hypothesis: Hypothesis | None = None,
         late: bool = False,
         judged_at: int | None = None,
+        reconsidering: _Accepted | None = None,
     ) -> int:
         """Spread the correction, merge the verified pairs, judge; keep only if explained.
 
@@ -811,6 +830,8 @@ class LoopCloser:
         attempt.f_statistic = float(f_stat)
         attempt.f_statistic_robust = float(f_robust)
         attempt.agreeing_hypotheses = int(agree)
+        if reconsidering is not None:
+            attempt.reconsidered_closure = reconsidering.keyframe
         self.attempts.append(attempt)
         explained = (
             good >= max(lcc.min_matches - 1, 2)
@@ -840,6 +861,8 @@ class LoopCloser:
             attempt.backend_restarted = big
             if hypothesis is not None:
                 self._accepted.append(hypothesis)
+                kept = [r for r in records if not r.undo and not g.landmark_alive[r.drop]]
+                self._overturnable.append(_Accepted(hypothesis, float(chi2_t), kept))
             self.counters["loop_closures"] += 1
             return 1
         # not explained: the back-end never saw it; the book goes back to its snapshot
@@ -849,6 +872,83 @@ class LoopCloser:
         self._rejected.append(
             (int(pose), np.asarray(found.correction, dtype=float), len(found.pairs))
         )
+        if hypothesis is not None and reconsidering is None:
+            rival = self.rival(hypothesis, chi2_t)
+            if rival is not None:
+                return self.reconsider(
+                    rival, local, old, found, pose, chi2_t, agree, hypothesis, late, judged_at
+                )
+        return 0
+
+    def rival(self, h: Hypothesis, chi2_t: float) -> _Accepted | None:
+        """The most recent accepted closure that a rejected ``h`` may overturn, if any.
+
+        Within ``reconsider_keyframes``, at another keyframe, inconsistent with ``h``
+        (:meth:`pair_chi2` beyond the ``consistency_probability`` quantile of χ²₃), while ``h``
+        agrees with the front end's own trajectory (:meth:`chain_chi2` within that quantile)
+        better than the closure did.
+        """
+        lcc = self.config.loop_closure
+        if lcc.reconsider_keyframes == 0 or not np.isfinite(chi2_t):
+            return None
+        if chi2_t > self._chi2_limit(2 if h.single else 3):
+            return None
+        self._overturnable = [
+            a for a in self._overturnable if a.keyframe >= h.keyframe - lcc.reconsider_keyframes
+        ]
+        for a in reversed(self._overturnable):
+            if a.keyframe == h.keyframe or not chi2_t < a.chain_chi2:
+                continue
+            if self.pair_chi2(a.hypothesis, h) > self._chi2_limit(3):
+                return a
+        return None
+
+    def reconsider(
+        self,
+        rival: _Accepted,
+        local: IntArray,
+        old: IntArray,
+        found: LoopClosure,
+        pose: int,
+        chi2_t: float,
+        agree: int,
+        hypothesis: Hypothesis,
+        late: bool = False,
+        judged_at: int | None = None,
+    ) -> int:
+        """Judge ``found`` again with ``rival``'s merges undone; keep whichever explains.
+
+        Accepted: ``rival`` stays dropped (its undone pairs vetoed, so fusion does not redo
+        them; it no longer turns hypotheses away).  Rejected: the book goes back to its state
+        with ``rival``, the back-end never having seen the difference.  Returns 1 when
+        accepted, else 0.
+        """
+        book = self.book
+        g = book.graph
+        undone = [
+            r
+            for r in rival.records
+            if g.landmark_alive[r.keep]
+            and not g.landmark_alive[r.drop]
+            and np.all(g.factor_landmark[r.factors] == r.keep)
+        ]
+        if not undone:
+            return 0
+        before = book.snapshot()
+        for r in undone:
+            g.unmerge(r)
+        book.recompute_info(np.array(sorted({r.keep for r in undone} | {r.drop for r in undone})))
+        book.refresh_extents()
+        if self.apply(
+            local, old, found, pose, chi2_t, agree, hypothesis, late, judged_at, reconsidering=rival
+        ):
+            self.audit.vetoed.update((min(r.keep, r.drop), max(r.keep, r.drop)) for r in undone)
+            self._overturnable.remove(rival)
+            self._accepted = [h for h in self._accepted if h is not rival.hypothesis]
+            self.counters["loop_closures_dropped"] += 1
+            return 1
+        book.restore(before)  # the undone merges are merged again
+        book.refresh_extents()
         return 0
 
     def _judge_kernel(self) -> tuple[RobustKernel, float]:

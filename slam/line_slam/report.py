@@ -58,6 +58,7 @@ COUNTERS = (
     "loop_closure_candidates",
     "loop_closures",
     "loop_closures_undone",
+    "loop_closures_dropped",
     "loop_closures_repeated",
     "loop_closures_gated",
     "keyframes_without_lines",
