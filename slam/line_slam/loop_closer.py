@@ -936,7 +936,12 @@ class LoopCloser:
             return 0
         before = book.snapshot()
         for r in undone:
-            g.unmerge(r)
+            # the merge's factors, and those added to the merged landmark since (factors are
+            # numbered in the order they came): the current pass's, which belong to the
+            # landmark that was dropped into it
+            on_keep = np.flatnonzero(g.factor_landmark == r.keep)
+            later = on_keep[on_keep > int(r.factors.max())]
+            g.unmerge(MergeRecord(r.keep, r.drop, np.union1d(r.factors, later)))
         book.recompute_info(np.array(sorted({r.keep for r in undone} | {r.drop for r in undone})))
         book.refresh_extents()
         if self.apply(
