@@ -589,25 +589,28 @@ def _reconsidering(slam, n=20):
 
 def test_a_recent_closure_is_reconsidered_only_by_a_hypothesis_that_disagrees_and_fits_better():
     """``rival``: the accepted closure is a rival of a hypothesis that agrees with the front
-    end's trajectory (χ² 0 < its 50) and not with it (3 m apart); not when the hypothesis'
-    own χ² is beyond the quantile or above the closure's, not when the two agree, not when
-    the closure is older than ``reconsider_keyframes`` or when that is 0 (the default)."""
+    end's trajectory (χ² 0 < its 50) and not with it (3 m apart), and that one recent
+    hypothesis agrees with (none agreed with the closure); not when the hypothesis' own χ² is
+    beyond the quantile or above the closure's, not when no more hypotheses agree with it than
+    with the closure, not when the two agree, not when the closure is older than
+    ``reconsider_keyframes`` or when that is 0 (the default)."""
     slam, _, h, *_ = _with_wrong_closure()
     closer = slam.loop_closer
     rival = closer._overturnable[0]
-    assert closer.rival(h, 0.0) is None  # off by default
+    assert closer.rival(h, 0.0, 1) is None  # off by default
     _reconsidering(slam)
-    assert closer.rival(h, 0.0) is rival
-    assert closer.rival(h, 60.0) is None  # beyond the quantile (and above the closure's)
+    assert closer.rival(h, 0.0, 1) is rival
+    assert closer.rival(h, 60.0, 1) is None  # beyond the quantile (and above the closure's)
+    assert closer.rival(h, 0.0, 0) is None  # no more hypotheses agree with it than with the closure
     closer._overturnable[0] = replace(rival, chain_chi2=0.0)
-    assert closer.rival(h, 0.0) is None  # the closure fitted the trajectory as well
+    assert closer.rival(h, 0.0, 1) is None  # the closure fitted the trajectory as well
     z = closer.drift.relative(h.k_old, rival.keyframe)  # on the front end's trajectory
     agreeing = replace(rival.hypothesis, z=z)
     closer._overturnable[0] = replace(rival, hypothesis=agreeing)
-    assert closer.rival(h, 0.0) is None  # the two agree
+    assert closer.rival(h, 0.0, 1) is None  # the two agree
     closer._overturnable[0] = rival
     _reconsidering(slam, 4)
-    assert closer.rival(h, 0.0) is None  # accepted 5 keyframes before h
+    assert closer.rival(h, 0.0, 1) is None  # accepted 5 keyframes before h
 
 
 @pytest.mark.parametrize("accepted", [True, False])
@@ -666,13 +669,13 @@ def test_a_rejected_hypothesis_reconsiders_the_closure_it_contradicts(monkeypatc
     )
     closer.config = replace(slam.config, loop_closure=lcc)
     pose = slam.graph.n_poses - 1
-    assert closer.apply(local, old, found, pose, 0.0, 0, h) == 0
+    assert closer.apply(local, old, found, pose, 0.0, 1, h) == 0
     assert calls == [rival]
-    assert closer.apply(local, old, found, pose, 0.0, 0, h, reconsidering=rival) == 0
+    assert closer.apply(local, old, found, pose, 0.0, 1, h, reconsidering=rival) == 0
     assert calls == [rival]
     lcc = replace(lcc, judge_max_pair_chi2=np.inf)
     closer.config = replace(closer.config, loop_closure=lcc)
-    assert closer.apply(local, old, found, pose, 0.0, 0, h) == 1
+    assert closer.apply(local, old, found, pose, 0.0, 1, h) == 1
     assert calls == [rival]
 
 

@@ -157,11 +157,14 @@ class _Pending:
 
 @dataclass(frozen=True, eq=False)
 class _Accepted:
-    """An accepted closure: its hypothesis, its chain χ² and the merges it made."""
+    """An accepted closure: its hypothesis, its chain χ², the merges it made, how many
+    hypotheses agreed with it and the first pose its judgement solved."""
 
     hypothesis: Hypothesis
     chain_chi2: float
     records: list[MergeRecord]
+    agreeing: int = 0
+    free_from: int = 0
 
     @property
     def keyframe(self) -> int:
@@ -862,7 +865,9 @@ class LoopCloser:
             if hypothesis is not None:
                 self._accepted.append(hypothesis)
                 kept = [r for r in records if not r.undo and not g.landmark_alive[r.drop]]
-                self._overturnable.append(_Accepted(hypothesis, float(chi2_t), kept))
+                self._overturnable.append(
+                    _Accepted(hypothesis, float(chi2_t), kept, int(agree), free_from)
+                )
             self.counters["loop_closures"] += 1
             return 1
         # not explained: the back-end never saw it; the book goes back to its snapshot
@@ -873,20 +878,21 @@ class LoopCloser:
             (int(pose), np.asarray(found.correction, dtype=float), len(found.pairs))
         )
         if hypothesis is not None and reconsidering is None:
-            rival = self.rival(hypothesis, chi2_t)
+            rival = self.rival(hypothesis, chi2_t, agree)
             if rival is not None:
                 return self.reconsider(
                     rival, local, old, found, pose, chi2_t, agree, hypothesis, late, judged_at
                 )
         return 0
 
-    def rival(self, h: Hypothesis, chi2_t: float) -> _Accepted | None:
+    def rival(self, h: Hypothesis, chi2_t: float, agree: int) -> _Accepted | None:
         """The most recent accepted closure that a rejected ``h`` may overturn, if any.
 
         Within ``reconsider_keyframes``, at another keyframe, inconsistent with ``h``
         (:meth:`pair_chi2` beyond the ``consistency_probability`` quantile of χ²₃), while ``h``
         agrees with the front end's own trajectory (:meth:`chain_chi2` within that quantile)
-        better than the closure did.
+        better than the closure did, and more recent hypotheses agree with ``h`` (``agree``)
+        than agreed with the closure when it was judged: the larger consistent set wins.
         """
         lcc = self.config.loop_closure
         if lcc.reconsider_keyframes == 0 or not np.isfinite(chi2_t):
@@ -897,7 +903,7 @@ class LoopCloser:
             a for a in self._overturnable if a.keyframe >= h.keyframe - lcc.reconsider_keyframes
         ]
         for a in reversed(self._overturnable):
-            if a.keyframe == h.keyframe or not chi2_t < a.chain_chi2:
+            if a.keyframe == h.keyframe or not chi2_t < a.chain_chi2 or agree <= a.agreeing:
                 continue
             if self.pair_chi2(a.hypothesis, h) > self._chi2_limit(3):
                 return a
@@ -918,7 +924,9 @@ class LoopCloser:
     ) -> int:
         """Judge ``found`` again with ``rival``'s merges undone; keep whichever explains.
 
-        Accepted: ``rival`` stays dropped (its undone pairs vetoed, so fusion does not redo
+        With the merges undone, the loops of both are solved first (the judge's solver, from
+        the first pose either judgement freed), so that the judgement starts, and its F test
+        compares against, the graph converged without ``rival``.  Accepted: ``rival`` stays dropped (its undone pairs vetoed, so fusion does not redo
         them; it no longer turns hypotheses away).  Rejected: the book goes back to its state
         with ``rival``, the back-end never having seen the difference.  Returns 1 when
         accepted, else 0.
@@ -943,6 +951,15 @@ class LoopCloser:
             later = on_keep[on_keep > int(r.factors.max())]
             g.unmerge(MergeRecord(r.keep, r.drop, np.union1d(r.factors, later)))
         book.recompute_info(np.array(sorted({r.keep for r in undone} | {r.drop for r in undone})))
+        lcc = self.config.loop_closure
+        old_last = book.last_keyframe[old[[j for _, j in found.pairs]]]
+        free_from = (
+            min(max(int(old_last.min()) - lcc.local_keyframes, 0), rival.free_from)
+            if lcc.judge_loop_only
+            else 0
+        )
+        with self.clock("judge"):
+            self._judge.solve(g, lcc.judge_iterations, free_from=free_from)
         book.refresh_extents()
         if self.apply(
             local, old, found, pose, chi2_t, agree, hypothesis, late, judged_at, reconsidering=rival
