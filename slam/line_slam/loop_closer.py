@@ -157,8 +157,11 @@ class _Pending:
 
 @dataclass(frozen=True, eq=False)
 class _Accepted:
-    """An accepted closure: its hypothesis, its chain χ², the merges it made, how many
-    hypotheses agreed with it and the first pose its judgement solved."""
+    """An accepted closure, as a later hypothesis may overturn it.
+
+    Its hypothesis, its chain χ², the merges it made, how many hypotheses agreed with it and
+    the first pose its judgement solved.
+    """
 
     hypothesis: Hypothesis
     chain_chi2: float
@@ -925,11 +928,11 @@ class LoopCloser:
         """Judge ``found`` again with ``rival``'s merges undone; keep whichever explains.
 
         With the merges undone, the loops of both are solved first (the judge's solver, from
-        the first pose either judgement freed), so that the judgement starts, and its F test
-        compares against, the graph converged without ``rival``.  Accepted: ``rival`` stays dropped (its undone pairs vetoed, so fusion does not redo
-        them; it no longer turns hypotheses away).  Rejected: the book goes back to its state
-        with ``rival``, the back-end never having seen the difference.  Returns 1 when
-        accepted, else 0.
+        the first pose either judgement freed), so that the judgement starts from, and its F
+        test compares against, the graph converged without ``rival``.  Accepted: ``rival``
+        stays dropped (its undone pairs vetoed, so fusion does not redo them; it no longer
+        turns hypotheses away).  Rejected: the book goes back to its state with ``rival``,
+        the back-end never having seen the difference.  Returns 1 when accepted, else 0.
         """
         book = self.book
         g = book.graph
