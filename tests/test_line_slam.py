@@ -623,6 +623,17 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
     slam, (a, b), h, found, local, old = _with_wrong_closure()
     g, closer = slam.graph, slam.loop_closer
     rival = closer._overturnable[0]
+    # an observation added to the merged landmark since the merge (the current pass's: a copy
+    # of one of the dropped landmark's) goes back with the merge
+    f = int(rival.records[0].factors[-1])
+    later = g.add_line_factors(
+        int(g.factor_pose[f]),
+        np.array([b]),
+        g.factor_z[[f]],
+        g.factor_cov[[f]],
+        g.factor_endpoints[[f]],
+    )
+    slam.backend.update(g)
     limit = np.inf if accepted else 1e-9  # no pair is explained to within 1e-9
     lcc = replace(
         slam.config.loop_closure,
@@ -638,6 +649,7 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
     if accepted:
         assert got == 1 and entry["accepted"]
         assert g.landmark_alive[a] and g.landmark_alive[b]
+        assert np.all(g.factor_landmark[later] == a)
         assert (min(a, b), max(a, b)) in closer.audit.vetoed
         assert not np.any(g.landmark_alive[local])  # the right pairs merged
         assert slam.counters["loop_closures_dropped"] == 1
@@ -649,6 +661,7 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
         np.testing.assert_array_equal(g.landmark_alive, before[1])
         np.testing.assert_array_equal(g.poses, before[2])
         assert len(g.merge_log) == before[3] and not g.landmark_alive[a]
+        assert np.all(g.factor_landmark[later] == b)
         assert slam.counters["loop_closures_dropped"] == 0
         assert rival in closer._overturnable and rival.hypothesis in closer._accepted
 
