@@ -573,8 +573,7 @@ def _with_wrong_closure():
     k_old = 5
     chain = closer.drift.relative(k_old, pose)
     off = Hypothesis(pose - 5, k_old, pose_compose(chain, np.array([3.0, 0.0, 0.0])))
-    closer._accepted = [off]
-    closer._overturnable = [_Accepted(off, 50.0, [wrong_record])]  # the only one
+    closer._accepted = [_Accepted(off, 50.0, [wrong_record])]  # the only one
     h = Hypothesis(pose, k_old, chain)
     found = LoopClosure(np.zeros(3), [(k, k) for k in range(3)], 10.0, 1.0)
     local = np.array([r.drop for r in right])
@@ -596,19 +595,19 @@ def test_a_recent_closure_is_reconsidered_only_by_a_hypothesis_that_disagrees_an
     ``reconsider_keyframes`` or when that is 0 (the default)."""
     slam, _, h, *_ = _with_wrong_closure()
     closer = slam.loop_closer
-    rival = closer._overturnable[0]
+    rival = closer._accepted[0]
     assert closer.rival(h, 0.0, 1) is None  # off by default
     _reconsidering(slam)
     assert closer.rival(h, 0.0, 1) is rival
     assert closer.rival(h, 60.0, 1) is None  # beyond the quantile (and above the closure's)
     assert closer.rival(h, 0.0, 0) is None  # no more hypotheses agree with it than with the closure
-    closer._overturnable[0] = replace(rival, chain_chi2=0.0)
+    closer._accepted[0] = replace(rival, chain_chi2=0.0)
     assert closer.rival(h, 0.0, 1) is None  # the closure fitted the trajectory as well
     z = closer.drift.relative(h.k_old, rival.keyframe)  # on the front end's trajectory
     agreeing = replace(rival.hypothesis, z=z)
-    closer._overturnable[0] = replace(rival, hypothesis=agreeing)
+    closer._accepted[0] = replace(rival, hypothesis=agreeing)
     assert closer.rival(h, 0.0, 1) is None  # the two agree
-    closer._overturnable[0] = rival
+    closer._accepted[0] = rival
     _reconsidering(slam, 4)
     assert closer.rival(h, 0.0, 1) is None  # accepted 5 keyframes before h
 
@@ -622,7 +621,7 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
     estimate and the merge log are exactly as before, the closure still accepted."""
     slam, (a, b), h, found, local, old = _with_wrong_closure()
     g, closer = slam.graph, slam.loop_closer
-    rival = closer._overturnable[0]
+    rival = closer._accepted[0]
     # an observation added to the merged landmark since the merge (the current pass's: a copy
     # of one of the dropped landmark's) goes back with the merge
     f = int(rival.records[0].factors[-1])
@@ -653,8 +652,7 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
         assert (min(a, b), max(a, b)) in closer.audit.vetoed
         assert not np.any(g.landmark_alive[local])  # the right pairs merged
         assert slam.counters["loop_closures_dropped"] == 1
-        assert rival not in closer._overturnable
-        assert rival.hypothesis not in closer._accepted
+        assert rival not in closer._accepted
     else:
         assert got == 0 and not entry["accepted"]
         np.testing.assert_array_equal(g.factor_landmark, before[0])
@@ -663,7 +661,7 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
         assert len(g.merge_log) == before[3] and not g.landmark_alive[a]
         assert np.all(g.factor_landmark[later] == b)
         assert slam.counters["loop_closures_dropped"] == 0
-        assert rival in closer._overturnable and rival.hypothesis in closer._accepted
+        assert rival in closer._accepted
 
 
 def test_a_rejected_hypothesis_reconsiders_the_closure_it_contradicts(monkeypatch):
@@ -671,7 +669,7 @@ def test_a_rejected_hypothesis_reconsiders_the_closure_it_contradicts(monkeypatc
     closure) once; one that is accepted, or judged while reconsidering, does not."""
     slam, _, h, found, local, old = _with_wrong_closure()
     closer = slam.loop_closer
-    rival = closer._overturnable[0]
+    rival = closer._accepted[0]
     calls = []
     monkeypatch.setattr(closer, "reconsider", lambda r, *args: calls.append(r) or 0)
     lcc = replace(
@@ -819,7 +817,7 @@ def test_a_hypothesis_contradicting_a_recent_closure_is_turned_away():
     from slam.geometry import pose_compose
     from slam.line_slam.clock import StageClock
     from slam.line_slam.drift import DriftAccumulator
-    from slam.line_slam.loop_closer import Hypothesis, LoopCloser
+    from slam.line_slam.loop_closer import Hypothesis, LoopCloser, _Accepted
 
     config = SlamConfig()
     lcc = config.loop_closure
@@ -836,7 +834,9 @@ def test_a_hypothesis_contradicting_a_recent_closure_is_turned_away():
         walls, walls, [(0, 0), (1, 1), (2, 2)], np.zeros(2), np.zeros(3), lcc, (1.0, 0.1)
     )
     normal = np.array([0.0, 1.0])  # keyframe frames are the world's here (heading 0)
-    closer._accepted.append(Hypothesis(30, 5, drift.relative(5, 30), normal, cov))
+    closer._accepted.append(
+        _Accepted(Hypothesis(30, 5, drift.relative(5, 30), normal, cov), 0.0, [])
+    )
 
     def hypothesis(keyframe: int, old: int, offset: tuple[float, float]) -> Hypothesis:
         z = pose_compose(drift.relative(old, keyframe), np.array([*offset, 0.0]))

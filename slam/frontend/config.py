@@ -355,10 +355,12 @@ class LoopClosureConfig:
         A closure accepted at most this many keyframes ago is reconsidered when a later
         hypothesis is rejected that agrees with the front end's own trajectory better than
         that closure did (``correction_chi2`` within the ``consistency_probability`` quantile
-        and below the closure's) and disagrees with the closure (pairwise, as
-        ``confirmations``): the closure's merges are undone and the hypothesis is judged
+        and below the closure's), disagrees with the closure (pairwise, as
+        ``confirmations``) and has more recent hypotheses agreeing with it than the closure
+        had: the closure's merges are undone with the observations added to its merged
+        landmarks since, the loops are solved without it, and the hypothesis is judged
         again; if it is accepted the earlier closure stays dropped (its pairs vetoed), else
-        both are as before.  0: never.
+        both are as before.  0 (the default): never.
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate

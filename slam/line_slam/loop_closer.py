@@ -319,10 +319,8 @@ class LoopCloser:
         self._rejected: list[tuple[int, FloatArray, int]] = []
         # recent hypotheses that passed the drift test (for confirmation)
         self._recent: list[Hypothesis] = []
-        # recently accepted closures (consistent_with_accepted)
-        self._accepted: list[Hypothesis] = []
-        # accepted closures that a later hypothesis may still overturn (reconsider_keyframes)
-        self._overturnable: list[_Accepted] = []
+        # recently accepted closures (consistent_with_accepted, reconsider_keyframes)
+        self._accepted: list[_Accepted] = []
         # the hypothesis awaiting confirmation, judged late (judge_unconfirmed), and the one it
         # has just replaced, to be judged now (judge_replaced)
         self._pending: _Pending | None = None
@@ -684,17 +682,26 @@ class LoopCloser:
         degrees of freedom as directions are compared.
         """
         lcc = self.config.loop_closure
-        self._accepted = [
-            r for r in self._accepted if r.keyframe > h.keyframe - lcc.local_keyframes
-        ]
-        for r in self._accepted:
-            chi2, dof = self._cycle(r, h, fitted=True)
+        for r in self._recent_accepted(h.keyframe, lcc.local_keyframes):
+            chi2, dof = self._cycle(r.hypothesis, h, fitted=True)
             if chi2 > self._chi2_limit(dof):
                 return (
                     f"contradicts the closure accepted at keyframe {r.keyframe} "
                     f"(χ² {chi2:.1f} > {self._chi2_limit(dof):.1f}, {dof} dof)"
                 )
         return None
+
+    def _recent_accepted(self, keyframe: int, window: int) -> list[_Accepted]:
+        """The closures accepted less than ``window`` keyframes before ``keyframe``, oldest first.
+
+        Closures beyond both windows that look back (``local_keyframes`` for
+        :meth:`contradiction`, ``reconsider_keyframes`` inclusive for :meth:`rival`) are
+        forgotten.
+        """
+        lcc = self.config.loop_closure
+        longest = max(lcc.local_keyframes, lcc.reconsider_keyframes + 1)
+        self._accepted = [a for a in self._accepted if a.keyframe > keyframe - longest]
+        return [a for a in self._accepted if a.keyframe > keyframe - window]
 
     def agreement(self, h: Hypothesis) -> int:
         """How many recent hypotheses agree with ``h`` (``h`` then joins them).
@@ -787,7 +794,7 @@ class LoopCloser:
             book.restore(before)
             return 0
         # the map before the loop is the reference: held, only the loop is solved
-        free_from = max(int(old_last.min()) - lcc.local_keyframes, 0) if lcc.judge_loop_only else 0
+        free_from = loop_from if lcc.judge_loop_only else 0
         records = list(g.merge_log[n_log:])
 
         def hopeless(iterations: int, poses: FloatArray, landmarks: FloatArray) -> bool:
@@ -873,9 +880,8 @@ class LoopCloser:
             attempt.accepted = True
             attempt.backend_restarted = big
             if hypothesis is not None:
-                self._accepted.append(hypothesis)
                 kept = [r for r in records if not r.undo and not g.landmark_alive[r.drop]]
-                self._overturnable.append(
+                self._accepted.append(
                     _Accepted(hypothesis, float(chi2_t), kept, int(agree), free_from)
                 )
             self.counters["loop_closures"] += 1
@@ -909,10 +915,7 @@ class LoopCloser:
             return None
         if chi2_t > self._chi2_limit(2 if h.single else 3):
             return None
-        self._overturnable = [
-            a for a in self._overturnable if a.keyframe >= h.keyframe - lcc.reconsider_keyframes
-        ]
-        for a in reversed(self._overturnable):
+        for a in reversed(self._recent_accepted(h.keyframe, lcc.reconsider_keyframes + 1)):
             if a.keyframe == h.keyframe or not chi2_t < a.chain_chi2 or agree <= a.agreeing:
                 continue
             if self.pair_chi2(a.hypothesis, h) > self._chi2_limit(3):
@@ -962,12 +965,10 @@ class LoopCloser:
             g.unmerge(MergeRecord(r.keep, r.drop, np.union1d(r.factors, later)))
         book.recompute_info(np.array(sorted({r.keep for r in undone} | {r.drop for r in undone})))
         lcc = self.config.loop_closure
+        # the first pose this judgement frees (as apply), or the closure's if earlier
         old_last = book.last_keyframe[old[[j for _, j in found.pairs]]]
-        free_from = (
-            min(max(int(old_last.min()) - lcc.local_keyframes, 0), rival.free_from)
-            if lcc.judge_loop_only
-            else 0
-        )
+        loop_from = max(int(old_last.min()) - lcc.local_keyframes, 0)
+        free_from = min(loop_from, rival.free_from) if lcc.judge_loop_only else 0
         with self.clock("judge"):
             self._judge.solve(g, lcc.judge_iterations, free_from=free_from)
         book.refresh_extents()
@@ -975,8 +976,7 @@ class LoopCloser:
             local, old, found, pose, chi2_t, agree, hypothesis, late, judged_at, reconsidering=rival
         ):
             self.audit.vetoed.update((min(r.keep, r.drop), max(r.keep, r.drop)) for r in undone)
-            self._overturnable.remove(rival)
-            self._accepted = [h for h in self._accepted if h is not rival.hypothesis]
+            self._accepted.remove(rival)
             self.counters["loop_closures_dropped"] += 1
             return 1
         book.restore(before)  # the undone merges are merged again
