@@ -592,11 +592,13 @@ def test_a_recent_closure_is_reconsidered_only_by_a_hypothesis_that_disagrees_an
     hypothesis agrees with (none agreed with the closure); not when the hypothesis' own χ² is
     beyond the quantile or above the closure's, not when no more hypotheses agree with it than
     with the closure, not when the two agree, not when the closure is older than
-    ``reconsider_keyframes`` or when that is 0 (the default)."""
+    ``reconsider_keyframes`` (20 by default) or when that is 0."""
     slam, _, h, *_ = _with_wrong_closure()
     closer = slam.loop_closer
     rival = closer._accepted[0]
-    assert closer.rival(h, 0.0, 1) is None  # off by default
+    assert closer.rival(h, 0.0, 1) is rival  # on by default
+    _reconsidering(slam, 0)
+    assert closer.rival(h, 0.0, 1) is None  # off
     _reconsidering(slam)
     assert closer.rival(h, 0.0, 1) is rival
     assert closer.rival(h, 60.0, 1) is None  # beyond the quantile (and above the closure's)

@@ -360,7 +360,7 @@ class LoopClosureConfig:
         had: the closure's merges are undone with the observations added to its merged
         landmarks since, the loops are solved without it, and the hypothesis is judged
         again; if it is accepted the earlier closure stays dropped (its pairs vetoed), else
-        both are as before.  0 (the default): never.
+        both are as before.  0: never.
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -429,7 +429,7 @@ class LoopClosureConfig:
     judge_hopeless_after: int = 5
     large_correction_m: float = 0.1
     large_correction_rad: float = 0.01
-    reconsider_keyframes: int = 0
+    reconsider_keyframes: int = 20
 
     def __post_init__(self) -> None:
         require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
