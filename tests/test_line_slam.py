@@ -666,6 +666,57 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
         assert rival in closer._accepted
 
 
+def _moved(x, corr):
+    """Keyframe pose ``x`` moved by a correction ``(t_x, t_y, dθ)`` (about its position)."""
+    return np.array([x[0] + corr[0], x[1] + corr[1], x[2] + corr[2]])
+
+
+def test_a_hypothesis_asks_the_current_estimate_for_its_relative_pose():
+    """``correction_at`` is the inverse of ``hypothesis``: the correction a hypothesis was made
+    from comes back, and when the estimate moves, the correction moves with it so that the
+    two keyframes again stand at the hypothesis' relative pose ``z``."""
+    slam, _, h, found, _, old = _with_wrong_closure()
+    g, closer = slam.graph, slam.loop_closer
+    made = replace(found, correction=np.array([0.3, -0.2, 0.05]))
+    h = closer.hypothesis(made, old, h.keyframe, h.k_old)
+    np.testing.assert_allclose(
+        closer.correction_at(h), closer.effective_correction(made, old), atol=1e-12
+    )
+    g.poses[h.keyframe] += np.array([0.5, 0.1, 0.02])
+    g.poses[h.k_old] += np.array([-0.2, 0.3, -0.01])
+    corr = closer.correction_at(h)
+    moved = _moved(g.poses[h.keyframe], corr)
+    np.testing.assert_allclose(
+        pose_log(pose_between(h.z, pose_between(g.poses[h.k_old], moved))), 0.0, atol=1e-12
+    )
+
+
+def test_reconsidering_reads_the_correction_at_the_estimate_without_the_closure(monkeypatch):
+    """The hypothesis found with the wrong closure in place is judged again, with the closure
+    undone and the loops solved, from the correction that puts its two keyframes at its
+    relative pose on that estimate (not the correction read on the estimate the closure had
+    shaped, which the solve without the closure has moved)."""
+    slam, _, h, found, local, old = _with_wrong_closure()
+    g, closer = slam.graph, slam.loop_closer
+    rival = closer._accepted[0]
+    h = closer.hypothesis(
+        replace(found, correction=np.array([0.3, -0.2, 0.05])), old, h.keyframe, h.k_old
+    )
+    seen = []
+
+    def judged(local, old, f, pose, *args, **kwargs):
+        moved = _moved(g.poses[h.keyframe], closer.effective_correction(f, old))
+        seen.append((pose_between(g.poses[h.k_old], moved), g.poses.copy()))
+        return 0
+
+    monkeypatch.setattr(closer, "apply", judged)
+    before = g.poses.copy()
+    assert closer.reconsider(rival, local, old, found, h.keyframe, 0.0, 0, h) == 0
+    ((z_seen, poses_seen),) = seen
+    assert np.max(np.abs(poses_seen - before)) > 1e-3  # the loops were solved without the closure
+    np.testing.assert_allclose(pose_log(pose_between(h.z, z_seen)), 0.0, atol=1e-9)
+
+
 def test_a_rejected_hypothesis_reconsiders_the_closure_it_contradicts(monkeypatch):
     """Through ``apply``: a hypothesis the judge rejects reconsiders its rival (the wrong
     closure) once; one that is accepted, or judged while reconsidering, does not."""

@@ -569,6 +569,17 @@ class LoopCloser:
             corr[:2] = (corr[:2] @ n) * n
         return corr
 
+    def correction_at(self, h: Hypothesis) -> FloatArray:
+        """The correction ``(t_x, t_y, dθ)`` that ``h`` asks of the current estimate.
+
+        The inverse of :meth:`hypothesis`: the move of keyframe ``h.keyframe`` (about its
+        position) onto ``x_old ∘ z``, with the two keyframes' estimates as they are now.
+        """
+        g = self.book.graph
+        x = g.poses[h.keyframe]
+        target = pose_compose(g.poses[h.k_old], h.z)
+        return np.array([target[0] - x[0], target[1] - x[1], float(wrap_angle(target[2] - x[2]))])
+
     def hypothesis(
         self,
         found: LoopClosure,
@@ -972,6 +983,9 @@ class LoopCloser:
         with self.clock("judge"):
             self._judge.solve(g, lcc.judge_iterations, free_from=free_from)
         book.refresh_extents()
+        # the hypothesis measures the relative pose of its two keyframes; its correction was
+        # read at the estimate the closure had shaped, and is read again at the one without it
+        found = replace(found, correction=self.correction_at(hypothesis))
         if self.apply(
             local, old, found, pose, chi2_t, agree, hypothesis, late, judged_at, reconsidering=rival
         ):
