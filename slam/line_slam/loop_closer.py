@@ -41,13 +41,14 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    ``judge_alone_both_costs``), else the landmark book is restored to its snapshot and the
    back-end never sees it.  An accepted closure with a large correction
    restarts the back-end from the judged estimate; a small one reaches it incrementally.
-5. **Reconsider** (``reconsider_keyframes``, off by default).  A rejected hypothesis that
-   contradicts a closure accepted within the last ``reconsider_keyframes`` keyframes, lies
-   closer to the front end's own trajectory than that closure did and has more recent
-   hypotheses agreeing with it than the closure had, is judged again with the closure undone
-   (its merges and the observations added to its merged landmarks since) and the loops solved
-   without it (:meth:`LoopCloser.reconsider`): accepted, it replaces the closure; rejected,
-   everything is as before.
+5. **Reconsider** (``reconsider_keyframes``, 20 by default; 0 turns it off).  A rejected
+   hypothesis that contradicts a closure accepted within the last ``reconsider_keyframes``
+   keyframes, lies closer to the front end's own trajectory than that closure did and has more
+   recent hypotheses agreeing with it than the closure had, is judged again with the closure
+   undone (its merges and the observations added to its merged landmarks since), the loops
+   solved without it and its correction read again on that estimate
+   (:meth:`LoopCloser.reconsider`): accepted, it replaces the closure; rejected, everything is
+   as before.
 
 Every attempt is recorded as a :class:`ClosureAttempt` (``summary.json``:
 ``loop_closures_log``).
