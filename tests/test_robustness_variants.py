@@ -21,6 +21,7 @@ from slam.experiments.robustness import (
     DecimateScans,
     MoveOdometryToCentre,
     NoisyOdometry,
+    OdometryLag,
     RangeNoise,
     Variant,
     fill_dropped_scans,
@@ -563,7 +564,7 @@ def test_table_parameters_match_the_catalogue():
     for v, t in rows + steps:
         laser = catalog[v.dataset].laser
         if isinstance(t, ClipRanges):
-            assert t.limit_m == 8.0
+            assert t.limit_m == (5.6 if v.name.endswith("-max5.6m") else 8.0)
         if isinstance(t, ClipRanges | RangeNoise):
             assert t.no_return_m == laser.max_range_m
         if isinstance(t, ClipRanges | CropFieldOfView | DecimateBeams | RangeNoise):
@@ -602,3 +603,72 @@ def test_real_decimated_variant_keeps_its_odometry_baseline(shared_data, tmp_pat
     assert score.lineslam.n_used == 1279
     assert score.lineslam.abs_trans_m.mean == pytest.approx(0.5636, abs=1e-4)
     assert score.odometry.abs_trans_m.mean == pytest.approx(0.5636, abs=1e-4)
+
+
+# --------------------------------------------------------------------------------------------
+# odometry a few laser lines late
+# --------------------------------------------------------------------------------------------
+def _reversing_log() -> list[str]:
+    """Laser lines on a wavy path with an offset laser, ODOM lines between them, two of them
+    reversing (tv < 0 while the logged pose moves forwards, as fr079 logs it)."""
+    base = _wavy_poses(8)
+    offset = np.array([0.2, 0.05, 0.1])
+    lines = ["# CARMEN Logfile"]
+    for i, p in enumerate(base):
+        tv = -0.3 if i in (4, 5) else 0.3
+        mid = pose_compose(base[i - 1], 0.5 * pose_between(base[i - 1], p)) if i else p
+        lines.append(odom(mid, 9.5 + i, tv=tv, rv=0.01 * i))
+        lines.append(flaser([1.0, 2.0], pose_compose(p, offset), p, 10.0 + i))
+    return lines
+
+
+def test_odometry_lag_of_zero_keeps_every_line():
+    lines = _reversing_log()
+    out = rewrite_lines(OdometryLag(0), lines)
+    assert [x.split() for x in out] == [x.split() for x in lines]
+
+
+@pytest.mark.parametrize("scans", [1, 2, 3])
+def test_odometry_lag_gives_each_laser_line_an_earlier_lines_odometry(scans):
+    lines = _reversing_log()
+    out = rewrite_lines(OdometryLag(scans), lines)
+    odo_in, base_in, laser_in = _odometry_poses(lines)
+    odo, base, laser = _odometry_poses(out)
+    k = np.maximum(np.arange(len(base_in)) - scans, 0)
+    np.testing.assert_allclose(base, base_in[k], atol=1e-6)
+    # the laser keeps its logged offset from the odometry pose
+    np.testing.assert_allclose(
+        pose_between(base, laser), pose_between(base_in, laser_in), atol=2e-6
+    )
+    # the ODOM line before laser line i carries the one before laser line i - scans
+    np.testing.assert_allclose(odo, odo_in[k], atol=1e-6)
+    tv_in = [x.split()[4] for x in lines if x.startswith("ODOM")]
+    tv = [x.split()[4] for x in out if x.startswith("ODOM")]
+    assert tv == [tv_in[j] for j in k]
+    # time stamps, ranges and the order of the lines stay
+    for before, after in zip(lines, out, strict=True):
+        b, a = before.split(), after.split()
+        assert a[0] == b[0] and a[-3:] == b[-3:]
+        if b[0] == "FLASER":
+            assert a[:4] == b[:4]
+
+
+@pytest.mark.parametrize("scans", [1, 2])
+def test_odometry_lag_read_as_the_estimators_read_it_is_the_delayed_reading(tmp_path, scans):
+    # the velocity-signed reading (fr079's reversing repaired) of the delayed log is the
+    # reading of the log itself, delayed: both streams are delayed alike
+    from slam.io.carmen import velocity_signed_scans
+
+    lines = _reversing_log()
+    src = _write(tmp_path / "src.clf", lines)
+    lagged = _write(tmp_path / "lagged.clf", rewrite_lines(OdometryLag(scans), lines))
+    read = [s.pose_odom_base for s in velocity_signed_scans(CarmenReader(src).messages())]
+    read_lagged = [s.pose_odom_base for s in velocity_signed_scans(CarmenReader(lagged).messages())]
+    k = np.maximum(np.arange(len(read)) - scans, 0)
+    assert not np.allclose(np.array(read)[:, :2], np.array(_odometry_poses(lines)[1])[:, :2])
+    np.testing.assert_allclose(np.array(read_lagged), np.array(read)[k], atol=1e-5)
+
+
+def test_odometry_lag_rejects_a_negative_lag():
+    with pytest.raises(ConfigError, match="scans must be >= 0"):
+        OdometryLag(-1)

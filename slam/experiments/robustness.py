@@ -210,6 +210,8 @@ class _Pass:
     odom_lines: int = 0
     #: Random draws of the pass (a transform that needs them seeds it at its first use).
     rng: np.random.Generator | None = None
+    #: What a transform remembers of earlier lines (:class:`OdometryLag`).
+    history: dict[str, Any] | None = None
 
 
 class LogTransform:
@@ -500,6 +502,57 @@ class NoisyOdometry(_ReintegratedOdometry):
 
 
 @dataclass(frozen=True)
+class OdometryLag(LogTransform):
+    """The odometry ``scans`` laser lines late, as a logger that pairs each scan with old odometry.
+
+    The ``k``-th ``FLASER`` line (0-based) carries the odometry pose of line ``k − scans``
+    (of the first line while ``k < scans``); its laser pose keeps its logged offset from the
+    odometry pose.  The ``ODOM`` lines logged between laser lines ``k − 1`` and ``k`` keep their
+    time stamps and places in the file but carry the pose, ``tv`` and ``rv`` of the last
+    ``ODOM`` line before laser line ``k − scans`` (of the first ``ODOM`` line while there is
+    none), so that both streams are delayed alike and a laser line's increment from the last
+    ``ODOM`` line is the delayed one.  Over a gap in the log a line's odometry is as old as
+    the gap.
+    """
+
+    scans: int
+    kind: ClassVar[str] = "odometry-lag"
+
+    def __post_init__(self) -> None:
+        if self.scans < 0:
+            raise ConfigError(f"OdometryLag.scans must be >= 0, got {self.scans}")
+
+    def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
+        if state.history is None:
+            state.history = {"laser": [], "odom_before": [], "odom_last": None}
+        history = state.history
+        if tokens[0] == "ODOM":
+            if len(tokens) < 8:
+                raise LogFormatError("ODOM with fewer than 8 fields", where)
+            _pose(tokens, 1, where)
+            own = tokens[1:6]
+            if history["odom_last"] is None:
+                history["first_odom"] = own
+            history["odom_last"] = own
+            k = len(history["laser"]) - self.scans
+            before: list[str] | None = own  # no lag: this line itself
+            if k < len(history["odom_before"]):
+                before = history["odom_before"][k] if k >= 0 else None
+            tokens[1:6] = before if before is not None else history["first_odom"]
+        elif tokens[0] == "FLASER":
+            n = _flaser_beams(tokens, where)
+            laser = _pose(tokens, 2 + n, where)
+            base = _pose(tokens, 5 + n, where)
+            history["laser"].append(base)
+            history["odom_before"].append(history["odom_last"])
+            k = max(0, len(history["laser"]) - 1 - self.scans)
+            old = history["laser"][k]
+            tokens[2 + n : 5 + n] = _pose_tokens(pose_compose(old, pose_between(base, laser)))
+            tokens[5 + n : 8 + n] = _pose_tokens(old)
+        yield _join(tokens)
+
+
+@dataclass(frozen=True)
 class MoveOdometryToCentre(LogTransform):
     """Odometry poses moved to ``laser ∘ pose_laser_centre``; relations rewritten for it."""
 
@@ -775,6 +828,12 @@ _FOV_60_RAD = math.radians(60.0)
 _FOV_60 = "field of view 60° (the middle beams, ±30°), ROBOTLASER1"
 _NO_ODOMETRY = "odometry frozen at its first pose (a laser-only log): the motion from the scans"
 
+#: The ``*-max5.6m`` rows: a short-range scanner (a Hokuyo URG-04LX reaches 5.6 m).
+_SHORT_RANGE_M = 5.6
+_SHORT_RANGE = "readings > 5.6 m set to no return (a Hokuyo URG-04LX's range), ROBOTLASER1"
+#: The ``*-odom-lag1`` rows: each scan paired with the odometry of the laser line before it.
+_LAG = "odometry one laser line late (about 0.2 s; over a gap in the log, as old as the gap)"
+
 #: More rows, never used to choose a default before they were added (the ``*-fov60`` rows
 #: are among those the handling of a contradicted scan match was judged on): the same
 #: transforms on Intel, chains of two or three transforms on the three logs (a lower scan
@@ -975,6 +1034,72 @@ EXTRA_VARIANTS: tuple[Variant, ...] = (
     Variant("intel-no-odometry", "intel", 0.05, FreezeOdometry(), _NO_ODOMETRY),
     Variant("aces-no-odometry", "aces", 0.08, FreezeOdometry(), _NO_ODOMETRY),
     Variant("fr079-no-odometry", "fr079", 0.10, FreezeOdometry(), _NO_ODOMETRY),
+    # Rows added after every default of today was chosen (held out): a short-range scanner,
+    # odometry paired with the scans one laser line late, and the two with a lower scan rate.
+    Variant(
+        "intel-max5.6m",
+        "intel",
+        0.05,
+        ClipRanges(_SHORT_RANGE_M, _INTEL_NO_RETURN_M, -_HALF_PI, _ONE_DEG_RAD),
+        _SHORT_RANGE,
+    ),
+    Variant(
+        "aces-max5.6m",
+        "aces",
+        0.08,
+        ClipRanges(_SHORT_RANGE_M, _ACES_NO_RETURN_M, -_HALF_PI, _ONE_DEG_RAD),
+        _SHORT_RANGE,
+    ),
+    Variant(
+        "fr079-max5.6m",
+        "fr079",
+        0.10,
+        ClipRanges(_SHORT_RANGE_M, _FR079_NO_RETURN_M, -_HALF_PI, _FR079_STEP_RAD),
+        _SHORT_RANGE,
+    ),
+    Variant("intel-odom-lag1", "intel", 0.05, OdometryLag(1), _LAG),
+    Variant("aces-odom-lag1", "aces", 0.08, OdometryLag(1), _LAG),
+    Variant("fr079-odom-lag1", "fr079", 0.10, OdometryLag(1), _LAG),
+    Variant(
+        "aces-every2-odom-lag1",
+        "aces",
+        0.08,
+        Chain((DecimateScans(2), OdometryLag(1))),
+        "every 2nd FLASER line, odometry one (kept) laser line late",
+    ),
+    Variant(
+        "aces-odom-lag1-max5.6m",
+        "aces",
+        0.08,
+        Chain(
+            (
+                OdometryLag(1),
+                ClipRanges(_SHORT_RANGE_M, _ACES_NO_RETURN_M, -_HALF_PI, _ONE_DEG_RAD),
+            )
+        ),
+        "odometry one laser line late, readings > 5.6 m set to no return, ROBOTLASER1",
+    ),
+    *(
+        Variant(
+            f"{name}-every2-lag1-max5.6m",
+            name,
+            bar,
+            Chain(
+                (
+                    DecimateScans(2),
+                    OdometryLag(1),
+                    ClipRanges(_SHORT_RANGE_M, no_return, -_HALF_PI, step),
+                )
+            ),
+            "every 2nd FLASER line, odometry one (kept) laser line late, readings > 5.6 m set "
+            "to no return, ROBOTLASER1",
+        )
+        for name, bar, no_return, step in (
+            ("intel", 0.05, _INTEL_NO_RETURN_M, _ONE_DEG_RAD),
+            ("aces", 0.08, _ACES_NO_RETURN_M, _ONE_DEG_RAD),
+            ("fr079", 0.10, _FR079_NO_RETURN_M, _FR079_STEP_RAD),
+        )
+    ),
 )
 
 
