@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from carmen_lines import flaser, odom, robotlaser
 
-from slam.errors import LogFormatError
+from slam.errors import ConfigError, LogFormatError
 from slam.io import iter_scans
 from slam.io.carmen import CarmenReader
 
@@ -50,3 +50,55 @@ def test_pose_coordinate_beyond_any_odometry_is_skipped_when_lenient(tmp_path):
     )
     scans = list(iter_scans(path, lenient=True))
     assert [s.timestamp for s in scans] == [1.0, 3.0]
+
+
+def _trajectory_and_relations():
+    from slam.io.relations import Relations
+    from slam.io.trajectory import Trajectory
+
+    stamps = np.array([10.0, 11.0, 12.0])
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    relations = Relations.planar([10.0, 11.0], [11.0, 12.0], [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    return Trajectory(stamps, poses), relations
+
+
+@pytest.mark.parametrize("tolerance", [-1.0, float("nan")])
+def test_relations_metric_refuses_a_negative_or_nan_time_tolerance(tolerance):
+    from slam.evaluation.relations_metric import relations_metric
+    from slam.evaluation.timestamps import associate
+
+    trajectory, relations = _trajectory_and_relations()
+    with pytest.raises(ConfigError, match="time tolerance must be >= 0 s"):
+        relations_metric(trajectory, relations, tolerance_s=tolerance)
+    with pytest.raises(ConfigError, match="time tolerance must be >= 0 s"):
+        associate(trajectory, trajectory, tolerance_s=tolerance)
+
+
+@pytest.mark.parametrize("fraction", [-0.1, 2.0, float("nan")])
+def test_relations_metric_refuses_an_unmatched_fraction_outside_0_1(fraction):
+    # a NaN fraction would never fail: every relation could be unmatched but one
+    from slam.evaluation.relations_metric import relations_metric
+    from slam.evaluation.timestamps import associate
+
+    trajectory, relations = _trajectory_and_relations()
+    with pytest.raises(ConfigError, match=r"max_unmatched_fraction must be in \[0, 1\]"):
+        relations_metric(trajectory, relations, max_unmatched_fraction=fraction)
+    with pytest.raises(ConfigError, match=r"max_unmatched_fraction must be in \[0, 1\]"):
+        associate(trajectory, trajectory, max_unmatched_fraction=fraction)
+
+
+def test_evaluate_cli_refuses_a_nan_max_unmatched(tmp_path, capsys):
+    from slam.cli import main
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "trajectory.tum").write_text(
+        "10.000000 0 0 0 0 0 0 1\n11.000000 1 0 0 0 0 0 1\n12.000000 2 0 0 0 0 0 1\n"
+    )
+    rel = tmp_path / "rel.txt"
+    rel.write_text("10.0 11.0 1 0 0 0 0 0\n11.0 12.0 1 0 0 0 0 0\n")
+    with pytest.raises(SystemExit) as exit_:
+        main(["evaluate", str(run), "--relations", str(rel), "--max-unmatched", "nan"])
+    assert exit_.value.code == 2
+    assert "max_unmatched_fraction must be in [0, 1], got nan" in capsys.readouterr().err
+    assert not (run / "metrics.json").exists()
