@@ -102,3 +102,37 @@ def test_evaluate_cli_refuses_a_nan_max_unmatched(tmp_path, capsys):
     assert exit_.value.code == 2
     assert "max_unmatched_fraction must be in [0, 1], got nan" in capsys.readouterr().err
     assert not (run / "metrics.json").exists()
+
+
+def _bare(line: str) -> str:
+    """The line without ``hostname logger_timestamp``: it ends in its ipc_timestamp."""
+    return line.rsplit(" ", 2)[0]
+
+
+@pytest.mark.parametrize("keep", [5, 9])  # "...0002.2" and "10000000"
+@pytest.mark.parametrize("kind", ["FLASER", "ODOM"])
+def test_last_line_cut_inside_a_final_time_stamp_is_skipped(tmp_path, keep, kind):
+    # a log without the hostname fields: the field count of a line cut inside its
+    # ipc_timestamp is right, and the stamp was read as 1000000002.2 or 10000000
+    def line(k, t):
+        if kind == "ODOM":
+            return _bare(odom([0.1 * k, 0.0, 0.0], t))
+        return _bare(flaser(RANGES, [0.1 * k, 0.0, 0.0], [0.1 * k, 0.0, 0.0], t))
+
+    lines = [line(k, 1000000000.0 + 0.75 * k) for k in range(4)]
+    path = tmp_path / "log.clf"
+    path.write_text("\n".join(lines)[:-keep])  # no newline at the end
+    reader = CarmenReader(path)
+    stamps = [m.timestamp for m in reader.messages()]
+    assert stamps == [1000000000.0, 1000000000.75, 1000000001.5]
+    assert reader.stats.anomalies.counts["truncated_lines"] == 1
+    assert reader.stats.anomalies.first["truncated_lines"][0] == 4
+
+
+def test_complete_last_line_ending_in_its_time_stamp_is_kept(tmp_path):
+    lines = [_bare(odom([0.0, 0.0, 0.0], 1.0 + k)) for k in range(3)]
+    path = tmp_path / "log.clf"
+    path.write_text("\n".join(lines))  # no newline at the end, nothing cut
+    reader = CarmenReader(path)
+    assert [m.timestamp for m in reader.messages()] == [1.0, 2.0, 3.0]
+    assert not reader.stats.anomalies.counts.get("truncated_lines")

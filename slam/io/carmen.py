@@ -446,6 +446,33 @@ def _parse_odom(tokens: list[str]) -> tuple[FloatArray, float, float, float, int
     return pose, tv, rv, stamp, len(tokens) - 8
 
 
+def _decimals(token: str) -> int:
+    """Digits after the decimal point of a number as written (-1: none; 99: exponent form)."""
+    if "e" in token or "E" in token:
+        return 99
+    point = token.find(".")
+    return -1 if point < 0 else len(token) - point - 1
+
+
+def _check_last_stamp(
+    tokens: list[str], tail: int, last: bool, stamp_decimals: dict[str, int]
+) -> None:
+    """Refuse a final ``ipc_timestamp`` cut short on the file's last line.
+
+    On the last line without a newline, a stamp that ends the line with fewer decimals than
+    the line of the same type before was cut while the log was written.
+    """
+    if tail != 0:
+        return
+    kind, decimals = tokens[0], _decimals(tokens[-1])
+    if last and decimals < stamp_decimals.get(kind, -1):
+        raise _LineError(
+            f"{kind}: ipc_timestamp {tokens[-1]!r} has {max(decimals, 0)} decimals, the line "
+            f"before {stamp_decimals[kind]} (no newline at the end)"
+        )
+    stamp_decimals[kind] = decimals
+
+
 def _sniff_laser_type(path: str | Path) -> str | None:
     seen: set[str] = set()
     for _, line in islice(iter_text_lines(path), _SNIFF_LINES):
@@ -731,6 +758,7 @@ class CarmenReader:
         anomalies = stats.anomalies
         anomalies.strict = self.strict
         tails: dict[str, int] = {}  # fields after ipc_timestamp in the last line of each type
+        stamp_decimals: dict[str, int] = {}  # of the last ipc_timestamp ending a line, per type
         geometry = self.geometry
         laser = self.laser if self.laser != "auto" else _sniff_laser_type(self.path)
         stats.laser_type = laser
@@ -757,6 +785,7 @@ class CarmenReader:
                             f"{tails[kind]} (no newline at the end)"
                         )
                     tails[kind] = tail
+                    _check_last_stamp(tokens, tail, last, stamp_decimals)
                     odom = Odometry(stats.odometry, stamp, pose, tv, rv, f"{path}:{line_number}")
                     stats.odometry += 1
                     yield odom
@@ -777,6 +806,7 @@ class CarmenReader:
                             f"before {tails[kind]} (no newline at the end)"
                         )
                     tails[kind] = parsed.tail
+                    _check_last_stamp(tokens, parsed.tail, last, stamp_decimals)
                     anomalies.scan(
                         parsed.timestamp,
                         parsed.pose_odom_base
