@@ -136,3 +136,15 @@ def test_complete_last_line_ending_in_its_time_stamp_is_kept(tmp_path):
     reader = CarmenReader(path)
     assert [m.timestamp for m in reader.messages()] == [1.0, 2.0, 3.0]
     assert not reader.stats.anomalies.counts.get("truncated_lines")
+
+
+@pytest.mark.parametrize("which", ["ranges", "bearings"])
+def test_extract_lines_refuses_complex_arrays(which):
+    from linefit import InputError, extract_lines
+
+    phi = np.radians(np.arange(-30.0, 31.0))
+    d = 2.0 / np.cos(phi)
+    args = {"ranges": d, "bearings": phi}
+    args[which] = args[which] + 1j
+    with pytest.raises(InputError, match=f"{which} must be real numbers"):
+        extract_lines(args["ranges"], args["bearings"])
