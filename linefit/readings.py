@@ -38,8 +38,10 @@ def as_vector(values: ArrayLike, name: str) -> FloatArray:
     Raises
     ------
     InputError
-        Non-numeric values or not one-dimensional.
+        Non-numeric or complex values, or not one-dimensional.
     """
+    if np.iscomplexobj(values):  # numpy would drop the imaginary part with only a warning
+        raise InputError(f"{name} must be real numbers, got complex values")
     try:
         arr = np.asarray(values, dtype=float)
     except (TypeError, ValueError) as exc:

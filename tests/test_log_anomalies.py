@@ -122,14 +122,16 @@ def test_odometry_jump_bound(tmp_path, step_m, dt_s, turn_rad, jump):
     assert stats.anomalies.counts["odometry_jumps"] == int(jump)
 
 
-def test_a_corrupt_huge_pose_is_reported_in_a_readable_number(tmp_path):
-    """A pose of 1e300 m (a corrupt field) is a jump; its detail is one short number."""
+def test_a_corrupt_huge_pose_is_refused_in_a_readable_number(tmp_path):
+    """A pose of 1e300 m (a corrupt field) is a malformed line, named in one short number."""
     t0 = 5000.0
     path = write(tmp_path, [scan_line(0.0, t0), scan_line(1e300, t0 + 0.2), scan_line(0.1, t0 + 5)])
-    _, stats = read(path)
-    assert stats.anomalies.counts["odometry_jumps"] == 2
-    detail = stats.anomalies.first["odometry_jumps"][1]
-    assert detail.startswith("1e+300 m and ") and len(detail) < 60, detail
+    with pytest.raises(LogFormatError, match=r"log\.clf:2: .*1e\+300.* beyond ") as info:
+        read(path)
+    assert len(str(info.value)) < 250, str(info.value)
+    scans, stats = read(path, lenient=True)
+    assert len(scans) == 2 and stats.malformed == 1
+    assert counts(stats) == {"malformed_lines": 1}
 
 
 def test_joined_logs_are_counted_warned_and_refused_with_strict(tmp_path, joined, capsys):

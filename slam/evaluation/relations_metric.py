@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import EvaluationError
-from slam.evaluation.timestamps import match_timestamps
+from slam.evaluation.timestamps import check_unmatched_fraction, match_timestamps
 from slam.geometry import pose_between
 from slam.io.relations import Relations
 from slam.io.trajectory import Trajectory
@@ -212,7 +212,10 @@ def relations_metric(
     ------
     EvaluationError
         Too many unmatched relations, or none left.
+    ConfigError
+        ``tolerance_s`` negative or NaN, ``max_unmatched_fraction`` outside [0, 1] or NaN.
     """
+    check_unmatched_fraction(max_unmatched_fraction)
     if len(relations) == 0:
         raise EvaluationError("no relations to evaluate")
     i1, ok1 = match_timestamps(relations.t1, trajectory.timestamps, tolerance_s)

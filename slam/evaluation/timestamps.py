@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.errors import EvaluationError
+from slam.errors import ConfigError, EvaluationError
 from slam.io.trajectory import Trajectory
 
-__all__ = ["associate", "match_timestamps"]
+__all__ = ["associate", "check_unmatched_fraction", "match_timestamps"]
 
 FloatArray = NDArray[np.float64]
 
@@ -19,7 +19,14 @@ def match_timestamps(
     """Index of the time stamp nearest to each query, and whether it is within tolerance.
 
     Works for time stamps in any order (Intel's go backwards); no interpolation.
+
+    Raises
+    ------
+    ConfigError
+        ``tolerance_s`` is negative or NaN.
     """
+    if not tolerance_s >= 0.0:  # NaN too (it would match nothing); inf: the nearest stamp
+        raise ConfigError(f"time tolerance must be >= 0 s, got {tolerance_s!r}")
     t = np.asarray(timestamps, dtype=np.float64)
     q = np.asarray(query, dtype=np.float64)
     if t.size == 0:
@@ -33,6 +40,12 @@ def match_timestamps(
     nearest = np.where(pick_hi, hi, lo)
     found = np.abs(sorted_t[nearest] - q) <= tolerance_s
     return order[nearest].astype(np.int64), found
+
+
+def check_unmatched_fraction(fraction: float) -> None:
+    """Raise :class:`~slam.errors.ConfigError` unless ``0 <= fraction <= 1`` (NaN: never fails)."""
+    if not 0.0 <= fraction <= 1.0:
+        raise ConfigError(f"max_unmatched_fraction must be in [0, 1], got {fraction!r}")
 
 
 def associate(
@@ -49,6 +62,7 @@ def associate(
     ``max_unmatched_fraction`` of them raise :class:`~slam.errors.EvaluationError` (a time
     stamp mistake).
     """
+    check_unmatched_fraction(max_unmatched_fraction)
     idx, found = match_timestamps(estimate.timestamps, reference.timestamps, tolerance_s)
     n = len(estimate)
     n_unmatched = int(n - found.sum())

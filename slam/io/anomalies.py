@@ -25,9 +25,10 @@ Kinds
     scans stamped 1 ms apart; ACES: 1.06 rad in 0.16 s once).  None of the catalogued logs
     (Intel, ACES, fr079) has such a jump; a log joined from two has one at the join.
 ``truncated_lines``
-    The last line of the file has no newline and cannot be read, or has fewer fields than the
-    line of the same type before it (a log cut while it was written, e.g. inside the time
-    stamp): the line is skipped.
+    The last line of the file has no newline and cannot be read, has fewer fields than the
+    line of the same type before it, or ends in its ``ipc_timestamp`` written with fewer
+    decimals than that line's (a log cut while it was written, e.g. inside the time stamp):
+    the line is skipped.
 ``unknown_messages``
     Lines of message types that neither this reader nor CARMEN knows (skipped).  Types CARMEN
     writes but lineslam does not use (``PARAM``, ``SYNC``, ``TRUEPOS``, ...,

@@ -79,8 +79,9 @@ naming the ``PARAM`` line.
 Bad input
 ---------
 A line that cannot be read (wrong field count, truncated, text in a number field, a NaN or
-negative range, a non-finite pose or time stamp) raises :class:`~slam.errors.LogFormatError`
-naming the file and 1-based line number.  With ``lenient=True`` the line is skipped and counted
+negative range, a non-finite pose or time stamp, a pose coordinate beyond
+:data:`MAX_POSE_COORDINATE_M`) raises :class:`~slam.errors.LogFormatError` naming the file and
+1-based line number.  With ``lenient=True`` the line is skipped and counted
 (``CarmenStats.malformed``, first lines kept in ``malformed_lines``); the scan indices stay
 contiguous.  ``+inf`` ranges are accepted (no return).  An empty or binary file, or a text file
 with no CARMEN message in it, is an error in both modes.
@@ -108,6 +109,7 @@ from slam.types import Scan
 
 __all__ = [
     "LASER_MESSAGES",
+    "MAX_POSE_COORDINATE_M",
     "CarmenReader",
     "CarmenStats",
     "LogParams",
@@ -125,6 +127,10 @@ __all__ = [
 #: A laser scan without a logged pose takes the ``ODOM`` pose of a message at most this far (s)
 #: from its time stamp when no message lies on its other side (the log's first or last scans).
 MAX_ODOMETRY_GAP_S = 1.0
+
+#: Largest |x| or |y| (m) of a logged pose; a larger one is a corrupted number (no odometry
+#: drifts 100 000 km), and its square overflows in the estimators.
+MAX_POSE_COORDINATE_M = 1.0e8
 
 FloatArray = NDArray[np.float64]
 
@@ -323,6 +329,16 @@ def _check_finite(values: FloatArray, kind: str, what: str) -> None:
         raise _LineError(f"{kind}: {what} must be finite, got {values.tolist()}")
 
 
+def _check_pose_xy(values: FloatArray, kind: str, what: str) -> None:
+    """``values`` holds ``(x, y, θ)`` triples (finite): ``|x|, |y| <= MAX_POSE_COORDINATE_M``."""
+    xy = np.abs(values.reshape(-1, 3)[:, :2])
+    if xy.max() > MAX_POSE_COORDINATE_M:
+        raise _LineError(
+            f"{kind}: {what} {values.tolist()} has a coordinate beyond "
+            f"{MAX_POSE_COORDINATE_M:g} m (a corrupted number?)"
+        )
+
+
 @dataclass(frozen=True)
 class _Parsed:
     ranges: FloatArray
@@ -352,6 +368,7 @@ def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
     ranges = values[:n]
     _check_ranges(ranges, kind)
     _check_finite(values[n:], kind, "poses and ipc_timestamp")
+    _check_pose_xy(values[n : n + 6], kind, "x y theta odom_x odom_y odom_theta")
     if geometry is None:
         geometry = guess_laser_geometry(n)
     elif geometry.n_beams is not None and geometry.n_beams != n:
@@ -395,6 +412,8 @@ def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
     _check_ranges(ranges, kind)
     rest = _floats(tokens[after:need], kind)
     _check_finite(rest, kind, "poses and ipc_timestamp")
+    if robot:
+        _check_pose_xy(rest[0:6], kind, "laser and robot poses")
     if m:
         _floats(tokens[10 + n : after], f"{kind} remissions")
     if not (math.isfinite(max_range) and max_range > 0.0):
@@ -422,7 +441,36 @@ def _parse_odom(tokens: list[str]) -> tuple[FloatArray, float, float, float, int
         values = [x, y, theta, tv, rv, accel, stamp]
         if not all(map(math.isfinite, values)):
             raise _LineError(f"ODOM: x y theta tv rv accel ipc_timestamp must be finite: {values}")
-    return np.array([x, y, theta]), tv, rv, stamp, len(tokens) - 8
+    pose = np.array([x, y, theta])
+    _check_pose_xy(pose, "ODOM", "x y theta")
+    return pose, tv, rv, stamp, len(tokens) - 8
+
+
+def _decimals(token: str) -> int:
+    """Digits after the decimal point of a number as written (-1: none; 99: exponent form)."""
+    if "e" in token or "E" in token:
+        return 99
+    point = token.find(".")
+    return -1 if point < 0 else len(token) - point - 1
+
+
+def _check_last_stamp(
+    tokens: list[str], tail: int, last: bool, stamp_decimals: dict[str, int]
+) -> None:
+    """Refuse a final ``ipc_timestamp`` cut short on the file's last line.
+
+    On the last line without a newline, a stamp that ends the line with fewer decimals than
+    the line of the same type before was cut while the log was written.
+    """
+    if tail != 0:
+        return
+    kind, decimals = tokens[0], _decimals(tokens[-1])
+    if last and decimals < stamp_decimals.get(kind, -1):
+        raise _LineError(
+            f"{kind}: ipc_timestamp {tokens[-1]!r} has {max(decimals, 0)} decimals, the line "
+            f"before {stamp_decimals[kind]} (no newline at the end)"
+        )
+    stamp_decimals[kind] = decimals
 
 
 def _sniff_laser_type(path: str | Path) -> str | None:
@@ -710,6 +758,7 @@ class CarmenReader:
         anomalies = stats.anomalies
         anomalies.strict = self.strict
         tails: dict[str, int] = {}  # fields after ipc_timestamp in the last line of each type
+        stamp_decimals: dict[str, int] = {}  # of the last ipc_timestamp ending a line, per type
         geometry = self.geometry
         laser = self.laser if self.laser != "auto" else _sniff_laser_type(self.path)
         stats.laser_type = laser
@@ -736,6 +785,7 @@ class CarmenReader:
                             f"{tails[kind]} (no newline at the end)"
                         )
                     tails[kind] = tail
+                    _check_last_stamp(tokens, tail, last, stamp_decimals)
                     odom = Odometry(stats.odometry, stamp, pose, tv, rv, f"{path}:{line_number}")
                     stats.odometry += 1
                     yield odom
@@ -756,6 +806,7 @@ class CarmenReader:
                             f"before {tails[kind]} (no newline at the end)"
                         )
                     tails[kind] = parsed.tail
+                    _check_last_stamp(tokens, parsed.tail, last, stamp_decimals)
                     anomalies.scan(
                         parsed.timestamp,
                         parsed.pose_odom_base

@@ -1,0 +1,150 @@
+"""Bad input: clear errors naming file and line instead of crashes or wrong numbers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from carmen_lines import flaser, odom, robotlaser
+
+from slam.errors import ConfigError, LogFormatError
+from slam.io import iter_scans
+from slam.io.carmen import CarmenReader
+
+
+def write(tmp_path, lines, name="log.clf"):
+    path = tmp_path / name
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+RANGES = np.full(180, 2.0)
+
+
+@pytest.mark.parametrize(
+    ("line", "field"),
+    [
+        (flaser(RANGES, [1e200, 0.0, 0.0], [0.0, 0.0, 0.0], 1.0), "x y theta odom_x"),
+        (flaser(RANGES, [0.0, 0.0, 0.0], [0.0, -3e150, 0.0], 1.0), "x y theta odom_x"),
+        (
+            robotlaser(RANGES, -1.5, 0.0175, 80.0, [0.0, 0.0, 0.0], [2e9, 0.0, 0.0], 1.0),
+            "laser and robot poses",
+        ),
+        (odom([1e200, 0.0, 0.0], 1.0), "ODOM: x y theta"),
+    ],
+)
+def test_pose_coordinate_beyond_any_odometry_names_the_line(tmp_path, line, field):
+    # 1e200 is finite, but its square overflows inside the scan matcher (numba LinAlgError)
+    path = write(tmp_path, [odom([0.0, 0.0, 0.0], 0.5), line, odom([0.0, 0.0, 0.0], 1.5)])
+    with pytest.raises(LogFormatError, match=rf"{path}:2: .*{field}.*beyond 1e\+08 m"):
+        list(CarmenReader(path).messages())
+
+
+def test_pose_coordinate_beyond_any_odometry_is_skipped_when_lenient(tmp_path):
+    path = write(
+        tmp_path,
+        [
+            flaser(RANGES, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 1.0),
+            flaser(RANGES, [1e200, 0.0, 0.0], [0.0, 0.0, 0.0], 2.0),
+            flaser(RANGES, [5e7, -5e7, 0.0], [5e7, -5e7, 0.0], 3.0),  # far, but a number
+        ],
+    )
+    scans = list(iter_scans(path, lenient=True))
+    assert [s.timestamp for s in scans] == [1.0, 3.0]
+
+
+def _trajectory_and_relations():
+    from slam.io.relations import Relations
+    from slam.io.trajectory import Trajectory
+
+    stamps = np.array([10.0, 11.0, 12.0])
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    relations = Relations.planar([10.0, 11.0], [11.0, 12.0], [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    return Trajectory(stamps, poses), relations
+
+
+@pytest.mark.parametrize("tolerance", [-1.0, float("nan")])
+def test_relations_metric_refuses_a_negative_or_nan_time_tolerance(tolerance):
+    from slam.evaluation.relations_metric import relations_metric
+    from slam.evaluation.timestamps import associate
+
+    trajectory, relations = _trajectory_and_relations()
+    with pytest.raises(ConfigError, match="time tolerance must be >= 0 s"):
+        relations_metric(trajectory, relations, tolerance_s=tolerance)
+    with pytest.raises(ConfigError, match="time tolerance must be >= 0 s"):
+        associate(trajectory, trajectory, tolerance_s=tolerance)
+
+
+@pytest.mark.parametrize("fraction", [-0.1, 2.0, float("nan")])
+def test_relations_metric_refuses_an_unmatched_fraction_outside_0_1(fraction):
+    # a NaN fraction would never fail: every relation could be unmatched but one
+    from slam.evaluation.relations_metric import relations_metric
+    from slam.evaluation.timestamps import associate
+
+    trajectory, relations = _trajectory_and_relations()
+    with pytest.raises(ConfigError, match=r"max_unmatched_fraction must be in \[0, 1\]"):
+        relations_metric(trajectory, relations, max_unmatched_fraction=fraction)
+    with pytest.raises(ConfigError, match=r"max_unmatched_fraction must be in \[0, 1\]"):
+        associate(trajectory, trajectory, max_unmatched_fraction=fraction)
+
+
+def test_evaluate_cli_refuses_a_nan_max_unmatched(tmp_path, capsys):
+    from slam.cli import main
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "trajectory.tum").write_text(
+        "10.000000 0 0 0 0 0 0 1\n11.000000 1 0 0 0 0 0 1\n12.000000 2 0 0 0 0 0 1\n"
+    )
+    rel = tmp_path / "rel.txt"
+    rel.write_text("10.0 11.0 1 0 0 0 0 0\n11.0 12.0 1 0 0 0 0 0\n")
+    with pytest.raises(SystemExit) as exit_:
+        main(["evaluate", str(run), "--relations", str(rel), "--max-unmatched", "nan"])
+    assert exit_.value.code == 2
+    assert "max_unmatched_fraction must be in [0, 1], got nan" in capsys.readouterr().err
+    assert not (run / "metrics.json").exists()
+
+
+def _bare(line: str) -> str:
+    """The line without ``hostname logger_timestamp``: it ends in its ipc_timestamp."""
+    return line.rsplit(" ", 2)[0]
+
+
+@pytest.mark.parametrize("keep", [5, 9])  # "...0002.2" and "10000000"
+@pytest.mark.parametrize("kind", ["FLASER", "ODOM"])
+def test_last_line_cut_inside_a_final_time_stamp_is_skipped(tmp_path, keep, kind):
+    # a log without the hostname fields: the field count of a line cut inside its
+    # ipc_timestamp is right, and the stamp was read as 1000000002.2 or 10000000
+    def line(k, t):
+        if kind == "ODOM":
+            return _bare(odom([0.1 * k, 0.0, 0.0], t))
+        return _bare(flaser(RANGES, [0.1 * k, 0.0, 0.0], [0.1 * k, 0.0, 0.0], t))
+
+    lines = [line(k, 1000000000.0 + 0.75 * k) for k in range(4)]
+    path = tmp_path / "log.clf"
+    path.write_text("\n".join(lines)[:-keep])  # no newline at the end
+    reader = CarmenReader(path)
+    stamps = [m.timestamp for m in reader.messages()]
+    assert stamps == [1000000000.0, 1000000000.75, 1000000001.5]
+    assert reader.stats.anomalies.counts["truncated_lines"] == 1
+    assert reader.stats.anomalies.first["truncated_lines"][0] == 4
+
+
+def test_complete_last_line_ending_in_its_time_stamp_is_kept(tmp_path):
+    lines = [_bare(odom([0.0, 0.0, 0.0], 1.0 + k)) for k in range(3)]
+    path = tmp_path / "log.clf"
+    path.write_text("\n".join(lines))  # no newline at the end, nothing cut
+    reader = CarmenReader(path)
+    assert [m.timestamp for m in reader.messages()] == [1.0, 2.0, 3.0]
+    assert not reader.stats.anomalies.counts.get("truncated_lines")
+
+
+@pytest.mark.parametrize("which", ["ranges", "bearings"])
+def test_extract_lines_refuses_complex_arrays(which):
+    from linefit import InputError, extract_lines
+
+    phi = np.radians(np.arange(-30.0, 31.0))
+    d = 2.0 / np.cos(phi)
+    args = {"ranges": d, "bearings": phi}
+    args[which] = args[which] + 1j
+    with pytest.raises(InputError, match=f"{which} must be real numbers"):
+        extract_lines(args["ranges"], args["bearings"])
