@@ -53,7 +53,9 @@ facts, else what the log's ``PARAM`` lines state (:meth:`LogParams.laser_geometr
 CARMEN's ``carmen_laser_guess_fov`` rule with a range limit of 80 m (:mod:`slam.io.laser`).  A
 :class:`~slam.io.laser.LaserGeometry` passed in is used for ``FLASER``/``RLASER`` lines; its
 ``n_beams``, when set, must match every line.  ``ROBOTLASER1``/``RAWLASER`` lines always use
-their own start angle, resolution and maximum range.
+their own start angle, resolution and maximum range: beam ``i`` lies at ``start_angle + i ·
+resolution`` (the ``fov`` field is not used), and a maximum range that is not positive and
+finite is taken as unstated (the geometry's, else 80 m).
 
 The log's own parameters
 ------------------------
