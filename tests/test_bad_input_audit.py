@@ -148,3 +148,33 @@ def test_extract_lines_refuses_complex_arrays(which):
     args[which] = args[which] + 1j
     with pytest.raises(InputError, match=f"{which} must be real numbers"):
         extract_lines(args["ranges"], args["bearings"])
+
+
+def test_a_relation_of_a_time_stamp_to_itself_names_its_line(tmp_path):
+    from slam.io.relations import read_relations
+
+    path = tmp_path / "r.relations"
+    path.write_text("# t1 t2 x y z roll pitch yaw\n1.0 2.0 0.1 0 0 0 0 0.01\n3.5 3.5 0 0 0 0 0 0\n")
+    with pytest.raises(LogFormatError, match=rf"{path}:3: .*itself"):
+        read_relations(path)
+    path.write_text("1.0 2.0 0.1 0 0 0 0 0.01\n3.5 3.6 0 0 0 0 0 0\n")
+    assert len(read_relations(path).t1) == 2
+
+
+def _tum_line(t, x, y, yaw):
+    return f"{t:.6f} {x} {y} 0 0 0 {np.sin(yaw / 2):.9f} {np.cos(yaw / 2):.9f}"
+
+
+def test_ground_truth_giving_one_time_stamp_two_poses_names_both_lines(tmp_path):
+    from slam.io.tum import read_ground_truth, read_tum
+
+    path = tmp_path / "gt.tum"
+    lines = [_tum_line(1.0, 0, 0, 0), _tum_line(2.0, 1, 0, 0.1), _tum_line(1.0, 0, 0.5, 0)]
+    path.write_text("# ground truth\n" + "\n".join(lines) + "\n")
+    with pytest.raises(LogFormatError, match=rf"{path}:4: .*two poses.*line 2"):
+        read_ground_truth(path)
+    assert len(read_tum(path)) == 3  # a run's own trajectory may repeat a stamp
+    # the same pose twice (a log that repeats a scan) is one pose
+    lines[2] = _tum_line(1.0, 0, 0, 0)
+    path.write_text("\n".join(lines) + "\n")
+    assert len(read_ground_truth(path)) == 3

@@ -17,7 +17,7 @@ from slam.io.catalog import resolve_log
 from slam.io.relations import read_relations
 from slam.io.results import read_results, write_metrics
 from slam.io.trajectory import Trajectory
-from slam.io.tum import read_tum
+from slam.io.tum import read_ground_truth
 
 __all__ = ["evaluate", "relations_path"]
 
@@ -159,7 +159,7 @@ def evaluate(
                     sources["odometry_log"] = str(results.summary["log"])
     gt = None
     if ground_truth is not None:
-        gt = read_tum(ground_truth)
+        gt = read_ground_truth(ground_truth)
         sources["ground_truth_file"] = str(ground_truth)
     report = evaluate_results(
         results,

@@ -258,7 +258,8 @@ def _run_on_sim(task: CompareTask) -> VariantOutcome:
 
 def _run_on_log(task: CompareTask) -> VariantOutcome:
     from slam.experiments.logdata import cached_log_data
-    from slam.io import read_relations, read_tum
+    from slam.io import read_relations
+    from slam.io.tum import read_ground_truth
 
     cache = Path(task.cache_dir) if task.cache_dir else None
     data = cached_log_data(
@@ -293,5 +294,5 @@ def _run_on_log(task: CompareTask) -> VariantOutcome:
         "landmarks": int(est.landmarks_r_alpha.shape[0]),
     }
     relations = None if data.relations_path is None else read_relations(data.relations_path)
-    truth = None if data.ground_truth_path is None else read_tum(data.ground_truth_path)
+    truth = None if data.ground_truth_path is None else read_ground_truth(data.ground_truth_path)
     return evaluate_variant(task.variant, est, metrics, truth, relations, started_at_truth=False)

@@ -51,7 +51,7 @@ from slam.io.results import (
 )
 from slam.io.rosbag import iter_rosbag_scans, read_rosbag_odometry
 from slam.io.trajectory import Trajectory
-from slam.io.tum import read_tum, write_tum
+from slam.io.tum import read_ground_truth, read_tum, write_tum
 
 __all__ = [
     "LASER_MESSAGES",
@@ -76,6 +76,7 @@ __all__ = [
     "manifest_for_path",
     "odometry_pose_graph",
     "read_g2o",
+    "read_ground_truth",
     "read_relations",
     "read_results",
     "read_rosbag_odometry",

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from linefit.line import wrap_angle
-from slam.errors import InputError
+from slam.errors import InputError, LogFormatError
 from slam.geometry import pose_between
 from slam.io._table import read_numeric_table
 
@@ -139,8 +139,20 @@ def write_relations(
 
 
 def read_relations(path: str | Path) -> Relations:
-    """Read a relations file (``#`` header lines allowed); errors name file and line."""
+    """Read a relations file (``#`` header lines allowed); errors name file and line.
+
+    A relation of a time stamp to itself (``t1 == t2``) is an error: it relates a pose to
+    itself, which no trajectory can err on and whose covariance is zero.
+    """
     values, lines = read_numeric_table(path, 8, "relation (t1 t2 x y z roll pitch yaw)")
+    same = values[:, 0] == values[:, 1]
+    if same.any():
+        i = int(np.flatnonzero(same)[0])
+        raise LogFormatError(
+            f"relation of a time stamp to itself (t1 = t2 = {float(values[i, 0])!r})",
+            str(path),
+            int(lines[i]),
+        )
     return Relations(
         t1=values[:, 0].copy(),
         t2=values[:, 1].copy(),

@@ -4,6 +4,7 @@ Main entry points (stable, used across the project)::
 
     write_tum(path, timestamps, poses, *, decimals=6, header=None) -> None
     read_tum(path) -> Trajectory            # .timestamps (n,), .poses (n, 3) = (x, y, yaw)
+    read_ground_truth(path) -> Trajectory   # read_tum, one pose per time stamp
 
 Planar poses ``(x, y, θ)`` are written with ``z = 0`` and the yaw quaternion
 ``(0, 0, sin θ/2, cos θ/2)``; time stamps with ``decimals`` (≥ 6) digits after the point, so a
@@ -13,6 +14,9 @@ of the TUM RGB-D benchmark tools.
 Reading accepts ``#`` comment lines, ignores ``z`` and takes the yaw of the quaternion
 (``atan2(2(qw qz + qx qy), 1 − 2(qy² + qz²))``); a quaternion whose norm is not 1 (±1e-3), or a
 pose that is tilted out of the plane by more than 1e-3 rad, is an error naming the line.
+:func:`read_ground_truth` also refuses a time stamp given two different poses (naming both
+lines): which of them a relation or a scan is scored against would be arbitrary.  A run's own
+trajectory may repeat a time stamp (a log that repeats one) and is read with :func:`read_tum`.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from slam.errors import InputError, LogFormatError
 from slam.io._table import read_numeric_table
 from slam.io.trajectory import Trajectory
 
-__all__ = ["read_tum", "write_tum"]
+__all__ = ["read_ground_truth", "read_tum", "write_tum"]
 
 _QUATERNION_TOL = 1e-3
 _TILT_TOL_RAD = 1e-3
@@ -82,6 +86,35 @@ def write_tum(
 
 def read_tum(path: str | Path) -> Trajectory:
     """Read a TUM trajectory as planar poses (see the module docstring for the checks)."""
+    return _read_tum(path)[0]
+
+
+def read_ground_truth(path: str | Path) -> Trajectory:
+    """:func:`read_tum`, and a time stamp given twice must carry the same pose.
+
+    Raises
+    ------
+    LogFormatError
+        As :func:`read_tum`; or a time stamp on two lines with different poses (both named).
+    """
+    trajectory, lines = _read_tum(path)
+    t = trajectory.timestamps
+    order = np.argsort(t, kind="stable")
+    repeated = np.flatnonzero(np.diff(t[order]) == 0.0)
+    for k in repeated:
+        i, j = int(order[k]), int(order[k + 1])
+        d = trajectory.poses[j] - trajectory.poses[i]
+        d[2] = float(wrap_angle(d[2]))
+        if np.any(np.abs(d) > 1e-9):
+            raise LogFormatError(
+                f"time stamp {float(t[i])!r} is given two poses, here and at line {int(lines[i])}",
+                str(path),
+                int(lines[j]),
+            )
+    return trajectory
+
+
+def _read_tum(path: str | Path) -> tuple[Trajectory, np.ndarray]:
     values, lines = read_numeric_table(path, 8, "TUM pose (timestamp x y z qx qy qz qw)")
     qx, qy, qz, qw = values[:, 4], values[:, 5], values[:, 6], values[:, 7]
     norm = np.sqrt(qx**2 + qy**2 + qz**2 + qw**2)
@@ -97,4 +130,5 @@ def read_tum(path: str | Path) -> Trajectory:
         i = int(np.flatnonzero(tilted)[0])
         raise LogFormatError("pose is not planar (roll/pitch > 1e-3 rad)", str(path), int(lines[i]))
     yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy**2 + qz**2))
-    return Trajectory(values[:, 0].copy(), np.column_stack([values[:, 1], values[:, 2], yaw]))
+    poses = np.column_stack([values[:, 1], values[:, 2], yaw])
+    return Trajectory(values[:, 0].copy(), poses), lines
