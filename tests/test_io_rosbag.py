@@ -131,3 +131,15 @@ def test_not_a_bag_and_wrong_topic(tmp_path, rng):
     write_bag(path, 2, store, scans, odoms)
     with pytest.raises(InputError, match="no sensor_msgs/msg/LaserScan topic '/front'"):
         list(iter_rosbag_scans(path, scan_topic="/front"))
+
+
+def test_an_odometry_pose_beyond_any_odometry_names_the_message(tmp_path, rng):
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    scans, odoms, _ = make_messages(store, rng, n_scans=3)
+    odoms[4][1].pose.pose.position.x = 1e200  # finite, but no odometry drifts that far
+    path = tmp_path / "bag2"
+    write_bag(path, 2, store, scans, odoms)
+    with pytest.raises(LogFormatError, match=r"/odom: odometry message 4: .*beyond 1e\+08 m"):
+        read_rosbag_odometry(path)
+    with pytest.raises(LogFormatError, match="odometry message 4"):
+        list(iter_rosbag_scans(path))

@@ -58,6 +58,7 @@ from numpy.typing import NDArray
 
 from slam.errors import ConfigError, InputError, LogFormatError
 from slam.geometry import pose_compose
+from slam.io.carmen import MAX_POSE_COORDINATE_M
 from slam.io.trajectory import Trajectory
 from slam.types import Scan
 
@@ -183,12 +184,23 @@ def _read_odometry(reader: Any, conns: list[Any], path: str) -> tuple[Trajectory
             raise LogFormatError(
                 f"{conn.topic}: odometry message {k} cannot be read ({exc})", path
             ) from None
+        _check_pose(poses[-1], f"{conn.topic}: odometry message {k}", path)
     if not stamps:
         return None, child
     try:
         return Trajectory(np.asarray(stamps), np.asarray(poses)), child
     except InputError as exc:
         raise LogFormatError(f"odometry: {exc.reason}", path) from None
+
+
+def _check_pose(pose: tuple[float, float, float], what: str, where: str) -> None:
+    """A pose whose x or y lies beyond :data:`~slam.io.carmen.MAX_POSE_COORDINATE_M` is corrupt."""
+    if max(abs(pose[0]), abs(pose[1])) > MAX_POSE_COORDINATE_M:
+        raise LogFormatError(
+            f"{what}: pose {list(pose)} has a coordinate beyond {MAX_POSE_COORDINATE_M:g} m "
+            "(a corrupted number?)",
+            where,
+        )
 
 
 def read_rosbag_odometry(path: str | Path, *, topic: str | None = None) -> Trajectory:
@@ -367,6 +379,7 @@ class RosbagLog:
             parent = parent or str(tr.header.frame_id).lstrip("/")
             stamps.append(stamp)
             poses.append(_planar(tr, self.where))
+            _check_pose(poses[-1], f"/tf {base} at {stamp:.6f} s", self.where)
         if not stamps:
             if self.odometry_mode == "tf":
                 raise InputError(f"no /tf transform to the base frame {base!r}", self.where)
