@@ -36,6 +36,7 @@ from slam.frontend.scan_match import (
     match_scans,
     normal_half_window,
     refine_scan,
+    scale_points_information,
     scan_points,
     slip_covariance,
     visible_points,
@@ -884,6 +885,49 @@ def test_scans_between_keyframes_matched_against_their_keyframe(tmp_path):
     # the simulator's walls are exact: the matches' 2 cm model error (model_sigma_m) makes
     # their covariances conservative, as the odometry's are here; never over-confident
     assert 0.2 < nees_on.mean() < 3.0 and 0.2 < nees_off.mean() < 3.0, (nees_on, nees_off)
+
+
+def test_scaling_the_points_information_of_a_posterior():
+    rng = np.random.default_rng(4)
+    a, b = rng.normal(size=(3, 3)), rng.normal(size=(3, 3))
+    info_points = a @ a.T + 0.1 * np.eye(3)
+    prior = np.linalg.inv(b @ b.T + 0.1 * np.eye(3))
+    post = np.linalg.inv(info_points + np.linalg.inv(prior))
+    for factor in (0.5, 1.0):  # the points are not said to scatter less than modelled
+        np.testing.assert_array_equal(scale_points_information(post, prior, factor), post)
+    scaled = scale_points_information(post, prior, 4.0)
+    expected = np.linalg.inv(info_points / 4.0 + np.linalg.inv(prior))
+    np.testing.assert_allclose(scaled, expected, rtol=1e-9)
+    np.testing.assert_allclose(scaled, scaled.T, rtol=0, atol=1e-15)
+    # between the posterior and the prior
+    assert np.all(np.linalg.eigvalsh(scaled - post) > 0)
+    assert np.all(np.linalg.eigvalsh(prior - scaled) > 0)
+
+
+def test_scans_between_keyframes_carry_the_points_noise_the_run_measures(tmp_path, monkeypatch):
+    """With the fits' range noise stated at half the simulator's, the demo's points scatter
+    about twice as much as the noise model says (``range_noise``); the matched scans between
+    keyframes then carry the points' information divided by that ratio squared, and their
+    NEES is lower than with the match's covariance as computed."""
+    import slam.line_slam.pipeline as pipeline
+
+    keyframes = {"min_distance_m": 0.6, "min_angle_rad": 0.45}
+    cfg = _with_scan_matching(between_keyframes=True)
+    noise = replace(cfg.linefit.noise, sigma_range_m=0.5 * cfg.linefit.noise.sigma_range_m)
+    cfg = replace(
+        cfg,
+        linefit=replace(cfg.linefit, noise=noise),
+        slam=replace(cfg.slam, keyframes=replace(cfg.slam.keyframes, **keyframes)),
+    )
+    s_scaled = run_slam(DEMO / "log.clf", tmp_path / "scaled", cfg)
+    assert s_scaled["range_noise"]["sigma_ratio"] > 1.5
+    monkeypatch.setattr(pipeline, "scale_points_information", lambda post, prior, f: post)
+    s_plain = run_slam(DEMO / "log.clf", tmp_path / "plain", cfg)
+    assert s_plain["scan_matches_between"] == s_scaled["scan_matches_between"] > 150
+    xy_s, _, nees_scaled = _nonkeyframe_errors(tmp_path / "scaled")
+    xy_p, _, nees_plain = _nonkeyframe_errors(tmp_path / "plain")
+    np.testing.assert_array_equal(xy_s, xy_p)  # the estimates are the same
+    assert nees_scaled.mean() < 0.9 * nees_plain.mean(), (nees_scaled.mean(), nees_plain.mean())
 
 
 def test_scan_matching_can_be_turned_off(tmp_path):

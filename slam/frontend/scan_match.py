@@ -67,6 +67,7 @@ __all__ = [
     "normal_half_window",
     "overlap_at",
     "refine_scan",
+    "scale_points_information",
     "scan_points",
     "scan_view",
     "slip_covariance",
@@ -144,8 +145,11 @@ class ScanMatchConfig:
         Also match every scan between two keyframes against the last keyframe, from its
         odometry since the keyframe (:func:`refine_scan`): an accepted match is the scan's
         offset from its keyframe, with the match's covariance, in the result (the graph is
-        unchanged).  False: such a scan is its keyframe composed with the odometry (and the
-        keyframes' correction shared along the stretch).
+        unchanged); where the run's points scatter more than the noise model says
+        (``summary.json`` ``range_noise``), the points' information in that covariance is
+        divided by the ratio of the variances (:func:`scale_points_information`).  False: such
+        a scan is its keyframe composed with the odometry (and the keyframes' correction
+        shared along the stretch).
     """
 
     RENAMED_KEYS: ClassVar[dict[str, str]] = {
@@ -1093,6 +1097,25 @@ def contradicted_covariance(
         return slip_covariance(Q, config, delta_odometry, body=body)
     d = pose_log(pose_between(np.asarray(delta_odometry, float), np.asarray(delta_match, float)))
     return slip_covariance(Q, config, delta_odometry, body=body, sigma_rad=abs(float(d[2])))
+
+
+def scale_points_information(
+    posterior_cov: FloatArray, prior_cov: FloatArray, factor: float
+) -> FloatArray:
+    """A match's posterior covariance with the points' information divided by ``factor``.
+
+    A match's posterior information is the points' plus the prior's (:func:`refine_scan`);
+    where the points scatter ``√factor`` times as much as the noise model says (the run's
+    :class:`~slam.line_slam.range_noise.RangeNoiseCheck`), their information is ``factor``
+    times too large.  Returns ``(I_post − I_prior)/factor + I_prior)⁻¹``, ``(3, 3)``; a
+    ``factor`` of 1 or less returns ``posterior_cov`` unchanged.
+    """
+    post = np.asarray(posterior_cov, dtype=np.float64)
+    if not factor > 1.0:
+        return post
+    info_prior = _symmetric_inverse(np.asarray(prior_cov, dtype=np.float64))
+    info_points = _symmetric_inverse(post) - info_prior
+    return _symmetric_inverse(info_points / factor + info_prior)
 
 
 def _symmetric_inverse(c: FloatArray) -> FloatArray:

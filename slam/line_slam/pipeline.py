@@ -68,6 +68,7 @@ from slam.frontend.scan_match import (
     contradicted_covariance,
     match_scans,
     refine_scan,
+    scale_points_information,
     scan_points,
 )
 from slam.geometry import pose_between, pose_compose, pose_log
@@ -290,7 +291,10 @@ class LineSlam:
             self.counters["scan_matches_between_rejected"] += 1
             return step.delta, None
         self.counters["scan_matches_between"] += 1
-        return match.delta, match.cov
+        # the points scatter as the run has measured, not as the noise model says
+        ratio = self.range_noise.sigma_ratio
+        factor = 1.0 if ratio is None else ratio**2
+        return match.delta, scale_points_information(match.cov, Q, factor)
 
     def _step_covariance(self, step: OdometryStep) -> FloatArray:
         """The covariance of the odometry's motion since the last keyframe.
