@@ -178,3 +178,18 @@ def test_ground_truth_giving_one_time_stamp_two_poses_names_both_lines(tmp_path)
     lines[2] = _tum_line(1.0, 0, 0, 0)
     path.write_text("\n".join(lines) + "\n")
     assert len(read_ground_truth(path)) == 3
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        flaser(RANGES, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 1e200),
+        robotlaser(RANGES, -1.5, 0.0175, 80.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], -3e15),
+        odom([0.0, 0.0, 0.0], 2e11),
+    ],
+)
+def test_a_time_stamp_beyond_any_clock_names_the_line(tmp_path, line):
+    # finite, but its microseconds are lost and the trajectory would be written with it
+    path = write(tmp_path, [odom([0.0, 0.0, 0.0], 0.5), line, odom([0.0, 0.0, 0.0], 1.5)])
+    with pytest.raises(LogFormatError, match=rf"{path}:2: .*ipc_timestamp .*beyond 1e\+11 s"):
+        list(CarmenReader(path).messages())

@@ -82,11 +82,12 @@ Bad input
 ---------
 A line that cannot be read (wrong field count, truncated, text in a number field, a NaN or
 negative range, a non-finite pose or time stamp, a pose coordinate beyond
-:data:`MAX_POSE_COORDINATE_M`) raises :class:`~slam.errors.LogFormatError` naming the file and
-1-based line number.  With ``lenient=True`` the line is skipped and counted
-(``CarmenStats.malformed``, first lines kept in ``malformed_lines``); the scan indices stay
-contiguous.  ``+inf`` ranges are accepted (no return).  An empty or binary file, or a text file
-with no CARMEN message in it, is an error in both modes.
+:data:`MAX_POSE_COORDINATE_M`, a time stamp beyond :data:`MAX_TIMESTAMP_S`) raises
+:class:`~slam.errors.LogFormatError` naming the file and 1-based line number. With
+``lenient=True`` the line is skipped and counted (``CarmenStats.malformed``, first lines kept
+in ``malformed_lines``); the scan indices stay contiguous. ``+inf`` ranges are accepted (no
+return). An empty or binary file, or a text file with no CARMEN message in it, is an error in
+both modes.
 """
 
 from __future__ import annotations
@@ -112,6 +113,7 @@ from slam.types import Scan
 __all__ = [
     "LASER_MESSAGES",
     "MAX_POSE_COORDINATE_M",
+    "MAX_TIMESTAMP_S",
     "CarmenReader",
     "CarmenStats",
     "LogParams",
@@ -129,6 +131,10 @@ __all__ = [
 #: A laser scan without a logged pose takes the ``ODOM`` pose of a message at most this far (s)
 #: from its time stamp when no message lies on its other side (the log's first or last scans).
 MAX_ODOMETRY_GAP_S = 1.0
+
+#: Largest |ipc_timestamp| (s): about the year 5138 in Unix time; a larger one is a corrupted
+#: number (its microseconds cannot even be represented in a double).
+MAX_TIMESTAMP_S = 1.0e11
 
 #: Largest |x| or |y| (m) of a logged pose; a larger one is a corrupted number (no odometry
 #: drifts 100 000 km), and its square overflows in the estimators.
@@ -331,6 +337,15 @@ def _check_finite(values: FloatArray, kind: str, what: str) -> None:
         raise _LineError(f"{kind}: {what} must be finite, got {values.tolist()}")
 
 
+def _check_stamp(stamp: float, kind: str) -> None:
+    """``|stamp| <= MAX_TIMESTAMP_S`` (``stamp`` finite)."""
+    if abs(stamp) > MAX_TIMESTAMP_S:
+        raise _LineError(
+            f"{kind}: ipc_timestamp {stamp!r} lies beyond {MAX_TIMESTAMP_S:g} s "
+            "(a corrupted number?)"
+        )
+
+
 def _check_pose_xy(values: FloatArray, kind: str, what: str) -> None:
     """``values`` holds ``(x, y, θ)`` triples (finite): ``|x|, |y| <= MAX_POSE_COORDINATE_M``."""
     xy = np.abs(values.reshape(-1, 3)[:, :2])
@@ -371,6 +386,7 @@ def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
     _check_ranges(ranges, kind)
     _check_finite(values[n:], kind, "poses and ipc_timestamp")
     _check_pose_xy(values[n : n + 6], kind, "x y theta odom_x odom_y odom_theta")
+    _check_stamp(float(values[n + 6]), kind)
     if geometry is None:
         geometry = guess_laser_geometry(n)
     elif geometry.n_beams is not None and geometry.n_beams != n:
@@ -416,6 +432,7 @@ def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
     _check_finite(rest, kind, "poses and ipc_timestamp")
     if robot:
         _check_pose_xy(rest[0:6], kind, "laser and robot poses")
+    _check_stamp(float(rest[-1]), kind)
     if m:
         _floats(tokens[10 + n : after], f"{kind} remissions")
     if not (math.isfinite(max_range) and max_range > 0.0):
@@ -445,6 +462,7 @@ def _parse_odom(tokens: list[str]) -> tuple[FloatArray, float, float, float, int
             raise _LineError(f"ODOM: x y theta tv rv accel ipc_timestamp must be finite: {values}")
     pose = np.array([x, y, theta])
     _check_pose_xy(pose, "ODOM", "x y theta")
+    _check_stamp(stamp, "ODOM")
     return pose, tv, rv, stamp, len(tokens) - 8
 
 
