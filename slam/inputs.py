@@ -103,6 +103,7 @@ the search over every heading: rescued).
 from __future__ import annotations
 
 import math
+import os
 import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -832,12 +833,14 @@ class LogInput:
     def run_summary(self, n_scans: int, max_scans: int | None) -> dict[str, Any]:
         """What ``summary.json`` says about the input of a run over ``n_scans`` scans.
 
-        ``log``, ``dataset``, ``scans_in_log`` (where known), ``partial`` (true when the run
-        stopped before the log's end: fewer scans than the log has, or, the count unknown,
-        ``max_scans`` reached; ``lineslam evaluate`` then scores the relations inside the run),
+        ``log`` (the absolute path), ``dataset``, ``scans_in_log`` (where known), ``partial``
+        (true when the run stopped before the log's end: fewer scans than the log has, or, the
+        count unknown, ``max_scans`` reached; ``lineslam evaluate`` then scores the relations
+        inside the run),
         ``max_scans`` and ``input`` (:meth:`describe`).
         """
-        out: dict[str, Any] = {"log": str(self.log), "dataset": self.name}
+        # absolute, so that the results folder can be evaluated from any working directory
+        out: dict[str, Any] = {"log": os.path.abspath(self.log), "dataset": self.name}
         if self.n_scans is not None:
             out["scans_in_log"] = self.n_scans
             partial = n_scans < self.n_scans
@@ -852,7 +855,7 @@ class LogInput:
     def describe(self) -> dict[str, Any]:
         """The ``"input"`` block of ``summary.json``: what was read and what was assumed."""
         out: dict[str, Any] = {
-            "log": str(self.log),
+            "log": os.path.abspath(self.log),
             "format": self.format,
             "catalogue": self.manifest.name if self.manifest is not None else None,
             "geometry": self.geometry.to_dict(),

@@ -193,3 +193,23 @@ def test_a_time_stamp_beyond_any_clock_names_the_line(tmp_path, line):
     path = write(tmp_path, [odom([0.0, 0.0, 0.0], 0.5), line, odom([0.0, 0.0, 0.0], 1.5)])
     with pytest.raises(LogFormatError, match=rf"{path}:2: .*ipc_timestamp .*beyond 1e\+11 s"):
         list(CarmenReader(path).messages())
+
+
+def test_a_results_folder_is_evaluated_from_any_working_directory(tmp_path, monkeypatch):
+    # the run names its log relatively; summary.json keeps the absolute path, so that
+    # evaluate finds the log's odometry (the relations' scatter) from elsewhere
+    import json
+    import shutil
+    from pathlib import Path
+
+    from slam.config import RunConfig
+    from slam.runner import run_slam
+
+    demo = Path(__file__).resolve().parents[1] / "datasets" / "sim" / "demo"
+    (tmp_path / "data").mkdir()
+    shutil.copy(demo / "log.clf", tmp_path / "data" / "log.clf")
+    monkeypatch.chdir(tmp_path / "data")
+    summary = run_slam("log.clf", tmp_path / "out", RunConfig(), max_scans=30)
+    assert summary["log"] == str(tmp_path / "data" / "log.clf")
+    written = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert written["log"] == written["input"]["log"] == str(tmp_path / "data" / "log.clf")
