@@ -38,8 +38,9 @@ Usage::
 
 Options: ``--only NAME...`` runs a subset; ``--extra`` also runs the extra rows
 (:data:`slam.experiments.robustness.EXTRA_VARIANTS`: the same transforms on Intel, chains
-of two or three transforms on the three logs, and the three logs with noisier odometry;
-``--list`` shows them); ``--workers N`` runs N rows at
+of two or three transforms on the three logs, the three logs with noisier odometry, a noisier
+laser, a narrower scanner or no odometry, and the held-out rows: a 5.6 m scanner and odometry
+one laser line late; ``--list`` shows them); ``--workers N`` runs N rows at
 once (1 by default; the times are only comparable between runs on an equally loaded machine);
 ``--config FILE.toml`` is passed to every run; ``--keep DIR`` keeps the results folders
 (``DIR/NAME``, with the run's output in ``DIR/NAME.log``); ``--work DIR`` is the variant cache
