@@ -43,7 +43,7 @@ def match_timestamps(
 
 
 def check_unmatched_fraction(fraction: float) -> None:
-    """Raise :class:`~slam.errors.ConfigError` unless ``0 <= fraction <= 1`` (NaN: never fails)."""
+    """Raise :class:`~slam.errors.ConfigError` unless ``0 <= fraction <= 1`` (NaN raises too)."""
     if not 0.0 <= fraction <= 1.0:
         raise ConfigError(f"max_unmatched_fraction must be in [0, 1], got {fraction!r}")
 

@@ -94,7 +94,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, fields
 from itertools import islice
 from pathlib import Path
@@ -121,6 +121,7 @@ __all__ = [
     "iter_log_scans",
     "iter_odometry",
     "iter_scans",
+    "pose_beyond_bound",
     "read_params",
     "reader_scans",
     "scan_trajectory",
@@ -346,14 +347,23 @@ def _check_stamp(stamp: float, kind: str) -> None:
         )
 
 
-def _check_pose_xy(values: FloatArray, kind: str, what: str) -> None:
-    """``values`` holds ``(x, y, θ)`` triples (finite): ``|x|, |y| <= MAX_POSE_COORDINATE_M``."""
-    xy = np.abs(values.reshape(-1, 3)[:, :2])
-    if xy.max() > MAX_POSE_COORDINATE_M:
-        raise _LineError(
-            f"{kind}: {what} {values.tolist()} has a coordinate beyond "
-            f"{MAX_POSE_COORDINATE_M:g} m (a corrupted number?)"
-        )
+def pose_beyond_bound(poses: Sequence[float] | FloatArray) -> str | None:
+    """Why ``(x, y, θ)`` triples (finite) are corrupt, or None.
+
+    A pose's ``|x|`` or ``|y|`` above :data:`MAX_POSE_COORDINATE_M` is a corrupted number; the
+    message (for the readers' errors) names the bound.
+    """
+    values = [float(v) for v in poses]
+    if all(abs(values[i]) <= MAX_POSE_COORDINATE_M for i in range(len(values)) if i % 3 != 2):
+        return None
+    return f"{values} has a coordinate beyond {MAX_POSE_COORDINATE_M:g} m (a corrupted number?)"
+
+
+def _check_pose_xy(values: Sequence[float] | FloatArray, kind: str, what: str) -> None:
+    """``values`` holds ``(x, y, θ)`` triples (finite) within :func:`pose_beyond_bound`."""
+    reason = pose_beyond_bound(values)
+    if reason is not None:
+        raise _LineError(f"{kind}: {what} {reason}")
 
 
 @dataclass(frozen=True)
@@ -460,10 +470,9 @@ def _parse_odom(tokens: list[str]) -> tuple[FloatArray, float, float, float, int
         values = [x, y, theta, tv, rv, accel, stamp]
         if not all(map(math.isfinite, values)):
             raise _LineError(f"ODOM: x y theta tv rv accel ipc_timestamp must be finite: {values}")
-    pose = np.array([x, y, theta])
-    _check_pose_xy(pose, "ODOM", "x y theta")
+    _check_pose_xy((x, y, theta), "ODOM", "x y theta")
     _check_stamp(stamp, "ODOM")
-    return pose, tv, rv, stamp, len(tokens) - 8
+    return np.array([x, y, theta]), tv, rv, stamp, len(tokens) - 8
 
 
 def _decimals(token: str) -> int:

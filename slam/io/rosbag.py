@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 
 from slam.errors import ConfigError, InputError, LogFormatError
 from slam.geometry import pose_compose
-from slam.io.carmen import MAX_POSE_COORDINATE_M
+from slam.io.carmen import pose_beyond_bound
 from slam.io.trajectory import Trajectory
 from slam.types import Scan
 
@@ -194,13 +194,10 @@ def _read_odometry(reader: Any, conns: list[Any], path: str) -> tuple[Trajectory
 
 
 def _check_pose(pose: tuple[float, float, float], what: str, where: str) -> None:
-    """A pose whose x or y lies beyond :data:`~slam.io.carmen.MAX_POSE_COORDINATE_M` is corrupt."""
-    if max(abs(pose[0]), abs(pose[1])) > MAX_POSE_COORDINATE_M:
-        raise LogFormatError(
-            f"{what}: pose {list(pose)} has a coordinate beyond {MAX_POSE_COORDINATE_M:g} m "
-            "(a corrupted number?)",
-            where,
-        )
+    """A pose beyond the readers' bound (:func:`slam.io.carmen.pose_beyond_bound`) is corrupt."""
+    reason = pose_beyond_bound(pose)
+    if reason is not None:
+        raise LogFormatError(f"{what}: pose {reason}", where)
 
 
 def read_rosbag_odometry(path: str | Path, *, topic: str | None = None) -> Trajectory:
