@@ -353,9 +353,10 @@ def pose_beyond_bound(poses: Sequence[float] | FloatArray) -> str | None:
     A pose's ``|x|`` or ``|y|`` above :data:`MAX_POSE_COORDINATE_M` is a corrupted number; the
     message (for the readers' errors) names the bound.
     """
-    values = [float(v) for v in poses]
-    if all(abs(values[i]) <= MAX_POSE_COORDINATE_M for i in range(len(values)) if i % 3 != 2):
+    xy = np.abs(np.asarray(poses, dtype=np.float64).reshape(-1, 3)[:, :2])
+    if xy.max() <= MAX_POSE_COORDINATE_M:
         return None
+    values = [float(v) for v in poses]
     return f"{values} has a coordinate beyond {MAX_POSE_COORDINATE_M:g} m (a corrupted number?)"
 
 
@@ -470,7 +471,8 @@ def _parse_odom(tokens: list[str]) -> tuple[FloatArray, float, float, float, int
         values = [x, y, theta, tv, rv, accel, stamp]
         if not all(map(math.isfinite, values)):
             raise _LineError(f"ODOM: x y theta tv rv accel ipc_timestamp must be finite: {values}")
-    _check_pose_xy((x, y, theta), "ODOM", "x y theta")
+    if abs(x) > MAX_POSE_COORDINATE_M or abs(y) > MAX_POSE_COORDINATE_M:
+        _check_pose_xy((x, y, theta), "ODOM", "x y theta")
     _check_stamp(stamp, "ODOM")
     return np.array([x, y, theta]), tv, rv, stamp, len(tokens) - 8
 
