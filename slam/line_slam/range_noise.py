@@ -60,12 +60,14 @@ class RangeNoiseCheck:
     def __init__(self, sigma_range_m: float) -> None:
         self.sigma_range_m = float(sigma_range_m)
         self._ratios: list[float] = []
+        self._sigma_ratio: float | None = None  # of the ratios so far, None: not computed
         self.warned = False
 
     def add(self, points: ScanPoints) -> None:
         """Count a keyframe's points (a NaN ratio, no window to measure, is left out)."""
         if math.isfinite(points.noise_ratio):
             self._ratios.append(float(points.noise_ratio))
+            self._sigma_ratio = None
 
     @property
     def keyframes(self) -> int:
@@ -77,7 +79,9 @@ class RangeNoiseCheck:
         """Square root of the median ratio; None before :data:`MIN_KEYFRAMES` keyframes."""
         if len(self._ratios) < MIN_KEYFRAMES:
             return None
-        return math.sqrt(max(float(np.median(self._ratios)), 0.0))
+        if self._sigma_ratio is None:  # once per keyframe at most, however often it is read
+            self._sigma_ratio = math.sqrt(max(float(np.median(self._ratios)), 0.0))
+        return self._sigma_ratio
 
     def warning(self) -> str | None:
         """The warning, the first time the ratio is above :data:`WARN_SIGMA_RATIO`; else None."""
