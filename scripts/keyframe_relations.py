@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from slam.evaluation.relations_metric import relation_errors
+from slam.evaluation.timestamps import match_timestamps
 from slam.io.catalog import resolve_log
+from slam.io.g2o import read_line_graph_g2o
 from slam.io.relations import read_relations
 from slam.io.tum import read_tum
 
@@ -44,23 +46,13 @@ def main() -> None:
     rel = read_relations(path)
     trajectory = read_tum(args.run / "trajectory.tum")
     t = np.asarray(trajectory.timestamps)
-    graph = (args.run / "graph.g2o").read_text(encoding="utf-8").splitlines()
-    keyframe_t = np.array([float(x.split()[2]) for x in graph if x.startswith("LINESLAM_SCAN ")])
-    order = np.argsort(t)
-
-    def nearest(stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        pos = np.clip(np.searchsorted(t[order], stamps), 1, len(t) - 1)
-        lo, hi = order[pos - 1], order[pos]
-        idx = np.where(np.abs(t[lo] - stamps) <= np.abs(t[hi] - stamps), lo, hi)
-        return idx, np.abs(t[idx] - stamps) <= STAMP_TOL_S
-
-    i1, ok1 = nearest(rel.t1)
-    i2, ok2 = nearest(rel.t2)
+    keyframe_t = read_line_graph_g2o(args.run / "graph.g2o").timestamps
+    if keyframe_t is None:
+        parser.error(f"{args.run / 'graph.g2o'}: no LINESLAM_SCAN time stamps")
+    i1, ok1 = match_timestamps(rel.t1, t, STAMP_TOL_S)
+    i2, ok2 = match_timestamps(rel.t2, t, STAMP_TOL_S)
     ok = ok1 & ok2
-    sorted_kf = np.sort(keyframe_t)
-    pos = np.clip(np.searchsorted(sorted_kf, t), 1, max(len(sorted_kf) - 1, 1))
-    gap = np.minimum(np.abs(sorted_kf[pos - 1] - t), np.abs(sorted_kf[pos] - t))
-    is_keyframe = gap <= STAMP_TOL_S
+    _, is_keyframe = match_timestamps(t, keyframe_t, STAMP_TOL_S)
     err, _ = relation_errors(trajectory.poses[i1], trajectory.poses[i2], rel)
     k1, k2 = is_keyframe[i1], is_keyframe[i2]
     print(f"{args.run}: {ok.sum()} of {len(rel.t1)} relations with both scans in the run")
