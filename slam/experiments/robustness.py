@@ -524,21 +524,22 @@ class OdometryLag(LogTransform):
 
     def _line(self, tokens: list[str], where: str, state: _Pass) -> Iterator[str]:
         if state.history is None:
-            state.history = {"laser": [], "odom_before": [], "odom_last": None}
+            # laser lines' odometry poses; per laser line, the last ODOM fields before it
+            state.history = {"laser": [], "odom_before": [], "odom_first": None, "odom_last": None}
         history = state.history
         if tokens[0] == "ODOM":
             if len(tokens) < 8:
                 raise LogFormatError("ODOM with fewer than 8 fields", where)
             _pose(tokens, 1, where)
-            own = tokens[1:6]
-            if history["odom_last"] is None:
-                history["first_odom"] = own
+            own = tokens[1:6]  # x y theta tv rv
+            history["odom_first"] = history["odom_first"] or own
             history["odom_last"] = own
             k = len(history["laser"]) - self.scans
-            before: list[str] | None = own  # no lag: this line itself
-            if k < len(history["odom_before"]):
-                before = history["odom_before"][k] if k >= 0 else None
-            tokens[1:6] = before if before is not None else history["first_odom"]
+            if k >= len(history["odom_before"]):  # no lag: this line itself
+                delayed = own
+            else:
+                delayed = (history["odom_before"][k] if k >= 0 else None) or history["odom_first"]
+            tokens[1:6] = delayed
         elif tokens[0] == "FLASER":
             n = _flaser_beams(tokens, where)
             laser = _pose(tokens, 2 + n, where)
