@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from carmen_lines import flaser, odom, robotlaser
+from carmen_lines import flaser, odom, rawlaser, robotlaser
 
 from slam.errors import ConfigError, LogFormatError
 from slam.io import iter_scans
@@ -213,3 +213,58 @@ def test_a_results_folder_is_evaluated_from_any_working_directory(tmp_path, monk
     assert summary["log"] == str(tmp_path / "data" / "log.clf")
     written = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert written["log"] == written["input"]["log"] == str(tmp_path / "data" / "log.clf")
+
+
+def _with_fov(line: str, fov: float, resolution: float | None = None) -> str:
+    """A ROBOTLASER1/RAWLASER line with its field_of_view (and resolution) replaced."""
+    tokens = line.split()
+    tokens[3] = f"{fov:.6f}"
+    if resolution is not None:
+        tokens[4] = f"{resolution:.6f}"
+    return " ".join(tokens)
+
+
+RES = np.pi / 180.0
+_FLAT = [0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize(
+    ("fov", "resolution"),
+    [
+        (np.pi, 1.0),  # the resolution in degrees: the beams would sweep 180 rad
+        (np.pi / 2.0, RES),  # half the beams' sweep
+        (2.0 * np.pi, RES),  # twice it
+    ],
+)
+@pytest.mark.parametrize("kind", ["ROBOTLASER1", "RAWLASER1"])
+def test_a_field_of_view_not_fitting_the_beams_names_the_line(tmp_path, kind, fov, resolution):
+    if kind == "ROBOTLASER1":
+        line = robotlaser(RANGES, -np.pi / 2.0, RES, 80.0, _FLAT, _FLAT, 1.0)
+    else:
+        line = rawlaser(RANGES, -np.pi / 2.0, RES, 80.0, 1.0)
+    path = write(tmp_path, [odom(_FLAT, 0.5), _with_fov(line, fov, resolution)])
+    with pytest.raises(LogFormatError, match=rf"{path}:2: {kind}: field_of_view .* 180 readings"):
+        list(CarmenReader(path).messages())
+    reader = CarmenReader(path, lenient=True)
+    assert list(reader.scans()) == []
+    assert reader.stats.malformed == 1
+    assert reader.stats.malformed_lines[0][0] == 2
+
+
+@pytest.mark.parametrize(
+    "fov",
+    [
+        179 * RES,  # CARMEN's SICK driver: (n - 1)·resolution
+        180 * RES,  # n·resolution
+        180 * RES + 0.4 * RES,  # a Hokuyo's field of view cut to whole beams
+        178.5 * RES,
+        0.0,  # not stated
+        -1.0,
+    ],
+)
+def test_a_field_of_view_within_a_beam_of_the_beams_sweep_is_read(tmp_path, fov):
+    line = robotlaser(RANGES, -np.pi / 2.0, RES, 80.0, _FLAT, _FLAT, 1.0)
+    path = write(tmp_path, [_with_fov(line, fov)])
+    (scan,) = iter_scans(path)
+    # the line's numbers are written with 6 decimals
+    np.testing.assert_allclose(scan.bearings, -np.pi / 2.0 + RES * np.arange(180), atol=1e-4)

@@ -54,8 +54,12 @@ CARMEN's ``carmen_laser_guess_fov`` rule with a range limit of 80 m (:mod:`slam.
 :class:`~slam.io.laser.LaserGeometry` passed in is used for ``FLASER``/``RLASER`` lines; its
 ``n_beams``, when set, must match every line.  ``ROBOTLASER1``/``RAWLASER`` lines always use
 their own start angle, resolution and maximum range: beam ``i`` lies at ``start_angle + i ·
-resolution`` (the ``fov`` field is not used), and a maximum range that is not positive and
-finite is taken as unstated (the geometry's, else 80 m).
+resolution``, and a maximum range that is not positive and finite is taken as unstated (the
+geometry's, else 80 m).  The ``fov`` field only checks them: CARMEN writes ``(n − 1) ·
+resolution`` (its SICK driver: 181 beams over π; its Hokuyo driver cuts the field of view to
+whole beams), other writers ``n · resolution``; a ``fov`` more than one resolution outside both
+(in a line of two readings or more) makes the line malformed (below).  A ``fov`` that is not
+positive is taken as unstated.
 
 The log's own parameters
 ------------------------
@@ -82,8 +86,9 @@ Bad input
 ---------
 A line that cannot be read (wrong field count, truncated, text in a number field, a NaN or
 negative range, a non-finite pose or time stamp, a pose coordinate beyond
-:data:`MAX_POSE_COORDINATE_M`, a time stamp beyond :data:`MAX_TIMESTAMP_S`) raises
-:class:`~slam.errors.LogFormatError` naming the file and 1-based line number. With
+:data:`MAX_POSE_COORDINATE_M`, a time stamp beyond :data:`MAX_TIMESTAMP_S`, a ``fov`` that
+does not fit the readings) raises :class:`~slam.errors.LogFormatError` naming the file and
+1-based line number. With
 ``lenient=True`` the line is skipped and counted (``CarmenStats.malformed``, first lines kept
 in ``malformed_lines``); the scan indices stay contiguous. ``+inf`` ranges are accepted (no
 return). An empty or binary file, or a text file with no CARMEN message in it, is an error in
@@ -413,6 +418,23 @@ def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
     )
 
 
+def _check_fov(fov: float, resolution: float, n: int, kind: str) -> None:
+    """A stated ``fov`` (> 0) lies within one beam of ``(n − 1)`` or ``n`` resolutions (``n ≥ 2``).
+
+    CARMEN's SICK driver states ``fov = (n − 1)·resolution`` (181 beams over π), its Hokuyo
+    driver cuts the field of view to whole beams (``(n − 1)`` or ``n`` resolutions, short by
+    less than one), other writers ``n·resolution``: a ``fov`` beyond ``[(n − 2), (n + 1)]``
+    resolutions says the resolution, the field of view or the beam count is wrong (a
+    resolution in degrees sweeps the beams over 180 rad), and the bearings cannot be trusted.
+    """
+    if fov > 0.0 and n >= 2 and not (n - 2) * resolution <= fov <= (n + 1) * resolution:
+        raise _LineError(
+            f"{kind}: field_of_view {fov!r} rad does not fit {n} readings {resolution!r} rad "
+            f"apart ({(n - 1) * resolution:.6g} or {n * resolution:.6g} rad, within one "
+            "reading): wrong angular_resolution (degrees?), field_of_view or num_readings"
+        )
+
+
 def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Parsed:
     """ROBOTLASER1 and RAWLASER1..4: the message carries its own geometry."""
     kind = tokens[0]
@@ -421,10 +443,11 @@ def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
         raise _LineError(f"{kind}: only {len(tokens)} fields (truncated line)")
     header = _floats(tokens[1:8], f"{kind} header")
     _check_finite(header, kind, "laser_type .. remission_mode")
-    start_angle, _fov, resolution, max_range = (float(v) for v in header[1:5])
+    start_angle, fov, resolution, max_range = (float(v) for v in header[1:5])
     if not resolution > 0.0:
         raise _LineError(f"{kind}: angular_resolution must be > 0 rad, got {resolution!r}")
     n = _count(tokens[8], f"{kind} num_readings")
+    _check_fov(fov, resolution, n, kind)
     if len(tokens) < 10 + n:
         raise _LineError(f"{kind} with {n} readings is truncated ({len(tokens)} fields)")
     m = _count(tokens[9 + n], f"{kind} num_remissions")
