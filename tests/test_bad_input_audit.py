@@ -268,3 +268,18 @@ def test_a_field_of_view_within_a_beam_of_the_beams_sweep_is_read(tmp_path, fov)
     (scan,) = iter_scans(path)
     # the line's numbers are written with 6 decimals
     np.testing.assert_allclose(scan.bearings, -np.pi / 2.0 + RES * np.arange(180), atol=1e-4)
+
+
+@pytest.mark.parametrize("which", ["ranges", "bearings", "max_range_m"])
+def test_extract_lines_batch_refuses_complex_arrays(which):
+    # numpy would drop the imaginary part with only a warning, and the lines be of the real part
+    from linefit import InputError, extract_lines_batch
+    from linefit.batch import extract_lines_batch_numpy
+
+    phi = np.radians(np.arange(-30.0, 31.0))
+    d = np.tile(2.0 / np.cos(phi), (2, 1))
+    args = {"ranges": d, "bearings": np.tile(phi, (2, 1)), "max_range_m": np.array([8.0, 8.0])}
+    args[which] = args[which] + 1j
+    for extract in (extract_lines_batch, extract_lines_batch_numpy):
+        with pytest.raises(InputError, match=f"{which} must be real numbers"):
+            extract(args["ranges"], args["bearings"], max_range_m=args["max_range_m"])
