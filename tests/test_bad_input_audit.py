@@ -283,3 +283,43 @@ def test_extract_lines_batch_refuses_complex_arrays(which):
     for extract in (extract_lines_batch, extract_lines_batch_numpy):
         with pytest.raises(InputError, match=f"{which} must be real numbers"):
             extract(args["ranges"], args["bearings"], max_range_m=args["max_range_m"])
+
+
+@pytest.mark.parametrize(
+    ("value", "shown"),
+    [
+        (1e200, "1e+200"),
+        (2e5, "200000"),
+        (np.nan, "nan"),
+        (np.inf, "inf"),
+        (0.0, "0"),
+        (-0.01, "-0.01"),
+    ],
+)
+@pytest.mark.parametrize("batch", [False, True])
+def test_a_sigma_range_fn_value_that_is_no_standard_deviation_is_named(value, shown, batch):
+    # 1e200 squared overflows: numpy warned and the scan had no line
+    import re
+    import warnings
+
+    from linefit import InputError, extract_lines, extract_lines_batch
+
+    phi = np.radians(np.arange(-30.0, 31.0))
+    d = 2.0 / np.cos(phi)
+
+    def sigma(r):  # fine up to 2.2 m, the bad value beyond (the first beam, 2.3094 m)
+        return np.where(r > 2.2, value, 0.01)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no numpy warning on the way
+        with pytest.raises(
+            InputError, match=rf"sigma_range_fn returned {re.escape(shown)} m for range 2\.3094 m"
+        ):
+            if batch:
+                extract_lines_batch(d[None, :], phi, sigma_range_fn=sigma)
+            else:
+                extract_lines(d, phi, sigma_range_fn=sigma)
+        # within the bound: lines, as before
+        assert (
+            len(extract_lines(d, phi, sigma_range_fn=lambda r: np.where(r > 2.2, 1e5, 0.01))) == 1
+        )
