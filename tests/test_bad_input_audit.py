@@ -228,27 +228,40 @@ RES = np.pi / 180.0
 _FLAT = [0.0, 0.0, 0.0]
 
 
-@pytest.mark.parametrize(
-    ("fov", "resolution"),
-    [
-        (np.pi, 1.0),  # the resolution in degrees: the beams would sweep 180 rad
-        (np.pi / 2.0, RES),  # half the beams' sweep
-        (2.0 * np.pi, RES),  # twice it
-    ],
-)
 @pytest.mark.parametrize("kind", ["ROBOTLASER1", "RAWLASER1"])
-def test_a_field_of_view_not_fitting_the_beams_names_the_line(tmp_path, kind, fov, resolution):
+def test_beams_sweeping_more_than_a_full_turn_name_the_line(tmp_path, kind):
+    # the resolution written in degrees: 180 beams 1 rad apart
     if kind == "ROBOTLASER1":
-        line = robotlaser(RANGES, -np.pi / 2.0, RES, 80.0, _FLAT, _FLAT, 1.0)
+        line = robotlaser(RANGES, -np.pi / 2.0, 1.0, 80.0, _FLAT, _FLAT, 1.0)
     else:
-        line = rawlaser(RANGES, -np.pi / 2.0, RES, 80.0, 1.0)
-    path = write(tmp_path, [odom(_FLAT, 0.5), _with_fov(line, fov, resolution)])
-    with pytest.raises(LogFormatError, match=rf"{path}:2: {kind}: field_of_view .* 180 readings"):
+        line = rawlaser(RANGES, -np.pi / 2.0, 1.0, 80.0, 1.0)
+    path = write(tmp_path, [odom(_FLAT, 0.5), line])
+    with pytest.raises(LogFormatError, match=rf"{path}:2: {kind}: 180 readings .* full turn"):
         list(CarmenReader(path).messages())
     reader = CarmenReader(path, lenient=True)
     assert list(reader.scans()) == []
     assert reader.stats.malformed == 1
     assert reader.stats.malformed_lines[0][0] == 2
+
+
+@pytest.mark.parametrize("fov", [np.pi / 2.0, 2.0 * np.pi])  # half, twice the beams' sweep
+@pytest.mark.parametrize("kind", ["ROBOTLASER1", "RAWLASER1"])
+def test_a_field_of_view_not_fitting_the_beams_is_an_anomaly_naming_the_line(tmp_path, kind, fov):
+    # e.g. a driver that caps the beam count but writes the configured field of view: the
+    # bearings follow the start angle and resolution, and the user hears of the mismatch
+    if kind == "ROBOTLASER1":
+        line = robotlaser(RANGES, -np.pi / 2.0, RES, 80.0, _FLAT, _FLAT, 1.0)
+    else:
+        line = rawlaser(RANGES, -np.pi / 2.0, RES, 80.0, 1.0)
+    path = write(tmp_path, [odom(_FLAT, 0.5), _with_fov(line, fov)])
+    with pytest.raises(LogFormatError, match=rf"{path}:2: field of view .*{kind}: field_of_view"):
+        list(CarmenReader(path, strict=True).messages())
+    reader = CarmenReader(path)
+    (scan,) = reader.scans()
+    np.testing.assert_allclose(scan.bearings, -np.pi / 2.0 + RES * np.arange(180), atol=1e-4)
+    assert reader.stats.anomalies.counts["fov_mismatch"] == 1
+    assert reader.stats.anomalies.first["fov_mismatch"][0] == 2
+    assert reader.stats.malformed == 0
 
 
 @pytest.mark.parametrize(
@@ -265,7 +278,8 @@ def test_a_field_of_view_not_fitting_the_beams_names_the_line(tmp_path, kind, fo
 def test_a_field_of_view_within_a_beam_of_the_beams_sweep_is_read(tmp_path, fov):
     line = robotlaser(RANGES, -np.pi / 2.0, RES, 80.0, _FLAT, _FLAT, 1.0)
     path = write(tmp_path, [_with_fov(line, fov)])
-    (scan,) = iter_scans(path)
+    reader = CarmenReader(path, strict=True)
+    (scan,) = reader.scans()
     # the line's numbers are written with 6 decimals
     np.testing.assert_allclose(scan.bearings, -np.pi / 2.0 + RES * np.arange(180), atol=1e-4)
 

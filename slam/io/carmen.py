@@ -57,9 +57,12 @@ their own start angle, resolution and maximum range: beam ``i`` lies at ``start_
 resolution``, and a maximum range that is not positive and finite is taken as unstated (the
 geometry's, else 80 m).  The ``fov`` field only checks them: CARMEN writes ``(n − 1) ·
 resolution`` (its SICK driver: 181 beams over π; its Hokuyo driver cuts the field of view to
-whole beams), other writers ``n · resolution``; a ``fov`` more than one resolution outside both
-(in a line of two readings or more) makes the line malformed (below).  A ``fov`` that is not
-positive is taken as unstated.
+whole beams), other writers ``n · resolution``; a stated ``fov`` (positive) more than one
+resolution outside both (in a line of two readings or more) is a log anomaly
+(``fov_mismatch``, :mod:`slam.io.anomalies`: warned and counted, an error with ``strict``) and
+the bearings stay ``start_angle + i · resolution``.  Beams that would sweep more than a full
+turn (``(n − 1) · resolution > 2π``, e.g. a resolution written in degrees) make the line
+malformed (below).
 
 The log's own parameters
 ------------------------
@@ -86,8 +89,8 @@ Bad input
 ---------
 A line that cannot be read (wrong field count, truncated, text in a number field, a NaN or
 negative range, a non-finite pose or time stamp, a pose coordinate beyond
-:data:`MAX_POSE_COORDINATE_M`, a time stamp beyond :data:`MAX_TIMESTAMP_S`, a ``fov`` that
-does not fit the readings) raises :class:`~slam.errors.LogFormatError` naming the file and
+:data:`MAX_POSE_COORDINATE_M`, a time stamp beyond :data:`MAX_TIMESTAMP_S`, beams sweeping
+more than a full turn) raises :class:`~slam.errors.LogFormatError` naming the file and
 1-based line number. With
 ``lenient=True`` the line is skipped and counted (``CarmenStats.malformed``, first lines kept
 in ``malformed_lines``); the scan indices stay contiguous. ``+inf`` ranges are accepted (no
@@ -381,6 +384,7 @@ class _Parsed:
     pose_odom_base: FloatArray | None
     pose_odom_laser: FloatArray | None
     tail: int  # fields after ipc_timestamp (hostname, logger_timestamp)
+    fov_mismatch: str | None = None  # a stated fov that does not fit the beams (an anomaly)
 
 
 def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Parsed:
@@ -418,21 +422,21 @@ def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
     )
 
 
-def _check_fov(fov: float, resolution: float, n: int, kind: str) -> None:
-    """A stated ``fov`` (> 0) lies within one beam of ``(n − 1)`` or ``n`` resolutions (``n ≥ 2``).
+def _fov_mismatch(fov: float, resolution: float, n: int) -> str | None:
+    """Why a stated ``fov`` (> 0) is not within one beam of ``(n − 1)`` or ``n`` resolutions.
 
     CARMEN's SICK driver states ``fov = (n − 1)·resolution`` (181 beams over π), its Hokuyo
     driver cuts the field of view to whole beams (``(n − 1)`` or ``n`` resolutions, short by
-    less than one), other writers ``n·resolution``: a ``fov`` beyond ``[(n − 2), (n + 1)]``
-    resolutions says the resolution, the field of view or the beam count is wrong (a
-    resolution in degrees sweeps the beams over 180 rad), and the bearings cannot be trusted.
+    less than one), other writers ``n·resolution``.  None when it fits, is not stated
+    (``fov ≤ 0``) or the line has fewer than two readings.
     """
     if fov > 0.0 and n >= 2 and not (n - 2) * resolution <= fov <= (n + 1) * resolution:
-        raise _LineError(
-            f"{kind}: field_of_view {fov!r} rad does not fit {n} readings {resolution!r} rad "
-            f"apart ({(n - 1) * resolution:.6g} or {n * resolution:.6g} rad, within one "
-            "reading): wrong angular_resolution (degrees?), field_of_view or num_readings"
+        return (
+            f"field_of_view {fov:.6g} rad, {n} readings {resolution:.6g} rad apart "
+            f"({(n - 1) * resolution:.6g} or {n * resolution:.6g} rad expected); bearings from "
+            "start_angle + i * angular_resolution"
         )
+    return None
 
 
 def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Parsed:
@@ -447,7 +451,11 @@ def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
     if not resolution > 0.0:
         raise _LineError(f"{kind}: angular_resolution must be > 0 rad, got {resolution!r}")
     n = _count(tokens[8], f"{kind} num_readings")
-    _check_fov(fov, resolution, n, kind)
+    if (n - 1) * resolution > 2.0 * math.pi * (1.0 + 1e-9):
+        raise _LineError(
+            f"{kind}: {n} readings {resolution!r} rad apart sweep {(n - 1) * resolution:.6g} "
+            "rad, more than a full turn (angular_resolution in degrees?)"
+        )
     if len(tokens) < 10 + n:
         raise _LineError(f"{kind} with {n} readings is truncated ({len(tokens)} fields)")
     m = _count(tokens[9 + n], f"{kind} num_remissions")
@@ -479,6 +487,7 @@ def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
         pose_odom_base=rest[3:6] if robot else None,
         pose_odom_laser=rest[0:3] if robot else None,
         tail=len(tokens) - need,
+        fov_mismatch=_fov_mismatch(fov, resolution, n),
     )
 
 
@@ -861,6 +870,8 @@ class CarmenReader:
                         )
                     tails[kind] = parsed.tail
                     _check_last_stamp(tokens, parsed.tail, last, stamp_decimals)
+                    if parsed.fov_mismatch is not None:
+                        anomalies.add("fov_mismatch", line_number, f"{kind}: {parsed.fov_mismatch}")
                     anomalies.scan(
                         parsed.timestamp,
                         parsed.pose_odom_base
