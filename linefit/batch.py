@@ -71,8 +71,9 @@ def extract_lines_batch(
     Raises
     ------
     InputError
-        Bad arrays (:func:`linefit.readings.check_batch`), or readings beyond any laser's
-        reach without a range limit (:func:`linefit.readings.check_reach`).
+        Bad arrays (:func:`linefit.readings.check_batch`), readings beyond any laser's reach
+        without a range limit (:func:`linefit.readings.check_reach`), or a ``sigma_range_fn``
+        value that is no standard deviation (:func:`linefit.noise.range_sigma`).
     ConfigError
         ``config`` is not a :class:`LineFitConfig`.
     """

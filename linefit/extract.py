@@ -99,7 +99,9 @@ def extract_lines(
     InputError
         Mismatched or non-1-D arrays, non-numeric values, non-finite or non-monotonic
         bearings, bearings sweeping more than a full turn (degrees given for radians),
-        readings beyond any laser's reach (over 1e5 m) when nothing limits the range.
+        readings beyond any laser's reach (over 1e5 m) when nothing limits the range, a
+        ``sigma_range_fn`` value that is not finite, ``> 0`` and at most 1e5 m
+        (:func:`linefit.noise.range_sigma`).
     ConfigError
         ``config`` is not a :class:`LineFitConfig`.
 

@@ -11,7 +11,8 @@ with the beam direction ``b = (cos φ, sin φ)`` and its perpendicular ``p = (�
 ``D, Φ``, as the paper recommends).
 
 ``σ_d`` may depend on the range: ``σ_d(d) = sigma_range_m + sigma_range_per_m · d`` from the
-configuration, or any vectorised callable ``sigma_range_fn(d) -> σ_d`` passed directly.
+configuration, or any vectorised callable ``sigma_range_fn(d) -> σ_d`` passed directly (its
+values must be finite, ``> 0`` and at most :data:`MAX_SIGMA_RANGE_M`, else :class:`InputError`).
 
 The three distinct entries ``(Q11, Q12, Q22)`` are what the fitting code uses (flat arrays,
 no 2×2 matrices in the inner loops); :func:`point_covariances` returns the ``(n, 2, 2)`` stack.
@@ -28,6 +29,7 @@ from linefit.config import SensorNoiseConfig
 from linefit.errors import InputError
 
 __all__ = [
+    "MAX_SIGMA_RANGE_M",
     "SigmaRangeFn",
     "point_covariance_entries",
     "point_covariances",
@@ -36,6 +38,13 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 SigmaRangeFn = Callable[[FloatArray], FloatArray]
+
+MAX_SIGMA_RANGE_M = 1.0e5
+"""Largest ``σ_d`` (m) a ``sigma_range_fn`` may return: any laser's reach, the bound of
+:data:`linefit.readings.MAX_READING_M`.  A reading whose standard deviation exceeds it measures
+no surface at all, so a larger value is a bug or a sentinel, never a standard deviation
+(``1e200`` squared overflows: numpy warned and the scan silently had no line); up to it,
+``σ_d² ≤ 1e10 m²`` and the fit's products stay far from overflow."""
 
 
 def range_sigma(
@@ -63,7 +72,9 @@ def range_sigma(
     Raises
     ------
     InputError
-        If ``sigma_range_fn`` returns a wrong shape, a non-finite or a non-positive value.
+        If ``sigma_range_fn`` returns a wrong shape, or a value that is not finite, ``> 0`` and
+        at most :data:`MAX_SIGMA_RANGE_M` (the message names the first such value and its
+        range).
     """
     d = np.asarray(ranges, dtype=float)
     if sigma_range_fn is None:
@@ -75,8 +86,14 @@ def range_sigma(
     if raw.shape != d.shape and raw.size != 1:
         raise InputError(f"sigma_range_fn returned shape {raw.shape} for ranges of shape {d.shape}")
     sigma = np.broadcast_to(raw.reshape(-1)[0] if raw.shape != d.shape else raw, d.shape)
-    if not np.all(np.isfinite(sigma) & (sigma > 0.0)):
-        raise InputError("sigma_range_fn must return finite, positive standard deviations")
+    ok = (sigma > 0.0) & (sigma <= MAX_SIGMA_RANGE_M)  # False for NaN and inf
+    if not ok.all():
+        i = int(np.flatnonzero(~ok.ravel())[0])
+        value, at = float(sigma.reshape(-1)[i]), float(d.reshape(-1)[i])
+        raise InputError(
+            f"sigma_range_fn returned {value:g} m for range {at:g} m: a range standard "
+            f"deviation must be finite, > 0 and at most {MAX_SIGMA_RANGE_M:g} m"
+        )
     return sigma
 
 

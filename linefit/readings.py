@@ -15,10 +15,22 @@ from linefit.errors import InputError
 from linefit.fit import PointSet
 from linefit.noise import SigmaRangeFn, point_covariance_entries, range_sigma
 
-__all__ = ["as_vector", "check_batch", "scan_points", "valid_readings"]
+__all__ = ["as_vector", "check_batch", "check_real", "scan_points", "valid_readings"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
+
+
+def check_real(values: ArrayLike, name: str) -> None:
+    """Refuse complex ``values`` (numpy would drop the imaginary part with only a warning).
+
+    Raises
+    ------
+    InputError
+        ``"{name} must be real numbers, got complex values"``.
+    """
+    if np.iscomplexobj(values):
+        raise InputError(f"{name} must be real numbers, got complex values")
 
 
 def as_vector(values: ArrayLike, name: str) -> FloatArray:
@@ -40,8 +52,7 @@ def as_vector(values: ArrayLike, name: str) -> FloatArray:
     InputError
         Non-numeric or complex values, or not one-dimensional.
     """
-    if np.iscomplexobj(values):  # numpy would drop the imaginary part with only a warning
-        raise InputError(f"{name} must be real numbers, got complex values")
+    check_real(values, name)
     try:
         arr = np.asarray(values, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -77,8 +88,12 @@ def check_batch(
     InputError
         Non-numeric values, wrong shapes, non-finite or non-monotonic bearings (per scan;
         wrapping past ±π is allowed), bearings sweeping more than a full turn (degrees given
-        for radians), non-positive maximum range.
+        for radians), non-positive maximum range, complex values.
     """
+    check_real(ranges, "ranges")
+    check_real(bearings, "bearings")
+    if max_range_m is not None:
+        check_real(max_range_m, "max_range_m")
     try:
         d = np.asarray(ranges, dtype=float)
         phi = np.asarray(bearings, dtype=float)

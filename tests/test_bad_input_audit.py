@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from carmen_lines import flaser, odom, robotlaser
+from carmen_lines import flaser, odom, rawlaser, robotlaser
 
 from slam.errors import ConfigError, LogFormatError
 from slam.io import iter_scans
@@ -213,3 +213,127 @@ def test_a_results_folder_is_evaluated_from_any_working_directory(tmp_path, monk
     assert summary["log"] == str(tmp_path / "data" / "log.clf")
     written = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert written["log"] == written["input"]["log"] == str(tmp_path / "data" / "log.clf")
+
+
+def _with_fov(line: str, fov: float, resolution: float | None = None) -> str:
+    """A ROBOTLASER1/RAWLASER line with its field_of_view (and resolution) replaced."""
+    tokens = line.split()
+    tokens[3] = f"{fov:.6f}"
+    if resolution is not None:
+        tokens[4] = f"{resolution:.6f}"
+    return " ".join(tokens)
+
+
+RES = np.pi / 180.0
+_FLAT = [0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("kind", ["ROBOTLASER1", "RAWLASER1"])
+def test_beams_sweeping_more_than_a_full_turn_name_the_line(tmp_path, kind):
+    # the resolution written in degrees: 180 beams 1 rad apart
+    if kind == "ROBOTLASER1":
+        line = robotlaser(RANGES, -np.pi / 2.0, 1.0, 80.0, _FLAT, _FLAT, 1.0)
+    else:
+        line = rawlaser(RANGES, -np.pi / 2.0, 1.0, 80.0, 1.0)
+    path = write(tmp_path, [odom(_FLAT, 0.5), line])
+    with pytest.raises(LogFormatError, match=rf"{path}:2: {kind}: 180 readings .* full turn"):
+        list(CarmenReader(path).messages())
+    reader = CarmenReader(path, lenient=True)
+    assert list(reader.scans()) == []
+    assert reader.stats.malformed == 1
+    assert reader.stats.malformed_lines[0][0] == 2
+
+
+@pytest.mark.parametrize("fov", [np.pi / 2.0, 2.0 * np.pi])  # half, twice the beams' sweep
+@pytest.mark.parametrize("kind", ["ROBOTLASER1", "RAWLASER1"])
+def test_a_field_of_view_not_fitting_the_beams_is_an_anomaly_naming_the_line(tmp_path, kind, fov):
+    # e.g. a driver that caps the beam count but writes the configured field of view: the
+    # bearings follow the start angle and resolution, and the user hears of the mismatch
+    if kind == "ROBOTLASER1":
+        line = robotlaser(RANGES, -np.pi / 2.0, RES, 80.0, _FLAT, _FLAT, 1.0)
+    else:
+        line = rawlaser(RANGES, -np.pi / 2.0, RES, 80.0, 1.0)
+    path = write(tmp_path, [odom(_FLAT, 0.5), _with_fov(line, fov)])
+    with pytest.raises(LogFormatError, match=rf"{path}:2: field of view .*{kind}: field_of_view"):
+        list(CarmenReader(path, strict=True).messages())
+    reader = CarmenReader(path)
+    (scan,) = reader.scans()
+    np.testing.assert_allclose(scan.bearings, -np.pi / 2.0 + RES * np.arange(180), atol=1e-4)
+    assert reader.stats.anomalies.counts["fov_mismatch"] == 1
+    assert reader.stats.anomalies.first["fov_mismatch"][0] == 2
+    assert reader.stats.malformed == 0
+
+
+@pytest.mark.parametrize(
+    "fov",
+    [
+        179 * RES,  # CARMEN's SICK driver: (n - 1)·resolution
+        180 * RES,  # n·resolution
+        180 * RES + 0.4 * RES,  # a Hokuyo's field of view cut to whole beams
+        178.5 * RES,
+        0.0,  # not stated
+        -1.0,
+    ],
+)
+def test_a_field_of_view_within_a_beam_of_the_beams_sweep_is_read(tmp_path, fov):
+    line = robotlaser(RANGES, -np.pi / 2.0, RES, 80.0, _FLAT, _FLAT, 1.0)
+    path = write(tmp_path, [_with_fov(line, fov)])
+    reader = CarmenReader(path, strict=True)
+    (scan,) = reader.scans()
+    # the line's numbers are written with 6 decimals
+    np.testing.assert_allclose(scan.bearings, -np.pi / 2.0 + RES * np.arange(180), atol=1e-4)
+
+
+@pytest.mark.parametrize("which", ["ranges", "bearings", "max_range_m"])
+def test_extract_lines_batch_refuses_complex_arrays(which):
+    # numpy would drop the imaginary part with only a warning, and the lines be of the real part
+    from linefit import InputError, extract_lines_batch
+    from linefit.batch import extract_lines_batch_numpy
+
+    phi = np.radians(np.arange(-30.0, 31.0))
+    d = np.tile(2.0 / np.cos(phi), (2, 1))
+    args = {"ranges": d, "bearings": np.tile(phi, (2, 1)), "max_range_m": np.array([8.0, 8.0])}
+    args[which] = args[which] + 1j
+    for extract in (extract_lines_batch, extract_lines_batch_numpy):
+        with pytest.raises(InputError, match=f"{which} must be real numbers"):
+            extract(args["ranges"], args["bearings"], max_range_m=args["max_range_m"])
+
+
+@pytest.mark.parametrize(
+    ("value", "shown"),
+    [
+        (1e200, "1e+200"),
+        (2e5, "200000"),
+        (np.nan, "nan"),
+        (np.inf, "inf"),
+        (0.0, "0"),
+        (-0.01, "-0.01"),
+    ],
+)
+@pytest.mark.parametrize("batch", [False, True])
+def test_a_sigma_range_fn_value_that_is_no_standard_deviation_is_named(value, shown, batch):
+    # 1e200 squared overflows: numpy warned and the scan had no line
+    import re
+    import warnings
+
+    from linefit import InputError, extract_lines, extract_lines_batch
+
+    phi = np.radians(np.arange(-30.0, 31.0))
+    d = 2.0 / np.cos(phi)
+
+    def sigma(r):  # fine up to 2.2 m, the bad value beyond (the first beam, 2.3094 m)
+        return np.where(r > 2.2, value, 0.01)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no numpy warning on the way
+        with pytest.raises(
+            InputError, match=rf"sigma_range_fn returned {re.escape(shown)} m for range 2\.3094 m"
+        ):
+            if batch:
+                extract_lines_batch(d[None, :], phi, sigma_range_fn=sigma)
+            else:
+                extract_lines(d, phi, sigma_range_fn=sigma)
+        # within the bound: lines, as before
+        assert (
+            len(extract_lines(d, phi, sigma_range_fn=lambda r: np.where(r > 2.2, 1e5, 0.01))) == 1
+        )

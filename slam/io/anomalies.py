@@ -36,6 +36,11 @@ Kinds
 ``junk_lines``
     Lines that are not CARMEN messages at all (the first word is not a message name, e.g.
     binary garbage or text pasted into the log): skipped.
+``fov_mismatch``
+    A ``ROBOTLASER1``/``RAWLASER`` line states a field of view more than one beam away from
+    both ``(n − 1)`` and ``n`` times its angular resolution (e.g. a driver that caps the beam
+    count but writes the configured field of view): its bearings are taken from its start
+    angle and resolution, the ``fov`` field is not used.
 ``malformed_lines``
     Lines that cannot be read, skipped because the reader is lenient (else they are errors).
 """
@@ -87,6 +92,7 @@ ANOMALY_KINDS = (
     "truncated_lines",
     "unknown_messages",
     "junk_lines",
+    "fov_mismatch",
     "malformed_lines",
 )
 
@@ -129,6 +135,7 @@ _SHORT = {
     "truncated_lines": "last line cut short",
     "unknown_messages": "unknown message type",
     "junk_lines": "not a CARMEN message",
+    "fov_mismatch": "field of view not the beams' sweep",
     "malformed_lines": "malformed line",
 }
 """What an anomaly is, in the error of a strict reader (``file:line: SHORT: detail``)."""
@@ -141,6 +148,7 @@ _TEXT = {
     "truncated_lines": "last line cut short, skipped",
     "unknown_messages": "line(s) of unknown message types skipped",
     "junk_lines": "line(s) that are not CARMEN messages skipped",
+    "fov_mismatch": "laser line(s) whose fov field is not their beams' sweep (fov not used)",
     "malformed_lines": "malformed line(s) skipped (lenient reading)",
 }
 """What a count of anomalies is, in the warning lines (``file: N TEXT; first at line L``)."""

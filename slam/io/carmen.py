@@ -54,8 +54,15 @@ CARMEN's ``carmen_laser_guess_fov`` rule with a range limit of 80 m (:mod:`slam.
 :class:`~slam.io.laser.LaserGeometry` passed in is used for ``FLASER``/``RLASER`` lines; its
 ``n_beams``, when set, must match every line.  ``ROBOTLASER1``/``RAWLASER`` lines always use
 their own start angle, resolution and maximum range: beam ``i`` lies at ``start_angle + i ·
-resolution`` (the ``fov`` field is not used), and a maximum range that is not positive and
-finite is taken as unstated (the geometry's, else 80 m).
+resolution``, and a maximum range that is not positive and finite is taken as unstated (the
+geometry's, else 80 m).  The ``fov`` field only checks them: CARMEN writes ``(n − 1) ·
+resolution`` (its SICK driver: 181 beams over π; its Hokuyo driver cuts the field of view to
+whole beams), other writers ``n · resolution``; a stated ``fov`` (positive) more than one
+resolution outside both (in a line of two readings or more) is a log anomaly
+(``fov_mismatch``, :mod:`slam.io.anomalies`: warned and counted, an error with ``strict``) and
+the bearings stay ``start_angle + i · resolution``.  Beams that would sweep more than a full
+turn (``(n − 1) · resolution > 2π``, e.g. a resolution written in degrees) make the line
+malformed (below).
 
 The log's own parameters
 ------------------------
@@ -82,8 +89,9 @@ Bad input
 ---------
 A line that cannot be read (wrong field count, truncated, text in a number field, a NaN or
 negative range, a non-finite pose or time stamp, a pose coordinate beyond
-:data:`MAX_POSE_COORDINATE_M`, a time stamp beyond :data:`MAX_TIMESTAMP_S`) raises
-:class:`~slam.errors.LogFormatError` naming the file and 1-based line number. With
+:data:`MAX_POSE_COORDINATE_M`, a time stamp beyond :data:`MAX_TIMESTAMP_S`, beams sweeping
+more than a full turn) raises :class:`~slam.errors.LogFormatError` naming the file and
+1-based line number. With
 ``lenient=True`` the line is skipped and counted (``CarmenStats.malformed``, first lines kept
 in ``malformed_lines``); the scan indices stay contiguous. ``+inf`` ranges are accepted (no
 return). An empty or binary file, or a text file with no CARMEN message in it, is an error in
@@ -376,6 +384,7 @@ class _Parsed:
     pose_odom_base: FloatArray | None
     pose_odom_laser: FloatArray | None
     tail: int  # fields after ipc_timestamp (hostname, logger_timestamp)
+    fov_mismatch: str | None = None  # a stated fov that does not fit the beams (an anomaly)
 
 
 def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Parsed:
@@ -413,6 +422,23 @@ def _parse_old_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
     )
 
 
+def _fov_mismatch(fov: float, resolution: float, n: int) -> str | None:
+    """Why a stated ``fov`` (> 0) is not within one beam of ``(n − 1)`` or ``n`` resolutions.
+
+    CARMEN's SICK driver states ``fov = (n − 1)·resolution`` (181 beams over π), its Hokuyo
+    driver cuts the field of view to whole beams (``(n − 1)`` or ``n`` resolutions, short by
+    less than one), other writers ``n·resolution``.  None when it fits, is not stated
+    (``fov ≤ 0``) or the line has fewer than two readings.
+    """
+    if fov > 0.0 and n >= 2 and not (n - 2) * resolution <= fov <= (n + 1) * resolution:
+        return (
+            f"field_of_view {fov:.6g} rad, {n} readings {resolution:.6g} rad apart "
+            f"({(n - 1) * resolution:.6g} or {n * resolution:.6g} rad expected); bearings from "
+            "start_angle + i * angular_resolution"
+        )
+    return None
+
+
 def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Parsed:
     """ROBOTLASER1 and RAWLASER1..4: the message carries its own geometry."""
     kind = tokens[0]
@@ -421,10 +447,15 @@ def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
         raise _LineError(f"{kind}: only {len(tokens)} fields (truncated line)")
     header = _floats(tokens[1:8], f"{kind} header")
     _check_finite(header, kind, "laser_type .. remission_mode")
-    start_angle, _fov, resolution, max_range = (float(v) for v in header[1:5])
+    start_angle, fov, resolution, max_range = (float(v) for v in header[1:5])
     if not resolution > 0.0:
         raise _LineError(f"{kind}: angular_resolution must be > 0 rad, got {resolution!r}")
     n = _count(tokens[8], f"{kind} num_readings")
+    if (n - 1) * resolution > 2.0 * math.pi * (1.0 + 1e-9):
+        raise _LineError(
+            f"{kind}: {n} readings {resolution!r} rad apart sweep {(n - 1) * resolution:.6g} "
+            "rad, more than a full turn (angular_resolution in degrees?)"
+        )
     if len(tokens) < 10 + n:
         raise _LineError(f"{kind} with {n} readings is truncated ({len(tokens)} fields)")
     m = _count(tokens[9 + n], f"{kind} num_remissions")
@@ -456,6 +487,7 @@ def _parse_new_laser(tokens: list[str], geometry: LaserGeometry | None) -> _Pars
         pose_odom_base=rest[3:6] if robot else None,
         pose_odom_laser=rest[0:3] if robot else None,
         tail=len(tokens) - need,
+        fov_mismatch=_fov_mismatch(fov, resolution, n),
     )
 
 
@@ -838,6 +870,8 @@ class CarmenReader:
                         )
                     tails[kind] = parsed.tail
                     _check_last_stamp(tokens, parsed.tail, last, stamp_decimals)
+                    if parsed.fov_mismatch is not None:
+                        anomalies.add("fov_mismatch", line_number, f"{kind}: {parsed.fov_mismatch}")
                     anomalies.scan(
                         parsed.timestamp,
                         parsed.pose_odom_base
