@@ -70,6 +70,7 @@ from slam.frontend.scan_match import (
     refine_scan,
     scale_points_information,
     scan_points,
+    scan_view,
 )
 from slam.geometry import pose_between, pose_compose, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
@@ -416,7 +417,9 @@ class LineSlam:
                         x_pred = pose_compose(g.poses[prev], match.delta)
                         contradicted = True
                         self.counters["scan_match_contradictions"] += 1
-            self._points = points
+            # the reference of the next keyframe's match and of the scans before it: what it
+            # could see, worked out once
+            self._points = None if points is None else replace(points, view=scan_view(points))
             local = LocalMap.empty()
             if K and not step.first:
                 local = build_local_map(self.book, self.drift, x_pred, cfg)
