@@ -868,10 +868,11 @@ def test_scans_between_keyframes_matched_against_their_keyframe(tmp_path):
     keyframe (``between_keyframes``) they end closer to the ground truth than composed from it
     with the odometry (the demo: 4 against 12 mm, 0.4 against 2 mrad)."""
     keyframes = {"min_distance_m": 0.6, "min_angle_rad": 0.45}
-    off = RunConfig()
-    off = replace(off, slam=replace(off.slam, keyframes=replace(off.slam.keyframes, **keyframes)))
-    on = _with_scan_matching(between_keyframes=True)
-    on = replace(on, slam=replace(on.slam, keyframes=off.slam.keyframes))
+    on = RunConfig()  # the default
+    assert on.slam.frontend.scan_matching.between_keyframes
+    on = replace(on, slam=replace(on.slam, keyframes=replace(on.slam.keyframes, **keyframes)))
+    off = _with_scan_matching(between_keyframes=False)
+    off = replace(off, slam=replace(off.slam, keyframes=on.slam.keyframes))
     s_off = run_slam(DEMO / "log.clf", tmp_path / "off", off)
     s_on = run_slam(DEMO / "log.clf", tmp_path / "on", on)
     assert s_off["scan_matches_between"] == 0

@@ -142,14 +142,14 @@ class ScanMatchConfig:
         :func:`contradicted_covariance`), or the slip component's (``slip_sigma_rad``,
         :func:`slip_covariance`; ``docs/real-logs.md``, Opt-in settings).
     between_keyframes : bool
-        Also match every scan between two keyframes against the last keyframe, from its
-        odometry since the keyframe (:func:`refine_scan`): an accepted match is the scan's
+        Match every scan between two keyframes against the last keyframe, from its odometry
+        since the keyframe (:func:`refine_scan`; the default): an accepted match is the scan's
         offset from its keyframe, with the match's covariance, in the result (the graph is
         unchanged); where the run's points scatter more than the noise model says
         (``summary.json`` ``range_noise``), the points' information in that covariance is
         divided by the ratio of the variances (:func:`scale_points_information`).  False: such
         a scan is its keyframe composed with the odometry (and the keyframes' correction
-        shared along the stretch).
+        shared along the stretch), for a few per cent less CPU time.
     """
 
     RENAMED_KEYS: ClassVar[dict[str, str]] = {
@@ -173,7 +173,7 @@ class ScanMatchConfig:
     slip_probability: float = 0.01
     slip_sigma_rad: float = 0.35
     contradicted_spread: Literal["disagreement", "slip"] = "disagreement"
-    between_keyframes: bool = False
+    between_keyframes: bool = True
 
     def __post_init__(self) -> None:
         nonneg("model_sigma_m", self.model_sigma_m)
