@@ -139,7 +139,7 @@ def test_narrow_field_of_view_keeps_its_heading_through_a_turn_on_the_spot(
     run stays within 0.06 m and 1.2° of the relations (measured 0.0449 m, 0.94°); with the
     slip component's fixed 0.35 rad (``"slip"``) a single line paired with a wall at right
     angles turns the trajectory there (measured 0.69 m, 2.3°; docs/real-logs.md, Opt-in
-    settings).
+    settings).  Both measured with ``between_keyframes = false``.
     """
     if not within:
         _skip_unless_reference_kernels()
@@ -170,7 +170,8 @@ def test_narrow_field_of_view_rejects_a_wrong_closure_judged_alone(
     (``judge_alone_both_costs``, the default): its merge lowers the loop's χ² (F −499) but
     raises its robust cost (robust F 243), and it is rejected; the excerpt stays within
     0.07 m of the relations (measured 0.041 m).  With the χ² test alone it is accepted
-    (measured 0.148 m; docs/real-logs.md, Opt-in settings).
+    (measured 0.148 m; docs/real-logs.md, Opt-in settings).  Both measured with
+    ``between_keyframes = false``.
     """
     if not within:
         _skip_unless_reference_kernels()
