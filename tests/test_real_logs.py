@@ -31,15 +31,12 @@ from slam.runner import run_slam
 # (log, scans, bound on the mean abs translational error (m), on the rotational error (deg),
 #  required ratio odometry error / our error)
 CASES = [
-    # measured 2026-11-29: 0.0219 m, 0.517°; after the batch judge 0.0204 m, 0.484°
-    # (odometry 0.189 m, 3.94°), 246 relations
-    pytest.param("intel", 2000, 0.028, 0.65, 5.0, id="intel-2000"),
-    # measured: 0.0386 m, 0.659° (the same after the batch judge; odometry 0.0356 m, 0.731°),
-    # 189 relations
-    pytest.param("aces", 1200, 0.048, 0.82, None, id="aces-1200"),
-    # measured: 0.0381 m, 0.929°; after the batch judge 0.0378 m, 0.966°
-    # (odometry 0.0461 m, 1.518°), 169 relations
-    pytest.param("fr079", 800, 0.048, 1.16, None, id="fr079-800"),
+    # measured: 0.0166 m, 0.215° (odometry 0.189 m, 3.94°), 246 relations
+    pytest.param("intel", 2000, 0.021, 0.27, 5.0, id="intel-2000"),
+    # measured: 0.0392 m, 0.322° (odometry 0.0356 m, 0.731°), 189 relations
+    pytest.param("aces", 1200, 0.048, 0.40, None, id="aces-1200"),
+    # measured: 0.0275 m, 0.382° (odometry 0.0461 m, 1.518°), 169 relations
+    pytest.param("fr079", 800, 0.034, 0.48, None, id="fr079-800"),
 ]
 
 
