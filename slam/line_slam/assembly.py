@@ -6,7 +6,8 @@
   the two keyframes and ``f`` the fraction of that stretch already driven (path, turning
   weighted by :data:`~slam.line_slam.keyframes.ANGLE_WEIGHT_M_PER_RAD`).  After the last
   keyframe: ``x_k ∘ δ_s``.  A scan matched against its keyframe
-  (``scan_matching.between_keyframes``) is ``x_k ∘ δ_s`` with ``δ_s`` the match.
+  (``scan_matching.between_keyframes``, the default, where the match is accepted) is
+  ``x_k ∘ δ_s`` with ``δ_s`` the match.
 * **Covariances** (``pose_covariances = "keyframes"``): each keyframe's marginal from the
   back-end; a non-keyframe scan's is its keyframe's moved along ``δ_s`` (adjoint) plus the
   motion noise of ``δ_s`` (a matched scan: the match's covariance).  Reported in the output
