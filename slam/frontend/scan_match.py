@@ -148,8 +148,9 @@ class ScanMatchConfig:
         unchanged); where the run's points scatter more than the noise model says
         (``summary.json`` ``range_noise``), the points' information in that covariance is
         divided by the ratio of the variances (:func:`scale_points_information`).  False: such
-        a scan is its keyframe composed with the odometry (and the keyframes' correction
-        shared along the stretch), for a few per cent less CPU time.
+        a scan is placed at its keyframe's pose composed with the odometry since (and the
+        keyframes' correction shared along the stretch), for about 9 % less CPU time on
+        Intel (``docs/benchmarks.md``).
     """
 
     RENAMED_KEYS: ClassVar[dict[str, str]] = {
