@@ -48,6 +48,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -115,6 +116,11 @@ from slam.validate import check_config
 PASS_PAIRS = 300
 """Most pairs of passes the pass error is estimated from (each costs two solves)."""
 
+MAX_STRETCH_SCANS = 256
+"""Most scans between two keyframes whose points are kept, should the next keyframe's match
+find a slip (:meth:`LineSlam._research_stretch`): a memory bound (a few MB), reached only
+where the robot stands still for a while, which makes no keyframe."""
+
 FloatArray = NDArray[np.float64]
 
 __all__ = ["COUNTERS", "LineSlam", "ScanReport", "SlamWarning"]
@@ -175,6 +181,11 @@ class LineSlam:
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
         self.odometry_calibrator = OdometryCalibrator()  # with odometry_calibration = "estimated"
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
+        # the latest scans matched since that keyframe: (scan number, points, odometry step,
+        # accepted)
+        self._stretch: deque[tuple[int, ScanPoints, OdometryStep, bool]] = deque(
+            maxlen=MAX_STRETCH_SCANS
+        )
         self.range_noise = RangeNoiseCheck(self.linefit_config.noise.sigma_range_m)
         self._warned_mirrored = False
         self.line_noise = LineModelErrorEstimator(
@@ -253,7 +264,7 @@ class LineSlam:
         scan_no = self.track.n_scans
         if not step.keyframe:
             kf = self.graph.n_poses - 1
-            offset, offset_cov = self._between_keyframes(scan, step)
+            offset, offset_cov = self._between_keyframes(scan, step, scan_no)
             self._record(scan, kf, offset, False, t_start, offset_cov)
             return ScanReport(scan_no, False, kf)
         if lines is None:
@@ -273,13 +284,15 @@ class LineSlam:
         return report
 
     def _between_keyframes(
-        self, scan: Scan, step: OdometryStep
+        self, scan: Scan, step: OdometryStep, scan_no: int
     ) -> tuple[FloatArray, FloatArray | None]:
         """A scan that is not a keyframe: its offset from the keyframe, and its covariance.
 
         The odometry's offset (covariance None: the motion model's), or with
         ``scan_matching.between_keyframes`` the scan's points matched against the keyframe's
-        from it (:func:`refine_scan`) where the match is accepted.
+        from it (:func:`refine_scan`) where the match is accepted.  The scan's points are
+        kept until the next keyframe: where that keyframe's match finds that the odometry
+        slipped, they are matched again with the search (:meth:`_research_stretch`).
         """
         smc = self.config.frontend.scan_matching
         if not (smc.enabled and smc.between_keyframes) or self._points is None:
@@ -288,14 +301,45 @@ class LineSlam:
             points = self._scan_points(scan, with_normals=False)  # matched, never a reference
             Q = self._step_covariance(step)
             match = refine_scan(self._points, points, step.delta, Q, smc)
+        self._stretch.append((scan_no, points, step, match.accepted))
         if not match.accepted:
             self.counters["scan_matches_between_rejected"] += 1
             return step.delta, None
         self.counters["scan_matches_between"] += 1
+        return match.delta, self._between_covariance(match.cov, Q)
+
+    def _between_covariance(self, cov: FloatArray, Q: FloatArray) -> FloatArray:
+        """A between scan's match covariance, its points' part scaled as the run's scatter."""
         # the points scatter as the run has measured, not as the noise model says
         ratio = self.range_noise.sigma_ratio
         factor = 1.0 if ratio is None else ratio**2
-        return match.delta, scale_points_information(match.cov, Q, factor)
+        return scale_points_information(cov, Q, factor)
+
+    def _research_stretch(self) -> None:
+        """Match the scans since the last keyframe again, with the search (:func:`match_scans`).
+
+        Called when the new keyframe's match finds that the odometry slipped since the last
+        keyframe: the odometry's offsets of the scans in between, from which
+        :func:`refine_scan` started, were then off by part of the slip, and a refinement
+        from them can settle on a rotation tens of degrees from the scan's.  Each is matched
+        as a keyframe is (the rotations searched, the slip in the prior); an accepted match
+        replaces its recorded offset (a rejected one leaves it as it was).  The latest
+        :data:`MAX_STRETCH_SCANS` scans are kept for this (a robot standing still makes no
+        keyframe; earlier scans of such a stretch keep their refined offsets).
+        """
+        assert self._points is not None
+        smc = self.config.frontend.scan_matching
+        for scan_no, points, step, accepted in self._stretch:
+            Q = self._step_covariance(step)
+            match = match_scans(self._points, points, step.delta, Q, smc)
+            self.counters["scan_matches_between_searched"] += 1
+            if not match.accepted:
+                continue
+            if not accepted:
+                self.counters["scan_matches_between_rejected"] -= 1
+                self.counters["scan_matches_between"] += 1
+            self.track.scan_offset[scan_no] = np.asarray(match.delta, dtype=float)
+            self.track.scan_offset_cov[scan_no] = self._between_covariance(match.cov, Q)
 
     def _step_covariance(self, step: OdometryStep) -> FloatArray:
         """The covariance of the odometry's motion since the last keyframe.
@@ -404,6 +448,7 @@ class LineSlam:
                     if match.slip:
                         slip = match
                         self.counters["scan_match_slips"] += 1
+                        self._research_stretch()
                 else:
                     self.counters["scan_matches_rejected"] += 1
                     if match.contradicted:
@@ -420,6 +465,7 @@ class LineSlam:
             # the reference of the next keyframe's match and of the scans before it: what it
             # could see, worked out once
             self._points = None if points is None else replace(points, view=scan_view(points))
+            self._stretch.clear()
             local = LocalMap.empty()
             if K and not step.first:
                 local = build_local_map(self.book, self.drift, x_pred, cfg)

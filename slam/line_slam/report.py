@@ -54,6 +54,7 @@ COUNTERS = (
     "scan_match_turns_against",
     "scan_matches_between",
     "scan_matches_between_rejected",
+    "scan_matches_between_searched",
     "loop_closure_attempts",
     "loop_closure_candidates",
     "loop_closures",
