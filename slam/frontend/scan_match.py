@@ -147,7 +147,9 @@ class ScanMatchConfig:
         offset from its keyframe, with the match's covariance, in the result (the graph is
         unchanged); where the run's points scatter more than the noise model says
         (``summary.json`` ``range_noise``), the points' information in that covariance is
-        divided by the ratio of the variances (:func:`scale_points_information`).  False: such
+        divided by the ratio of the variances (:func:`scale_points_information`).  Where the
+        next keyframe's match finds a slip, the scans since the last keyframe are matched
+        again with the search (:func:`match_scans`).  False: such
         a scan is placed at its keyframe's pose composed with the odometry since (and the
         keyframes' correction shared along the stretch), for about 9 % less CPU time on
         Intel (``docs/benchmarks.md``).
