@@ -147,9 +147,10 @@ class ScanMatchConfig:
         offset from its keyframe, with the match's covariance, in the result (the graph is
         unchanged); where the run's points scatter more than the noise model says
         (``summary.json`` ``range_noise``), the points' information in that covariance is
-        divided by the ratio of the variances (:func:`scale_points_information`).  Where the
-        next keyframe's match finds a slip, the scans since the last keyframe are matched
-        again with the search (:func:`match_scans`).  False: such
+        divided by the ratio of the variances (:func:`scale_points_information`).  A
+        refinement not accepted is followed by the search (:func:`match_scans`), and where
+        the next keyframe's match finds a slip, the scans since the last keyframe are
+        searched too.  False: such
         a scan is placed at its keyframe's pose composed with the odometry since (and the
         keyframes' correction shared along the stretch), for about 9 % less CPU time on
         Intel (``docs/benchmarks.md``).

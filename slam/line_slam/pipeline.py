@@ -182,8 +182,8 @@ class LineSlam:
         self.odometry_calibrator = OdometryCalibrator()  # with odometry_calibration = "estimated"
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
         # the latest scans matched since that keyframe: (scan number, points, odometry step,
-        # accepted)
-        self._stretch: deque[tuple[int, ScanPoints, OdometryStep, bool]] = deque(
+        # accepted, searched)
+        self._stretch: deque[tuple[int, ScanPoints, OdometryStep, bool, bool]] = deque(
             maxlen=MAX_STRETCH_SCANS
         )
         self.range_noise = RangeNoiseCheck(self.linefit_config.noise.sigma_range_m)
@@ -290,9 +290,11 @@ class LineSlam:
 
         The odometry's offset (covariance None: the motion model's), or with
         ``scan_matching.between_keyframes`` the scan's points matched against the keyframe's
-        from it (:func:`refine_scan`) where the match is accepted.  The scan's points are
+        from it (:func:`refine_scan`) where the match is accepted.  A refinement not accepted
+        (too little overlap: the odometry may have slipped beyond its reach) is followed by
+        the search a keyframe's match makes (:func:`match_scans`).  The scan's points are
         kept until the next keyframe: where that keyframe's match finds that the odometry
-        slipped, they are matched again with the search (:meth:`_research_stretch`).
+        slipped, the scans not yet searched are (:meth:`_research_stretch`).
         """
         smc = self.config.frontend.scan_matching
         if not (smc.enabled and smc.between_keyframes) or self._points is None:
@@ -301,7 +303,11 @@ class LineSlam:
             points = self._scan_points(scan, with_normals=False)  # matched, never a reference
             Q = self._step_covariance(step)
             match = refine_scan(self._points, points, step.delta, Q, smc)
-        self._stretch.append((scan_no, points, step, match.accepted))
+            searched = not match.accepted
+            if searched:
+                match = match_scans(self._points, points, step.delta, Q, smc)
+                self.counters["scan_matches_between_searched"] += 1
+        self._stretch.append((scan_no, points, step, match.accepted, searched))
         if not match.accepted:
             self.counters["scan_matches_between_rejected"] += 1
             return step.delta, None
@@ -321,15 +327,18 @@ class LineSlam:
         Called when the new keyframe's match finds that the odometry slipped since the last
         keyframe: the odometry's offsets of the scans in between, from which
         :func:`refine_scan` started, were then off by part of the slip, and a refinement
-        from them can settle on a rotation tens of degrees from the scan's.  Each is matched
-        as a keyframe is (the rotations searched, the slip in the prior); an accepted match
-        replaces its recorded offset (a rejected one leaves it as it was).  The latest
+        from them can settle on a rotation tens of degrees from the scan's.  Each not searched
+        already is matched as a keyframe is (the rotations searched, the slip in the prior);
+        an accepted match replaces its recorded offset (a rejected one leaves it as it was).
+        The latest
         :data:`MAX_STRETCH_SCANS` scans are kept for this (a robot standing still makes no
         keyframe; earlier scans of such a stretch keep their refined offsets).
         """
         assert self._points is not None
         smc = self.config.frontend.scan_matching
-        for scan_no, points, step, accepted in self._stretch:
+        for scan_no, points, step, accepted, searched in self._stretch:
+            if searched:
+                continue
             Q = self._step_covariance(step)
             match = match_scans(self._points, points, step.delta, Q, smc)
             self.counters["scan_matches_between_searched"] += 1
