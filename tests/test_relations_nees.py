@@ -556,3 +556,40 @@ def test_relation_error_draws_of_matched_scans(tmp_path):
     sd = np.sqrt(np.einsum("mii->mi", want))
     corr = (got - want) / (sd[:, :, None] * sd[:, None, :])
     assert np.abs(corr).max() < 0.07
+
+
+def test_lineslam_evaluate_writes_every_relation_with_per_relation(tmp_path, capsys):
+    """``--per-relation`` writes relation_errors.csv: one row per relation used, in the
+    relations file's order, whose errors and NEES average to metrics.json's; the relations
+    NEES columns are NaN with ``--no-relations-nees``; without ``--relations`` it is an
+    error, not a silent no-op."""
+    from slam.io.relations import read_relations
+
+    sim, out = tmp_path / "sim", tmp_path / "run"
+    assert _cli(["simulate", "loop", "--out", str(sim), "--spacing", "0.1", "--seed", "5",
+                 "--quiet", "--no-beam-hits"]) == 0  # fmt: skip
+    assert _cli(["slam", str(sim / "log.clf"), "--out", str(out), "--backend", "batch",
+                 "--max-scans", "120", "--quiet"]) == 0  # fmt: skip
+    relations = sim / "relations.txt"
+    assert _cli(["evaluate", str(out), "--relations", str(relations), "--per-relation"]) == 0
+    assert "relation_errors.csv" in capsys.readouterr().out
+    metrics = json.loads((out / "metrics.json").read_text())
+    rows = np.genfromtxt(out / "relation_errors.csv", delimiter=",", names=True)
+    assert rows.dtype.names == ("t1_s", "t2_s", "trans_error_m", "rot_error_deg", "nees",
+                                "nees_with_relations_noise")  # fmt: skip
+    assert rows.size == metrics["relations"]["n_used"] == metrics["relations_nees"]["n"] > 50
+    inside = read_relations(relations)
+    inside = np.isin(inside.t1, rows["t1_s"]) & np.isin(inside.t2, rows["t2_s"])
+    np.testing.assert_allclose(rows["t1_s"], read_relations(relations).t1[inside], atol=1e-6)
+    for column, key in (("trans_error_m", "abs_trans_m"), ("rot_error_deg", "abs_rot_deg")):
+        assert rows[column].mean() == pytest.approx(metrics["relations"][key]["mean"], rel=1e-6)
+    assert rows["nees"].mean() == pytest.approx(metrics["relations_nees"]["mean"], rel=1e-6)
+    with_noise = metrics["relations_nees_with_relations_noise"]["mean"]
+    assert rows["nees_with_relations_noise"].mean() == pytest.approx(with_noise, rel=1e-6)
+    assert _cli(["evaluate", str(out), "--relations", str(relations), "--per-relation",
+                 "--no-relations-nees", "--quiet"]) == 0  # fmt: skip
+    rows = np.genfromtxt(out / "relation_errors.csv", delimiter=",", names=True)
+    assert np.all(np.isnan(rows["nees"])) and np.all(np.isfinite(rows["trans_error_m"]))
+    gt = sim / "ground_truth.tum"
+    assert _cli(["evaluate", str(out), "--ground-truth", str(gt), "--per-relation"]) == 2
+    assert "--per-relation needs --relations" in capsys.readouterr().err

@@ -15,7 +15,7 @@ from slam.evaluation.report import evaluate_results
 from slam.io.carmen import scan_trajectory
 from slam.io.catalog import resolve_log
 from slam.io.relations import read_relations
-from slam.io.results import read_results, write_metrics
+from slam.io.results import read_results, write_metrics, write_relation_errors
 from slam.io.trajectory import Trajectory
 from slam.io.tum import read_ground_truth
 
@@ -118,11 +118,21 @@ def evaluate(
             "graph).",
         ),
     ] = True,
+    per_relation: Annotated[
+        bool,
+        typer.Option(
+            "--per-relation",
+            help="With --relations: also write DIR/relation_errors.csv, every relation used "
+            "with its time stamps, errors and NEES.",
+        ),
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", help="Do not print the table.")] = False,
 ) -> None:
     """Evaluate DIR/trajectory.tum; print a table and write DIR/metrics.json."""
     if relations is None and ground_truth is None:
         raise typer.BadParameter("give --relations and/or --ground-truth")
+    if per_relation and relations is None:
+        raise typer.BadParameter("--per-relation needs --relations")
     results = read_results(results_dir)
     sources: dict[str, str] = {"trajectory": str(results_dir / "trajectory.tum")}
     rel = None
@@ -179,6 +189,10 @@ def evaluate(
     if walls is not None:
         report = replace(report, walls_between_passes=walls)
     path = write_metrics(results_dir, report.to_dict())  # whole or not at all
+    rows = report.relation_rows() if per_relation else None
+    rows_path = None if rows is None else write_relation_errors(results_dir, rows)
     if not quiet:
         typer.echo(report.format_table())
         typer.echo(f"wrote {path}")
+        if rows_path is not None:
+            typer.echo(f"wrote {rows_path}")

@@ -85,6 +85,8 @@ class RelationsMetric:
         Cartographer's four lines.
     trans_errors_m, rot_errors_deg : ndarray
         Per used relation (not serialised).
+    t1_s, t2_s : ndarray
+        The used relations' time stamps, in the file's order (not serialised).
     """
 
     n_relations: int
@@ -97,6 +99,8 @@ class RelationsMetric:
     tolerance_s: float
     trans_errors_m: FloatArray = field(repr=False)
     rot_errors_deg: FloatArray = field(repr=False)
+    t1_s: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
+    t2_s: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (the per-relation errors are left out)."""
@@ -253,4 +257,6 @@ def relations_metric(
         tolerance_s=tolerance_s,
         trans_errors_m=trans,
         rot_errors_deg=rot_deg,
+        t1_s=sub.t1,
+        t2_s=sub.t2,
     )

@@ -89,6 +89,8 @@ class RelationsNees:
     single_bound_95: float
     values: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
     gaps_s: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
+    t1_s: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
+    t2_s: FloatArray = field(repr=False, default_factory=lambda: np.zeros(0))
     dof: int = 3
     one_run: CorrelatedBounds | None = None
 
@@ -208,6 +210,8 @@ def relations_nees(
         single_bound_95=single,
         values=values,
         gaps_s=np.abs(sub.t2 - sub.t1),
+        t1_s=sub.t1,
+        t2_s=sub.t2,
         one_run=one_run,
     )
 

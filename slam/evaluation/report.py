@@ -57,6 +57,35 @@ class EvaluationReport:
     #: as its ``to_dict``), when the results folder has a ``graph.g2o``.
     walls_between_passes: dict[str, Any] | None = None
 
+    def relation_rows(self) -> dict[str, FloatArray] | None:
+        """Every relation used, one entry per column (``relation_errors.csv``); None without.
+
+        Columns: ``t1_s``, ``t2_s``, ``trans_error_m`` and ``rot_error_deg`` (the relations
+        metric's), ``nees`` and ``nees_with_relations_noise`` (NaN where not computed).
+        """
+        rel = self.relations
+        if rel is None:
+            return None
+        rows: dict[str, FloatArray] = {
+            "t1_s": rel.t1_s,
+            "t2_s": rel.t2_s,
+            "trans_error_m": rel.trans_errors_m,
+            "rot_error_deg": rel.rot_errors_deg,
+        }
+        for name, q in (
+            ("nees", self.relations_nees),
+            ("nees_with_relations_noise", self.relations_nees_with_relations_noise),
+        ):
+            column = np.full(rel.t1_s.shape, np.nan)
+            if q is not None:
+                if not (np.array_equal(q.t1_s, rel.t1_s) and np.array_equal(q.t2_s, rel.t2_s)):
+                    raise EvaluationError(
+                        "the relations NEES was computed on other relations than the metric"
+                    )
+                column = q.values
+            rows[name] = column
+        return rows
+
     def to_dict(self) -> dict[str, Any]:
         """The content of ``metrics.json``."""
         out: dict[str, Any] = {"n_poses": self.n_poses, "frame": self.frame, **self.sources}

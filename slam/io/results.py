@@ -46,6 +46,7 @@ from slam.io.tum import read_tum, write_tum
 __all__ = [
     "COVARIANCE_FILE",
     "METRICS_FILE",
+    "RELATION_ERRORS_FILE",
     "SUMMARY_FILE",
     "TRAJECTORY_FILE",
     "Results",
@@ -54,6 +55,7 @@ __all__ = [
     "to_jsonable",
     "write_covariances",
     "write_metrics",
+    "write_relation_errors",
     "write_results",
     "write_summary",
     "write_trajectory",
@@ -63,6 +65,7 @@ TRAJECTORY_FILE = "trajectory.tum"
 SUMMARY_FILE = "summary.json"
 COVARIANCE_FILE = "trajectory_covariance.txt"
 METRICS_FILE = "metrics.json"
+RELATION_ERRORS_FILE = "relation_errors.csv"
 
 FloatArray = NDArray[np.float64]
 _UPPER = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
@@ -205,6 +208,27 @@ def read_results(out_dir: str | Path) -> Results:
             )
     frame = str(summary.get("frame", "laser"))
     return Results(out, trajectory, summary, frame, covariances)
+
+
+def write_relation_errors(out_dir: str | Path, columns: Mapping[str, NDArray[Any]]) -> Path:
+    """Write ``relation_errors.csv`` into ``out_dir`` (a header line, one row per relation).
+
+    ``columns``: equal-length arrays by column name, written in the given order with 9
+    significant digits (time stamps with 6 decimals); NaN as ``nan``.  Replaced whole or not
+    at all, as ``metrics.json``.
+    """
+    names = list(columns)
+    data = [np.asarray(columns[n], dtype=float) for n in names]
+    n_rows = {d.shape for d in data}
+    if len(n_rows) != 1 or len(next(iter(n_rows))) != 1:
+        raise ValueError(f"columns of different lengths or not 1-D: {sorted(n_rows)}")
+    fmt = ["%.6f" if n.endswith("_s") else "%.9g" for n in names]
+    lines = [",".join(names)]
+    for row in zip(*data, strict=True):
+        lines.append(",".join(f % v for f, v in zip(fmt, row, strict=True)))
+    path = Path(out_dir) / RELATION_ERRORS_FILE
+    write_text_atomic(path, "\n".join(lines) + "\n")
+    return path
 
 
 def write_metrics(out_dir: str | Path, metrics: Mapping[str, Any]) -> Path:
