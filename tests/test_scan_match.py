@@ -1182,3 +1182,19 @@ def test_a_contradicted_step_is_the_match_in_the_graph(tmp_path, spread, slip_de
     )
     assert spread_rad <= sigma_theta[k] < 1.1 * spread_rad
     assert np.all(np.delete(sigma_theta, k) < 0.5 * spread_rad)
+
+
+def test_a_robot_standing_still_keeps_a_bounded_stretch_of_scans():
+    """A robot that stands still makes no keyframe: its scans between keyframes are matched,
+    and the points kept for a search after a slip are the latest ``MAX_STRETCH_SCANS``."""
+    import slam.line_slam.pipeline as pipeline
+    from slam.io.carmen import iter_scans
+
+    first = next(iter(iter_scans(DEMO / "log.clf")))
+    slam = pipeline.LineSlam()
+    n = pipeline.MAX_STRETCH_SCANS + 40
+    for k in range(n + 1):
+        slam.add_scan(replace(first, timestamp=first.timestamp + 0.1 * k))
+    assert slam.counters["scan_matches_between"] == n  # every one matched, none a keyframe
+    assert len(slam._stretch) == pipeline.MAX_STRETCH_SCANS
+    assert slam._stretch[-1][0] == n  # the latest kept
