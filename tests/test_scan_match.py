@@ -1198,4 +1198,4 @@ def test_a_robot_standing_still_keeps_a_bounded_stretch_of_scans():
         slam.add_scan(replace(first, timestamp=first.timestamp + 0.1 * k))
     assert slam.counters["scan_matches_between"] == n  # every one matched, none a keyframe
     assert len(slam._stretch) == pipeline.MAX_STRETCH_SCANS
-    assert slam._stretch[-1][0] == n  # the latest kept
+    assert slam._stretch[-1].scan_no == n  # the latest kept

@@ -52,7 +52,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -123,6 +123,18 @@ where the robot stands still for a while, which makes no keyframe."""
 
 FloatArray = NDArray[np.float64]
 
+
+class _StretchScan(NamedTuple):
+    """A scan matched since the last keyframe, kept for a search after a slip."""
+
+    scan_no: int
+    points: ScanPoints
+    delta: FloatArray  # the odometry's offset from the keyframe
+    Q: FloatArray  # its covariance, the refinement's prior
+    accepted: bool
+    searched: bool
+
+
 __all__ = ["COUNTERS", "LineSlam", "ScanReport", "SlamWarning"]
 
 
@@ -181,11 +193,8 @@ class LineSlam:
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
         self.odometry_calibrator = OdometryCalibrator()  # with odometry_calibration = "estimated"
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
-        # the latest scans matched since that keyframe: (scan number, points, odometry step,
-        # accepted, searched)
-        self._stretch: deque[tuple[int, ScanPoints, OdometryStep, bool, bool]] = deque(
-            maxlen=MAX_STRETCH_SCANS
-        )
+        # the latest scans matched since that keyframe
+        self._stretch: deque[_StretchScan] = deque(maxlen=MAX_STRETCH_SCANS)
         self.range_noise = RangeNoiseCheck(self.linefit_config.noise.sigma_range_m)
         self._warned_mirrored = False
         self.line_noise = LineModelErrorEstimator(
@@ -307,7 +316,7 @@ class LineSlam:
             if searched:
                 match = match_scans(self._points, points, step.delta, Q, smc)
                 self.counters["scan_matches_between_searched"] += 1
-        self._stretch.append((scan_no, points, step, match.accepted, searched))
+        self._stretch.append(_StretchScan(scan_no, points, step.delta, Q, match.accepted, searched))
         if not match.accepted:
             self.counters["scan_matches_between_rejected"] += 1
             return step.delta, None
@@ -330,25 +339,23 @@ class LineSlam:
         from them can settle on a rotation tens of degrees from the scan's.  Each not searched
         already is matched as a keyframe is (the rotations searched, the slip in the prior);
         an accepted match replaces its recorded offset (a rejected one leaves it as it was).
-        The latest
-        :data:`MAX_STRETCH_SCANS` scans are kept for this (a robot standing still makes no
-        keyframe; earlier scans of such a stretch keep their refined offsets).
+        The latest :data:`MAX_STRETCH_SCANS` scans are kept for this (a robot standing still
+        makes no keyframe; earlier scans of such a stretch keep their refined offsets).
         """
         assert self._points is not None
         smc = self.config.frontend.scan_matching
-        for scan_no, points, step, accepted, searched in self._stretch:
-            if searched:
+        for s in self._stretch:
+            if s.searched:
                 continue
-            Q = self._step_covariance(step)
-            match = match_scans(self._points, points, step.delta, Q, smc)
+            match = match_scans(self._points, s.points, s.delta, s.Q, smc)
             self.counters["scan_matches_between_searched"] += 1
             if not match.accepted:
                 continue
-            if not accepted:
+            if not s.accepted:
                 self.counters["scan_matches_between_rejected"] -= 1
                 self.counters["scan_matches_between"] += 1
-            self.track.scan_offset[scan_no] = np.asarray(match.delta, dtype=float)
-            self.track.scan_offset_cov[scan_no] = self._between_covariance(match.cov, Q)
+            self.track.scan_offset[s.scan_no] = np.asarray(match.delta, dtype=float)
+            self.track.scan_offset_cov[s.scan_no] = self._between_covariance(match.cov, s.Q)
 
     def _step_covariance(self, step: OdometryStep) -> FloatArray:
         """The covariance of the odometry's motion since the last keyframe.
