@@ -33,6 +33,7 @@ import numpy.
 
 from __future__ import annotations
 
+import importlib
 import os
 import platform
 import sys
@@ -185,11 +186,12 @@ def kernels_in_use() -> dict[str, Any]:
         if info.get("user_api") == "blas"
     ]
     try:
-        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+        umath = importlib.import_module("numpy._core._multiarray_umath")
     except ImportError:  # numpy before 2.0
         loops: list[str] = []
     else:
-        loops = [str(name) for name in __cpu_dispatch__ if __cpu_features__.get(name)]
+        features = getattr(umath, "__cpu_features__", {})
+        loops = [str(n) for n in getattr(umath, "__cpu_dispatch__", ()) if features.get(n)]
     return {
         "selection": selection,
         "libraries": libraries,

@@ -11,7 +11,14 @@ import sys
 import pytest
 
 import slam.blas
-from slam.blas import CORETYPE, cpu_flags, kernels_in_use, selection_reason
+from slam.blas import (
+    CORETYPE,
+    NUMPY_DISABLED,
+    cpu_flags,
+    kernels_in_use,
+    numpy_reason,
+    selection_reason,
+)
 
 CAPABLE = frozenset({"sse2", "avx", "avx2", "fma", "avx512f"})
 
@@ -84,7 +91,11 @@ CAN_SELECT = selection_reason({}, False, platform.machine(), cpu_flags())
 
 @pytest.mark.skipif(CAN_SELECT != "selected", reason=CAN_SELECT)
 def test_import_order_decides_the_kernels():
-    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_CORETYPE",)}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES")
+    }
     first = _kernels_in_fresh_process("import slam, numpy", env)
     assert first["selection"] == "selected"
     assert {lib["architecture"] for lib in first["libraries"]} == {CORETYPE}
@@ -92,3 +103,36 @@ def test_import_order_decides_the_kernels():
     assert "numpy was imported" in late["selection"]
     native = _kernels_in_fresh_process("import slam", {**env, "LINESLAM_NATIVE_BLAS": "1"})
     assert "LINESLAM_NATIVE_BLAS" in native["selection"]
+
+
+def test_numpy_reason_known_answers():
+    assert numpy_reason({}, (2, 4)) == "selected"
+    assert numpy_reason({}, (3, 0)) == "selected"
+    # older numpy names its loops differently; an unknown version is left alone
+    assert "before 2.4" in numpy_reason({}, (2, 3))
+    assert "before 2.4" in numpy_reason({}, None)
+    # the user's own choice wins
+    assert "NPY_DISABLE_CPU_FEATURES=AVX2" in numpy_reason(
+        {"NPY_DISABLE_CPU_FEATURES": "AVX2"}, (2, 4)
+    )
+
+
+@pytest.mark.skipif(CAN_SELECT != "selected", reason=CAN_SELECT)
+def test_numpy_avx512_loops_are_off_with_the_kernels():
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES", "LINESLAM_NATIVE_BLAS")
+    }
+    run = _kernels_in_fresh_process("import slam, numpy", env)
+    if run["numpy_selection"] != "selected":
+        pytest.skip(run["numpy_selection"])
+    # none of the switched-off instruction sets is used, whatever the CPU has
+    assert run["numpy_loops"]
+    assert not set(run["numpy_loops"]) & set(NUMPY_DISABLED.split())
+    # with the native choice numpy keeps every loop the CPU can run
+    native = _kernels_in_fresh_process("import slam", {**env, "LINESLAM_NATIVE_BLAS": "1"})
+    assert "LINESLAM_NATIVE_BLAS" in native["numpy_selection"]
+    assert set(native["numpy_loops"]) >= set(run["numpy_loops"])
+    if "avx512f" in cpu_flags() and "avx512bw" in cpu_flags():
+        assert set(native["numpy_loops"]) & set(NUMPY_DISABLED.split())

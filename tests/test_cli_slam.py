@@ -68,6 +68,8 @@ def test_slam_writes_the_results_folder(tmp_path, capsys, backend):
     assert summary["blas"]["libraries"] and all(
         lib["architecture"] for lib in summary["blas"]["libraries"]
     )
+    assert summary["blas"]["numpy_selection"] == slam.blas.numpy_selection
+    assert isinstance(summary["blas"]["numpy_loops"], list)
     line_map = read_map_json(out / "map.json")
     assert len(line_map) == summary["lines_merged"] > 5
     assert all(ln.r >= 0 and -np.pi < ln.alpha <= np.pi for ln in line_map.lines)
