@@ -45,9 +45,11 @@ once (1 by default; the times are only comparable between runs on an equally loa
 ``--config FILE.toml`` is passed to every run; ``--keep DIR`` keeps the results folders
 (``DIR/NAME``, with the run's output in ``DIR/NAME.log``); ``--work DIR`` is the variant cache
 (default ``~/.cache/lineslam/variants``); ``--catalogued-names`` (see above); ``--json FILE``
-writes every number; ``--baseline FILE.json`` (a previous ``--json``) also prints a
-before/after table: the baseline's mean translation error, this run's, and the change, for
-every row in both.
+writes every number and the run's arithmetic (CPU, BLAS kernels, numpy's loops:
+:func:`slam.experiments.robustness.arithmetic`); ``--baseline FILE.json`` (a previous
+``--json``) also prints a before/after table: the baseline's mean translation error, this
+run's, and the change, for every row in both, after a line naming any difference of
+arithmetic between the two (which can move a row with no change of code).
 
 The data root is ``$LINESLAM_DATA`` or ``../shared/datasets`` beside the repository.
 """
@@ -71,6 +73,8 @@ from slam.experiments.robustness import (
     EXTRA_VARIANTS,
     VARIANTS,
     VariantFiles,
+    arithmetic,
+    arithmetic_difference,
     default_cache_dir,
     make_variant,
     score_run,
@@ -328,9 +332,16 @@ def main() -> None:
             records = list(pool.map(job, files))
         total_s = time.perf_counter() - started
     print(table(records))
+    here = arithmetic()
     if baseline is not None:
         print()
         print(f"before: {args.baseline}")
+        differs = arithmetic_difference(baseline.get("arithmetic"), here)
+        if differs is not None:
+            print(
+                f"other arithmetic than the baseline's ({differs}): a row can move by which "
+                "closures pass, with no change of code"
+            )
         print(baseline_table(records, baseline))
     if args.json is not None:
         out = {
@@ -339,6 +350,7 @@ def main() -> None:
             "workers": args.workers,
             "catalogued_names": args.catalogued_names,
             "odometry_sign": args.odometry_sign,
+            "arithmetic": here,
             "total_wall_s": total_s,
             "within_bars": sum(bool(r.get("within_bar")) for r in records),
             "runs": records,

@@ -672,3 +672,21 @@ def test_odometry_lag_read_as_the_estimators_read_it_is_the_delayed_reading(tmp_
 def test_odometry_lag_rejects_a_negative_lag():
     with pytest.raises(ConfigError, match="scans must be >= 0"):
         OdometryLag(-1)
+
+
+def test_arithmetic_is_recorded_and_a_difference_is_named():
+    import json
+
+    from slam.experiments.robustness import arithmetic, arithmetic_difference
+
+    here = arithmetic()
+    assert set(here) == {"cpu", "blas", "numpy_loops"}
+    assert here["blas"] and all(isinstance(a, str) and a for a in here["blas"])
+    # the same arithmetic: nothing to say; a JSON round trip keeps it the same
+    assert arithmetic_difference(json.loads(json.dumps(here)), here) is None
+    # each difference is named, with both sides
+    other = {**here, "numpy_loops": ["X86_V3", "X86_V4"], "cpu": "another CPU"}
+    said = arithmetic_difference(other, here)
+    assert said is not None and "numpy's loops" in said and "CPU another CPU →" in said
+    assert "BLAS" not in said
+    assert "does not record" in str(arithmetic_difference(None, here))

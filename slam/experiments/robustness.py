@@ -124,6 +124,8 @@ __all__ = [
     "RunScore",
     "Variant",
     "VariantFiles",
+    "arithmetic",
+    "arithmetic_difference",
     "default_cache_dir",
     "fill_dropped_scans",
     "make_variant",
@@ -134,6 +136,52 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 Frame = Literal["laser", "base"]
+
+
+def arithmetic() -> dict[str, Any]:
+    """What decides the last bits of this process's arithmetic, for a results file.
+
+    ``{"cpu": model name (``/proc/cpuinfo``; "" where unreadable), "blas": [architectures of
+    the BLAS libraries loaded], "numpy_loops": [instruction sets of numpy's loops in use]}``
+    (:func:`slam.blas.kernels_in_use`).  Two runs of the same code whose entries differ can
+    differ by which loop closures pass (README, What the numbers do not show).
+    """
+    from slam.blas import kernels_in_use
+
+    cpu = ""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            for line in f:
+                key, sep, value = line.partition(":")
+                if sep and key.strip() == "model name":
+                    cpu = value.strip()
+                    break
+    except OSError:
+        pass
+    kernels = kernels_in_use()
+    return {
+        "cpu": cpu,
+        "blas": sorted({str(lib["architecture"]) for lib in kernels["libraries"]}),
+        "numpy_loops": list(kernels.get("numpy_loops", [])),
+    }
+
+
+def arithmetic_difference(before: dict[str, Any] | None, after: dict[str, Any]) -> str | None:
+    """How two runs' :func:`arithmetic` differ, as a sentence; None where they agree.
+
+    ``before`` is None for a results file written without the entry (the difference is then
+    unknown, and said so).
+    """
+    if before is None:
+        return "the baseline does not record its arithmetic (CPU, BLAS kernels, numpy's loops)"
+    names = {"cpu": "CPU", "blas": "BLAS kernels", "numpy_loops": "numpy's loops"}
+    parts = [
+        f"{label} {before.get(key)} → {after.get(key)}"
+        for key, label in names.items()
+        if before.get(key) != after.get(key)
+    ]
+    return "; ".join(parts) if parts else None
+
 
 #: Relations with ``|t2 − t1|`` below this (s) are also scored on their own.
 SHORT_RELATION_S = 10.0
