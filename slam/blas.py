@@ -63,17 +63,25 @@ selection: str = "not attempted"
 numpy_selection: str = "not attempted"
 
 
-def cpu_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> frozenset[str]:
-    """The instruction-set flags of the first CPU in ``cpuinfo``; empty where it is unreadable."""
+def cpu_field(name: str, cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The field ``name`` of the first CPU in ``cpuinfo`` (e.g. ``"model name"``).
+
+    "" where the file is unreadable or has no such field.
+    """
     try:
         with cpuinfo.open(encoding="ascii", errors="replace") as f:
             for line in f:
                 key, sep, value = line.partition(":")
-                if sep and key.strip() == "flags":
-                    return frozenset(value.split())
+                if sep and key.strip() == name:
+                    return value.strip()
     except OSError:
         pass
-    return frozenset()
+    return ""
+
+
+def cpu_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> frozenset[str]:
+    """The instruction-set flags of the first CPU in ``cpuinfo``; empty where it is unreadable."""
+    return frozenset(cpu_field("flags", cpuinfo).split())
 
 
 def selection_reason(
@@ -147,14 +155,13 @@ def select_kernels() -> str:
     records the reason in :data:`selection`; with it ``NPY_DISABLE_CPU_FEATURES`` where
     :func:`numpy_reason` allows (the reason in :data:`numpy_selection`).
     """
-    global selection
+    global selection, numpy_selection
     reason = selection_reason(
         os.environ,
         "numpy" in sys.modules,
         platform.machine(),
         cpu_flags() if sys.platform.startswith("linux") else frozenset(),
     )
-    global numpy_selection
     if reason == "selected":
         os.environ["OPENBLAS_CORETYPE"] = CORETYPE
         numpy_selection = numpy_reason(os.environ, numpy_version())

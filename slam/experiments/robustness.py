@@ -146,21 +146,11 @@ def arithmetic() -> dict[str, Any]:
     (:func:`slam.blas.kernels_in_use`).  Two runs of the same code whose entries differ can
     differ by which loop closures pass (README, What the numbers do not show).
     """
-    from slam.blas import kernels_in_use
+    from slam.blas import cpu_field, kernels_in_use
 
-    cpu = ""
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
-            for line in f:
-                key, sep, value = line.partition(":")
-                if sep and key.strip() == "model name":
-                    cpu = value.strip()
-                    break
-    except OSError:
-        pass
     kernels = kernels_in_use()
     return {
-        "cpu": cpu,
+        "cpu": cpu_field("model name"),
         "blas": sorted({str(lib["architecture"]) for lib in kernels["libraries"]}),
         "numpy_loops": list(kernels.get("numpy_loops", [])),
     }
