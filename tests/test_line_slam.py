@@ -592,10 +592,11 @@ def test_a_recent_closure_is_reconsidered_only_by_a_hypothesis_that_disagrees_an
     hypothesis agrees with (none agreed with the closure); not when the hypothesis' own χ² is
     beyond the quantile or above the closure's, not when no more hypotheses agree with it than
     with the closure, not when the two agree, not when the closure is older than
-    ``reconsider_keyframes`` (20 by default) or when that is 0."""
+    ``reconsider_keyframes`` (no limit by default) or when that is 0."""
     slam, _, h, *_ = _with_wrong_closure()
     closer = slam.loop_closer
     rival = closer._accepted[0]
+    assert slam.config.loop_closure.reconsider_keyframes is None
     assert closer.rival(h, 0.0, 1) is rival  # on by default
     _reconsidering(slam, 0)
     assert closer.rival(h, 0.0, 1) is None  # off
@@ -612,6 +613,30 @@ def test_a_recent_closure_is_reconsidered_only_by_a_hypothesis_that_disagrees_an
     closer._accepted[0] = rival
     _reconsidering(slam, 4)
     assert closer.rival(h, 0.0, 1) is None  # accepted 5 keyframes before h
+    _reconsidering(slam, 5)
+    assert closer.rival(h, 0.0, 1) is rival
+    # however long ago, by default: the closure is kept for it, not forgotten
+    _reconsidering(slam, None)
+    assert closer._recent_accepted(h.keyframe + 10_000, None) == [rival]
+    assert closer._recent_accepted(h.keyframe + 10_000, 5) == []
+
+
+def test_reconsider_keyframes_reads_from_a_config_file(tmp_path):
+    """Left out: no limit (None, also after the run's config.toml is read back); a number
+    of keyframes or 0 (never) as written; a negative one is an error naming the key."""
+    from slam.config import RunConfig
+    from slam.errors import ConfigError
+
+    assert RunConfig().slam.loop_closure.reconsider_keyframes is None
+    path = tmp_path / "run.toml"
+    RunConfig().to_toml(path)
+    assert RunConfig.from_toml(path).slam.loop_closure.reconsider_keyframes is None
+    for n in (0, 20):
+        path.write_text(f"[slam.loop_closure]\nreconsider_keyframes = {n}\n")
+        assert RunConfig.from_toml(path).slam.loop_closure.reconsider_keyframes == n
+    path.write_text("[slam.loop_closure]\nreconsider_keyframes = -1\n")
+    with pytest.raises(ConfigError, match="reconsider_keyframes"):
+        RunConfig.from_toml(path)
 
 
 @pytest.mark.parametrize("accepted", [True, False])

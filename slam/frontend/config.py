@@ -351,16 +351,18 @@ class LoopClosureConfig:
         is accepted the newer one, which does not agree with it, is dropped (its log entry's
         reason says so); if not, the newer one waits.  So every hypothesis that passes the
         gate is judged, at once when another agrees with it, else a few keyframes late.
-    reconsider_keyframes : int
-        A closure accepted at most this many keyframes ago is reconsidered when a later
-        hypothesis is rejected that agrees with the front end's own trajectory better than
-        that closure did (``correction_chi2`` within the ``consistency_probability`` quantile
-        and below the closure's), disagrees with the closure (pairwise, as
-        ``confirmations``) and has more recent hypotheses agreeing with it than the closure
-        had: the closure's merges are undone with the observations added to its merged
-        landmarks since, the loops are solved without it, and the hypothesis is judged
-        again; if it is accepted the earlier closure stays dropped (its pairs vetoed), else
-        both are as before.  0: never.
+    reconsider_keyframes : int or None
+        An accepted closure (None, the default: whenever it was accepted; a number: at most that
+        many keyframes ago) is reconsidered when a later hypothesis is rejected that agrees with
+        the front end's own trajectory better than that closure did (``correction_chi2`` within
+        the ``consistency_probability`` quantile and below the closure's), disagrees with the
+        closure (pairwise, as ``confirmations``) and has more recent hypotheses agreeing with it
+        than the closure had: the closure's merges are undone with the observations added to its
+        merged landmarks since, the loops are solved without it, and the hypothesis is judged
+        again; if it is accepted the earlier closure stays dropped (its pairs vetoed), else both
+        are as before.  0: never.  The larger consistent set wins however late it forms: a wrong
+        closure that right hypotheses contradict for tens of keyframes before one of them has
+        more agreeing than it had is still dropped.
     judge_loop_only : bool
         Solve only the loop in that judgement: the poses from ``local_keyframes`` before the
         matched old landmarks were last seen on, the earlier poses held at their estimate
@@ -429,12 +431,15 @@ class LoopClosureConfig:
     judge_hopeless_after: int = 5
     large_correction_m: float = 0.1
     large_correction_rad: float = 0.01
-    reconsider_keyframes: int = 20
+    reconsider_keyframes: int | None = None
 
     def __post_init__(self) -> None:
         require(self.interval_keyframes >= 1, "interval_keyframes must be >= 1")
         require(self.judge_iterations >= 1, "judge_iterations must be >= 1")
-        require(self.reconsider_keyframes >= 0, "reconsider_keyframes must be >= 0")
+        require(
+            self.reconsider_keyframes is None or self.reconsider_keyframes >= 0,
+            "reconsider_keyframes must be >= 0 (or left out: no limit)",
+        )
         require(self.judge_hopeless_after >= 0, "judge_hopeless_after must be >= 0")
         require(self.local_keyframes >= 1, "local_keyframes must be >= 1")
         require(self.max_updates >= 1, "max_updates must be >= 1")

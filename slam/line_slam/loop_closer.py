@@ -41,12 +41,12 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    ``judge_alone_both_costs``), else the landmark book is restored to its snapshot and the
    back-end never sees it.  An accepted closure with a large correction
    restarts the back-end from the judged estimate; a small one reaches it incrementally.
-5. **Reconsider** (``reconsider_keyframes``, 20 by default; 0 turns it off).  A rejected
-   hypothesis that contradicts a closure accepted within the last ``reconsider_keyframes``
-   keyframes, lies closer to the front end's own trajectory than that closure did and has more
-   recent hypotheses agreeing with it than the closure had, is judged again with the closure
-   undone (its merges and the observations added to its merged landmarks since), the loops
-   solved without it and its correction read again on that estimate
+5. **Reconsider** (``reconsider_keyframes``: by default any closure accepted earlier; a
+   number of keyframes limits it, 0 turns it off).  A rejected hypothesis that contradicts an
+   accepted closure, lies closer to the front end's own trajectory than that closure did and has
+   more recent hypotheses agreeing with it than the closure had, is judged again with the
+   closure undone (its merges and the observations added to its merged landmarks since), the
+   loops solved without it and its correction read again on that estimate
    (:meth:`LoopCloser.reconsider`): accepted, it replaces the closure; rejected, everything is
    as before.
 
@@ -703,16 +703,19 @@ class LoopCloser:
                 )
         return None
 
-    def _recent_accepted(self, keyframe: int, window: int) -> list[_Accepted]:
+    def _recent_accepted(self, keyframe: int, window: int | None) -> list[_Accepted]:
         """The closures accepted less than ``window`` keyframes before ``keyframe``, oldest first.
 
-        Closures beyond both windows that look back (``local_keyframes`` for
-        :meth:`contradiction`, ``reconsider_keyframes`` inclusive for :meth:`rival`) are
-        forgotten.
+        ``window`` None: all of them.  Closures beyond both windows that look back
+        (``local_keyframes`` for :meth:`contradiction`, ``reconsider_keyframes`` inclusive for
+        :meth:`rival`; None: no limit) are forgotten.
         """
         lcc = self.config.loop_closure
-        longest = max(lcc.local_keyframes, lcc.reconsider_keyframes + 1)
-        self._accepted = [a for a in self._accepted if a.keyframe > keyframe - longest]
+        if lcc.reconsider_keyframes is not None:
+            longest = max(lcc.local_keyframes, lcc.reconsider_keyframes + 1)
+            self._accepted = [a for a in self._accepted if a.keyframe > keyframe - longest]
+        if window is None:
+            return list(self._accepted)
         return [a for a in self._accepted if a.keyframe > keyframe - window]
 
     def agreement(self, h: Hypothesis) -> int:
@@ -916,7 +919,7 @@ class LoopCloser:
     def rival(self, h: Hypothesis, chi2_t: float, agree: int) -> _Accepted | None:
         """The most recent accepted closure that a rejected ``h`` may overturn, if any.
 
-        Within ``reconsider_keyframes``, at another keyframe, inconsistent with ``h``
+        Within ``reconsider_keyframes`` (None: any), at another keyframe, inconsistent with ``h``
         (:meth:`pair_chi2` beyond the ``consistency_probability`` quantile of χ²₃), while ``h``
         agrees with the front end's own trajectory (:meth:`chain_chi2` within that quantile)
         better than the closure did, and more recent hypotheses agree with ``h`` (``agree``)
@@ -927,7 +930,8 @@ class LoopCloser:
             return None
         if chi2_t > self._chi2_limit(2 if h.single else 3):
             return None
-        for a in reversed(self._recent_accepted(h.keyframe, lcc.reconsider_keyframes + 1)):
+        window = None if lcc.reconsider_keyframes is None else lcc.reconsider_keyframes + 1
+        for a in reversed(self._recent_accepted(h.keyframe, window)):
             if a.keyframe == h.keyframe or not chi2_t < a.chain_chi2 or agree <= a.agreeing:
                 continue
             if self.pair_chi2(a.hypothesis, h) > self._chi2_limit(3):
