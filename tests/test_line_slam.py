@@ -17,7 +17,8 @@ from line_world import (
 )
 
 from linefit.line import Line
-from slam.errors import InputError
+from slam.config import RunConfig
+from slam.errors import ConfigError, InputError
 from slam.frontend.config import LoopClosureConfig
 from slam.geometry import pose_between, pose_log
 from slam.graph import SolverConfig
@@ -624,9 +625,6 @@ def test_a_recent_closure_is_reconsidered_only_by_a_hypothesis_that_disagrees_an
 def test_reconsider_keyframes_reads_from_a_config_file(tmp_path):
     """Left out: no limit (None, also after the run's config.toml is read back); a number
     of keyframes or 0 (never) as written; a negative one is an error naming the key."""
-    from slam.config import RunConfig
-    from slam.errors import ConfigError
-
     assert RunConfig().slam.loop_closure.reconsider_keyframes is None
     path = tmp_path / "run.toml"
     RunConfig().to_toml(path)
