@@ -536,13 +536,18 @@ def _undone_merges_and_a_wrong_pair(seed=3):
     return slam, right, (a, b)
 
 
-def _judge(with_wrong_pair, agree=0, seed=3, **loop_closure):
+def _judge(with_wrong_pair, agree=0, seed=3, bend_m=0.0, **loop_closure):
     """The three right pairs (and the wrong one) judged as one closure with the loop-closure
     settings changed by ``loop_closure``, ``agree`` recent hypotheses agreeing; returns
-    ``(accepted, log entry)``."""
+    ``(accepted, log entry)``.  ``bend_m``: the second half of the trajectory bent sideways by
+    up to that much first (the estimate the judge starts from is then not the loop's optimum)."""
     from slam.frontend.loop_closure import LoopClosure
 
     slam, right, (a, b) = _undone_merges_and_a_wrong_pair(seed)
+    if bend_m:
+        poses = slam.graph.poses
+        half = poses.shape[0] // 2
+        poses[half:, 1] += bend_m * np.linspace(0.0, 1.0, poses.shape[0] - half)
     lcc = replace(slam.config.loop_closure, **loop_closure)
     slam.loop_closer.config = replace(slam.config, loop_closure=lcc)
     local = [r.drop for r in right] + ([a] if with_wrong_pair else [])
@@ -831,6 +836,24 @@ def test_closure_judged_alone_must_pass_the_f_test_in_both_costs():
     # below both: rejected either way; above both: accepted alone too
     assert _judge(False, 0, seed=5, judge_max_f=0.5 * f_gauss)[0] == 0
     assert _judge(False, 0, seed=5, judge_max_f=2.0 * f_robust)[0] == 1
+
+
+def test_judge_from_converged_compares_the_closure_with_the_loop_at_its_own_optimum():
+    """``judge_from_converged``: the loop without the closure is solved first, so a start away
+    from the loop's optimum does not count for the closure.  With the trajectory's second half
+    bent 0.3 m before judging, the F statistic of the three right pairs falls far below the
+    unbent one (the solve that merges them also undoes the bend); solved first, it is the
+    unbent one's."""
+    inf = {"judge_max_f": np.inf}
+    f_ref = _judge(False, judge_from_converged=True, **inf)[1]["f_statistic"]
+    f_unbent = _judge(False, judge_from_converged=False, **inf)[1]["f_statistic"]
+    f_bent = _judge(False, bend_m=0.3, judge_from_converged=False, **inf)[1]["f_statistic"]
+    f_bent_solved = _judge(False, bend_m=0.3, judge_from_converged=True, **inf)[1]["f_statistic"]
+    assert RunConfig().slam.loop_closure.judge_from_converged  # the default
+    assert f_ref > 0.0
+    assert f_unbent == pytest.approx(f_ref, rel=0.05)  # the fixture's loop is converged
+    assert f_bent < 0.0  # the premise: the bend's relief outweighs the closure's cost
+    assert f_bent_solved == pytest.approx(f_ref, rel=0.05)
 
 
 def test_judge_cost_counts_an_outlier_line_as_the_solver_does(loop_runs):

@@ -373,6 +373,14 @@ class LoopClosureConfig:
         and fr079 no accepted closure had fewer than 2 explained pairs after 5
         linearisations, while about half of the rejected ones had at most 1.  0: judgements
         always run their ``judge_iterations``.
+    judge_from_converged : bool
+        The loop is solved without the closure first (the judge's solver, its
+        ``judge_iterations``, the same poses freed), and the F statistic's cost before is
+        taken there: the closure and its absence are each compared at their own optimum (a
+        likelihood-ratio test).  Without it the cost before is the estimate's as the back end
+        left it, and whatever the judge's solve gains on the loop without the closure counts
+        for the closure.  The closure's judgement starts from that solution.  False: the
+        estimate as it is.
     skip_repeated_rejections : bool
         A candidate that repeats a hypothesis judged and rejected during the last
         ``local_keyframes`` keyframes (a correction within twice the angle and offset
@@ -429,6 +437,7 @@ class LoopClosureConfig:
     min_consistent_fraction: float = 0.6
     skip_repeated_rejections: bool = True
     judge_hopeless_after: int = 5
+    judge_from_converged: bool = True
     large_correction_m: float = 0.1
     large_correction_rad: float = 0.01
     reconsider_keyframes: int | None = None

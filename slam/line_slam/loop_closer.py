@@ -767,7 +767,8 @@ class LoopCloser:
 
         The candidate is judged by a batch solve in our own loop (``judge_iterations`` at most)
         of the loop (the poses since ``local_keyframes`` before the old landmarks were last
-        seen, the earlier ones held; the whole graph with ``judge_loop_only = False``) without
+        seen, the earlier ones held; the whole graph with ``judge_loop_only = False``), against
+        the same solve of the loop without it (``judge_from_converged``), without
         touching the back-end: a rejected closure is rolled back (the book's snapshot) and the
         back-end never sees it; an accepted one with a large correction restarts the back-end
         from the judged estimate, a small one reaches it incrementally
@@ -784,9 +785,16 @@ class LoopCloser:
         old_last = book.last_keyframe[old[[j for _, j in found.pairs]]]
         loop_from = max(int(old_last.min()) - lcc.local_keyframes, 0)
         kernel = self._judge_kernel()
-        loop_before, loop_before_robust, _ = residual_chi2(g, loop_from, *kernel)
         k_old = int(np.median(old_last))
-        where = self.where(pose, k_old)
+        where = self.where(pose, k_old)  # as the search saw it
+        if lcc.judge_from_converged:
+            # the loop without the closure solved first, by the same solver: the F statistic
+            # then compares the two hypotheses each at its own optimum
+            with self.clock("judge"):
+                self._judge.solve(
+                    g, lcc.judge_iterations, free_from=loop_from if lcc.judge_loop_only else 0
+                )
+        loop_before, loop_before_robust, _ = residual_chi2(g, loop_from, *kernel)
         corr = self.effective_correction(found, old)
         normal = self.corridor_normal(found, old)
         big = bool(
