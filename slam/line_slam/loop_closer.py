@@ -35,7 +35,8 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    (:class:`slam.graph.batch.BatchSolver`, at most ``judge_iterations``) outside the back-end
    decides: the closure is kept when enough merged pairs are explained
    (:class:`slam.line_slam.audit.MergeAudit`) and the loop's cost rises little per merged
-   degree of freedom (an F test in χ², or, for a closure whose every pair is explained and
+   degree of freedom against the loop solved without it (``judge_from_converged``: each at
+   its own optimum; an F test in χ², or, for a closure whose every pair is explained and
    that a recent hypothesis agrees with, in the solver's robust cost:
    ``judge_robust_cost``; for a closure no hypothesis agrees with, in both costs:
    ``judge_alone_both_costs``), else the landmark book is restored to its snapshot and the
@@ -787,13 +788,13 @@ class LoopCloser:
         kernel = self._judge_kernel()
         k_old = int(np.median(old_last))
         where = self.where(pose, k_old)  # as the search saw it
+        # the map before the loop is the reference: held, only the loop is solved
+        free_from = loop_from if lcc.judge_loop_only else 0
         if lcc.judge_from_converged:
             # the loop without the closure solved first, by the same solver: the F statistic
             # then compares the two hypotheses each at its own optimum
             with self.clock("judge"):
-                self._judge.solve(
-                    g, lcc.judge_iterations, free_from=loop_from if lcc.judge_loop_only else 0
-                )
+                self._judge.solve(g, lcc.judge_iterations, free_from=free_from)
         loop_before, loop_before_robust, _ = residual_chi2(g, loop_from, *kernel)
         corr = self.effective_correction(found, old)
         normal = self.corridor_normal(found, old)
@@ -816,8 +817,6 @@ class LoopCloser:
         if not done:
             book.restore(before)
             return 0
-        # the map before the loop is the reference: held, only the loop is solved
-        free_from = loop_from if lcc.judge_loop_only else 0
         records = list(g.merge_log[n_log:])
 
         def hopeless(iterations: int, poses: FloatArray, landmarks: FloatArray) -> bool:
