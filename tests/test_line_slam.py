@@ -536,11 +536,12 @@ def _undone_merges_and_a_wrong_pair(seed=3):
     return slam, right, (a, b)
 
 
-def _judge(with_wrong_pair, agree=0, seed=3, bend_m=0.0, **loop_closure):
+def _judge(with_wrong_pair, agree=0, seed=3, bend_m=0.0, before_judging=None, **loop_closure):
     """The three right pairs (and the wrong one) judged as one closure with the loop-closure
     settings changed by ``loop_closure``, ``agree`` recent hypotheses agreeing; returns
     ``(accepted, log entry)``.  ``bend_m``: the second half of the trajectory bent sideways by
-    up to that much first (the estimate the judge starts from is then not the loop's optimum)."""
+    up to that much first (the estimate the judge starts from is then not the loop's optimum).
+    ``before_judging``: called once the loop is built, right before the judgement."""
     from slam.frontend.loop_closure import LoopClosure
 
     slam, right, (a, b) = _undone_merges_and_a_wrong_pair(seed)
@@ -553,6 +554,8 @@ def _judge(with_wrong_pair, agree=0, seed=3, bend_m=0.0, **loop_closure):
     local = [r.drop for r in right] + ([a] if with_wrong_pair else [])
     old = [r.keep for r in right] + ([b] if with_wrong_pair else [])
     found = LoopClosure(np.zeros(3), [(k, k) for k in range(len(local))], 10.0, 1.0)
+    if before_judging is not None:
+        before_judging()
     got = slam.loop_closer.apply(
         np.array(local), np.array(old), found, slam.graph.n_poses - 1, agree=agree
     )
@@ -836,6 +839,49 @@ def test_closure_judged_alone_must_pass_the_f_test_in_both_costs():
     # below both: rejected either way; above both: accepted alone too
     assert _judge(False, 0, seed=5, judge_max_f=0.5 * f_gauss)[0] == 0
     assert _judge(False, 0, seed=5, judge_max_f=2.0 * f_robust)[0] == 1
+
+
+def test_closure_that_lowers_the_loops_chi2_must_pass_the_f_test_in_the_robust_cost(monkeypatch):
+    """``judge_negative_f_robust``: a closure whose merge lowers the loop's χ² (a negative F
+    statistic) is accepted only when its F statistic in the solver's robust cost is within
+    ``judge_max_f``, even when a recent hypothesis agrees with it.
+
+    The three right pairs are judged with the loop's cost after the merge read as 1 % below
+    the cost before in χ² and ``rise`` above it in the robust cost; with ``rise`` 0 the
+    closure passes either way."""
+    import slam.line_slam.loop_closer as lc
+
+    real = lc.residual_chi2
+
+    def judged(rise):
+        calls = []
+
+        def fake(g, loop_from, *kernel):
+            plain, robust, line = real(g, loop_from, *kernel)
+            calls.append((plain, robust))
+            if len(calls) == 2:  # after the merge: χ² down, the robust cost up by `rise`
+                (p0, r0) = calls[0]
+                return 0.99 * p0, r0 * (1.0 + rise), line
+            return plain, robust, line
+
+        def patch():
+            monkeypatch.setattr(lc, "residual_chi2", fake)
+
+        try:
+            return _judge(False, 1, judge_max_f=10.0, before_judging=patch, **kw)
+        finally:
+            monkeypatch.setattr(lc, "residual_chi2", real)
+
+    kw: dict = {}
+    assert RunConfig().slam.loop_closure.judge_negative_f_robust  # the default
+    accepted, entry = judged(0.0)
+    assert accepted == 1 and entry["f_statistic"] < 0.0
+    accepted, entry = judged(1.0)
+    assert entry["f_statistic"] < 0.0 < 10.0 < entry["f_statistic_robust"]
+    assert entry["consistent_pairs"] == entry["pairs"] == 3 and entry["agreeing_hypotheses"] == 1
+    assert accepted == 0
+    kw = {"judge_negative_f_robust": False}
+    assert judged(1.0)[0] == 1
 
 
 def test_judge_from_converged_compares_the_closure_with_the_loop_at_its_own_optimum():

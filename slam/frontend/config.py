@@ -321,6 +321,14 @@ class LoopClosureConfig:
         beyond the limit has not been explained by it, even where the loop's χ² falls; with
         no second hypothesis to vouch for the closure, both readings must accept it.  One
         that another hypothesis agrees with keeps the robust second chance.
+    judge_negative_f_robust : bool
+        A closure whose F statistic in χ² is negative (the loop's χ² fell when it was merged)
+        is accepted only when its F statistic in the solver's robust cost is within
+        ``judge_max_f`` as well (with ``judge_robust_cost``).  Both hypotheses are solved in
+        the robust cost (``judge_from_converged``), so their χ² can differ in either
+        direction; a fall says the solve with the closure left the χ² optimum behind, not
+        that the closure explains the loop better, and the comparison is then read in the
+        cost that was minimised.
     confirmations : int
         How many hypotheses found at other keyframes within the last ``local_keyframes`` must
         agree with one before it is judged at once (0: none, every hypothesis is judged when
@@ -434,6 +442,7 @@ class LoopClosureConfig:
     judge_max_f: float = 100.0
     judge_robust_cost: bool = True
     judge_alone_both_costs: bool = True
+    judge_negative_f_robust: bool = True
     min_consistent_fraction: float = 0.6
     skip_repeated_rejections: bool = True
     judge_hopeless_after: int = 5

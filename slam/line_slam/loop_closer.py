@@ -39,7 +39,8 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    its own optimum; an F test in χ², or, for a closure whose every pair is explained and
    that a recent hypothesis agrees with, in the solver's robust cost:
    ``judge_robust_cost``; for a closure no hypothesis agrees with, in both costs:
-   ``judge_alone_both_costs``), else the landmark book is restored to its snapshot and the
+   ``judge_alone_both_costs``; for a closure that lowers the loop's χ², in the robust cost
+   too: ``judge_negative_f_robust``), else the landmark book is restored to its snapshot and the
    back-end never sees it.  An accepted closure with a large correction
    restarts the back-end from the judged estimate; a small one reaches it incrementally.
 5. **Reconsider** (``reconsider_keyframes``: by default any closure accepted earlier; a
@@ -887,6 +888,8 @@ class LoopCloser:
             and f_robust <= lcc.judge_max_f
         )
         if lcc.judge_alone_both_costs and agree == 0:
+            f_ok = f_ok and f_robust <= lcc.judge_max_f
+        if lcc.judge_robust_cost and lcc.judge_negative_f_robust and f_stat < 0.0:
             f_ok = f_ok and f_robust <= lcc.judge_max_f
         if explained and f_ok:
             # explained (up to a few wrong pairs, which are undone)
