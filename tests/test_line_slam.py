@@ -853,7 +853,7 @@ def test_closure_that_lowers_the_loops_chi2_must_pass_the_f_test_in_the_robust_c
 
     real = lc.residual_chi2
 
-    def judged(rise):
+    def judged(rise, **settings):
         calls = []
 
         def fake(g, loop_from, *kernel):
@@ -868,11 +868,10 @@ def test_closure_that_lowers_the_loops_chi2_must_pass_the_f_test_in_the_robust_c
             monkeypatch.setattr(lc, "residual_chi2", fake)
 
         try:
-            return _judge(False, 1, judge_max_f=10.0, before_judging=patch, **kw)
+            return _judge(False, 1, judge_max_f=10.0, before_judging=patch, **settings)
         finally:
             monkeypatch.setattr(lc, "residual_chi2", real)
 
-    kw: dict = {}
     assert RunConfig().slam.loop_closure.judge_negative_f_robust  # the default
     accepted, entry = judged(0.0)
     assert accepted == 1 and entry["f_statistic"] < 0.0
@@ -880,8 +879,7 @@ def test_closure_that_lowers_the_loops_chi2_must_pass_the_f_test_in_the_robust_c
     assert entry["f_statistic"] < 0.0 < 10.0 < entry["f_statistic_robust"]
     assert entry["consistent_pairs"] == entry["pairs"] == 3 and entry["agreeing_hypotheses"] == 1
     assert accepted == 0
-    kw = {"judge_negative_f_robust": False}
-    assert judged(1.0)[0] == 1
+    assert judged(1.0, judge_negative_f_robust=False)[0] == 1
 
 
 def test_judge_from_converged_compares_the_closure_with_the_loop_at_its_own_optimum():

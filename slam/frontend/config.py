@@ -324,7 +324,8 @@ class LoopClosureConfig:
     judge_negative_f_robust : bool
         A closure whose F statistic in χ² is negative (the loop's χ² fell when it was merged)
         is accepted only when its F statistic in the solver's robust cost is within
-        ``judge_max_f`` as well (with ``judge_robust_cost``).  Both hypotheses are solved in
+        ``judge_max_f`` as well (with ``judge_robust_cost``, else both are χ² and this adds
+        nothing).  Both hypotheses are solved in
         the robust cost (``judge_from_converged``), so their χ² can differ in either
         direction; a fall says the solve with the closure left the χ² optimum behind, not
         that the closure explains the loop better, and the comparison is then read in the

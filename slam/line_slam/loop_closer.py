@@ -887,9 +887,11 @@ class LoopCloser:
             and good == len(records)
             and f_robust <= lcc.judge_max_f
         )
-        if lcc.judge_alone_both_costs and agree == 0:
-            f_ok = f_ok and f_robust <= lcc.judge_max_f
-        if lcc.judge_robust_cost and lcc.judge_negative_f_robust and f_stat < 0.0:
+        # the robust cost must accept it too: judged alone, or where the loop's χ² fell
+        # (without judge_robust_cost both costs are χ² and this adds nothing)
+        if (lcc.judge_alone_both_costs and agree == 0) or (
+            lcc.judge_negative_f_robust and f_stat < 0.0
+        ):
             f_ok = f_ok and f_robust <= lcc.judge_max_f
         if explained and f_ok:
             # explained (up to a few wrong pairs, which are undone)
