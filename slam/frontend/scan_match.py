@@ -612,9 +612,18 @@ class ScanMatch:
 jit = njit(cache=True, error_model="numpy", nogil=True)
 
 
+_Grid = tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]
+"""``(keys, order, columns)`` of :func:`_grid`."""
+
+
 @jit
-def _grid(p: FloatArray, cell: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Sorted cell keys of the points ``p`` (cells of side ``cell``) and the sorting order."""
+def _grid(p: FloatArray, cell: float) -> _Grid:
+    """The points ``p`` by cell (cells of side ``cell``): ``(keys, order, columns)``.
+
+    ``keys`` are the cells' keys sorted (a column ``cx`` is the block of keys
+    ``cx·_SPAN + cy``), ``order`` the points in that order; ``columns[0]`` is the first column
+    and ``columns[1 + r] : columns[2 + r]`` the keys of column ``columns[0] + r``.
+    """
     m = p.shape[0]
     keys = np.empty(m, dtype=np.int64)
     for i in range(m):
@@ -622,7 +631,19 @@ def _grid(p: FloatArray, cell: float) -> tuple[NDArray[np.int64], NDArray[np.int
         cy = np.int64(np.floor(p[i, 1] / cell)) + _OFFSET
         keys[i] = cx * _SPAN + cy
     order = np.argsort(keys, kind="mergesort")
-    return keys[order], order
+    keys = keys[order]
+    if m == 0:
+        return keys, order, np.zeros(2, dtype=np.int64)
+    first = keys[0] // _SPAN
+    n_columns = keys[m - 1] // _SPAN - first + 1
+    columns = np.empty(n_columns + 2, dtype=np.int64)
+    columns[0] = first
+    k = 0
+    for r in range(n_columns + 1):
+        while k < m and keys[k] // _SPAN < first + r:
+            k += 1
+        columns[1 + r] = k
+    return keys, order, columns
 
 
 @jit
@@ -632,19 +653,36 @@ def _nearest(
     p: FloatArray,
     keys: NDArray[np.int64],
     order: NDArray[np.int64],
+    columns: NDArray[np.int64],
     cell: float,
     d_max: float,
 ) -> int:
-    """Index of the point of ``p`` nearest to ``(qx, qy)`` within ``d_max`` (≤ ``cell``), or −1."""
+    """Index of the point of ``p`` nearest to ``(qx, qy)`` within ``d_max`` (≤ ``cell``), or −1.
+
+    Of points at equal distance, the last in the grid's order (``keys``, ``order``, ``columns``:
+    :func:`_grid`).
+    """
     cx = np.int64(np.floor(qx / cell)) + _OFFSET
     cy = np.int64(np.floor(qy / cell)) + _OFFSET
     best = -1
     best_d2 = d_max * d_max
+    n_columns = columns.shape[0] - 2
     for dx in range(-1, 2):
-        # the three cells (cx + dx, cy − 1 .. cy + 1) have consecutive keys: one search
-        row = (cx + dx) * _SPAN
-        lo = np.searchsorted(keys, row + cy - 1)
-        last = row + cy + 1
+        # the three cells (cx + dx, cy − 1 .. cy + 1) have consecutive keys in their column
+        r = cx + dx - columns[0]
+        if r < 0 or r >= n_columns:
+            continue
+        lo = columns[1 + r]
+        hi = columns[2 + r]
+        base = (cx + dx) * _SPAN
+        target = base + cy - 1
+        while lo < hi:  # the first key of the column at or above the lowest of the cells
+            mid = (lo + hi) >> 1
+            if keys[mid] < target:
+                lo = mid + 1
+            else:
+                hi = mid
+        last = base + cy + 1
         while lo < keys.size and keys[lo] <= last:
             j = order[lo]
             ex = p[j, 0] - qx
@@ -665,6 +703,7 @@ def _normal_equations(
     var_ref: FloatArray,
     keys: NDArray[np.int64],
     order: NDArray[np.int64],
+    columns: NDArray[np.int64],
     cell: float,
     d_max: float,
     q: FloatArray,
@@ -691,7 +730,7 @@ def _normal_equations(
     for i in range(q.shape[0]):
         qx = c * q[i, 0] - s * q[i, 1] + x[0]
         qy = s * q[i, 0] + c * q[i, 1] + x[1]
-        j = _nearest(qx, qy, p, keys, order, cell, d_max)
+        j = _nearest(qx, qy, p, keys, order, columns, cell, d_max)
         if j < 0:
             continue
         nx = n[j, 0]
@@ -739,6 +778,7 @@ def _gauss_newton(
     var_ref: FloatArray,
     keys: NDArray[np.int64],
     order: NDArray[np.int64],
+    columns: NDArray[np.int64],
     cell: float,
     d_max: float,
     q: FloatArray,
@@ -753,7 +793,7 @@ def _gauss_newton(
     x = x0.copy()
     for _ in range(iterations):
         H, g, _, _, _, _ = _normal_equations(
-            x, p, n, var_ref, keys, order, cell, d_max, q, q11, q12, q22, d_max, False
+            x, p, n, var_ref, keys, order, columns, cell, d_max, q, q11, q12, q22, d_max, False
         )
         r = x - x_prior
         r[2] = np.arctan2(np.sin(r[2]), np.cos(r[2]))
@@ -766,6 +806,51 @@ def _gauss_newton(
         if np.max(np.abs(dx)) < 1e-7:
             break
     return x
+
+
+@jit
+def _gauss_newton_starts(
+    x0: FloatArray,
+    offsets: FloatArray,
+    iterations: int,
+    x_prior: FloatArray,
+    info_prior: FloatArray,
+    p: FloatArray,
+    n: FloatArray,
+    var_ref: FloatArray,
+    grid: _Grid,
+    d_max: float,
+    inlier_grid: _Grid,
+    inlier_m: float,
+    q: FloatArray,
+    q11: FloatArray,
+    q12: FloatArray,
+    q22: FloatArray,
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    """:func:`_gauss_newton` from ``x0`` rotated by each of ``offsets``, and the inliers.
+
+    Pairs within ``d_max`` (``grid`` of that cell); the inliers (residuals within
+    ``inlier_m``, ``inlier_grid``) counted at each solution.
+    """
+    xs = np.empty((offsets.shape[0], 3))
+    inliers = np.empty(offsets.shape[0], dtype=np.int64)
+    keys, order, columns = grid
+    ikeys, iorder, icolumns = inlier_grid
+    for k in range(offsets.shape[0]):
+        start = np.empty(3)  # x0 + (0, 0, offset), as numpy adds them
+        start[0] = x0[0] + 0.0
+        start[1] = x0[1] + 0.0
+        start[2] = x0[2] + offsets[k]
+        x = _gauss_newton(
+            start, iterations, x_prior, info_prior, p, n, var_ref, keys, order, columns, d_max,
+            d_max, q, q11, q12, q22,
+        )  # fmt: skip
+        xs[k] = x
+        inliers[k] = _normal_equations(
+            x, p, n, var_ref, ikeys, iorder, icolumns, inlier_m, inlier_m, q, q11, q12, q22,
+            inlier_m,
+        )[3]  # fmt: skip
+    return xs, inliers
 
 
 def _cauchy_moments() -> tuple[float, float]:
@@ -792,6 +877,7 @@ def _sandwich(
     var_ref: FloatArray,
     keys: NDArray[np.int64],
     order: NDArray[np.int64],
+    columns: NDArray[np.int64],
     d_max: float,
     q: FloatArray,
     q11: FloatArray,
@@ -823,7 +909,7 @@ def _sandwich(
     for i in range(q.shape[0]):
         qx = c * q[i, 0] - s * q[i, 1] + x[0]
         qy = s * q[i, 0] + c * q[i, 1] + x[1]
-        j = _nearest(qx, qy, p, keys, order, d_max, d_max)
+        j = _nearest(qx, qy, p, keys, order, columns, d_max, d_max)
         if j < 0:
             continue
         nx = n[j, 0]
@@ -889,9 +975,9 @@ class _Matcher:
         self.n_seg = int(self.seg.max(initial=-1)) + 1
         self.q = np.ascontiguousarray(cur.xy)
         self.cq = (cur.q11, cur.q12, cur.q22)
-        self._grids: dict[float, tuple[NDArray[np.int64], NDArray[np.int64]]] = {}
+        self._grids: dict[float, _Grid] = {}
 
-    def _grid(self, d_max: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    def _grid(self, d_max: float) -> _Grid:
         if d_max not in self._grids:
             self._grids[d_max] = _grid(self.p, d_max)
         return self._grids[d_max]
@@ -900,9 +986,9 @@ class _Matcher:
         self, x: FloatArray, d_max: float
     ) -> tuple[FloatArray, FloatArray, int, int, float, float]:
         """``(H, g, pairs, inliers, Σ w e², cost)`` at ``x`` for the pairs within ``d_max``."""
-        keys, order = self._grid(d_max)
+        keys, order, columns = self._grid(d_max)
         return _normal_equations(
-            np.asarray(x, dtype=float), self.p, self.n, self.var_ref, keys, order, d_max,
+            np.asarray(x, dtype=float), self.p, self.n, self.var_ref, keys, order, columns, d_max,
             d_max, self.q, *self.cq, self.cfg.inlier_m,
         )  # fmt: skip
 
@@ -910,10 +996,23 @@ class _Matcher:
         """Gauss-Newton with Cauchy weights from ``x0`` (pairs within ``d_max``)."""
         if self.p.shape[0] < 3:
             return np.array(x0, dtype=float)
-        keys, order = self._grid(d_max)
+        keys, order, columns = self._grid(d_max)
         return _gauss_newton(
             np.array(x0, dtype=float), iterations, self.x_prior, self.info_prior, self.p, self.n,
-            self.var_ref, keys, order, d_max, d_max, self.q, *self.cq,
+            self.var_ref, keys, order, columns, d_max, d_max, self.q, *self.cq,
+        )  # fmt: skip
+
+    def solve_starts(
+        self, x0: FloatArray, offsets: FloatArray, iterations: int, d_max: float
+    ) -> tuple[FloatArray, NDArray[np.int64]]:
+        """:meth:`solve` from ``x0`` rotated by each offset, and :meth:`inliers` at each.
+
+        One compiled call; returns ``(xs (K, 3), inliers (K,))``.
+        """
+        return _gauss_newton_starts(
+            np.array(x0, dtype=float), offsets, iterations, self.x_prior, self.info_prior,
+            self.p, self.n, self.var_ref, self._grid(d_max), d_max,
+            self._grid(self.cfg.inlier_m), self.cfg.inlier_m, self.q, *self.cq,
         )  # fmt: skip
 
     def objective(self, x: FloatArray, kappa: float = 1.0) -> float:
@@ -965,9 +1064,9 @@ class _Matcher:
         """
         if self.p.shape[0] < 3:
             return np.full((3, 3), np.nan), 0
-        keys, order = self._grid(self.cfg.inlier_m)
+        keys, order, columns = self._grid(self.cfg.inlier_m)
         A, B, pairs, inl, wee = _sandwich(
-            np.asarray(x, dtype=float), self.p, self.n, self.var_ref, keys, order,
+            np.asarray(x, dtype=float), self.p, self.n, self.var_ref, keys, order, columns,
             self.cfg.inlier_m, self.q, *self.cq, self.seg, self.n_seg,
             self.cfg.model_sigma_m**2, CAUCHY_DPSI, CAUCHY_PSI2,
         )  # fmt: skip
@@ -1171,12 +1270,14 @@ def _coarse_starts(
     matcher: _Matcher, x0: FloatArray, offsets: list[float], cfg: ScanMatchConfig
 ) -> list[tuple[int, float, FloatArray]]:
     """A few iterations from ``x0`` rotated by each offset: ``(inliers, offset, x)`` each."""
-    coarse: list[tuple[int, float, FloatArray]] = []
-    for off in offsets:
-        start = x0 + np.array([0.0, 0.0, off])
-        x = matcher.solve(start, cfg.coarse_iterations, cfg.max_correspondence_m)
-        coarse.append((matcher.inliers(x), off, x))
-    return coarse
+    if matcher.p.shape[0] < 3:
+        return [(0, off, x0 + np.array([0.0, 0.0, off])) for off in offsets]
+    xs, inliers = matcher.solve_starts(
+        x0, np.asarray(offsets, dtype=float), cfg.coarse_iterations, cfg.max_correspondence_m
+    )
+    return [
+        (int(n), off, x.copy()) for n, off, x in zip(inliers.tolist(), offsets, xs, strict=True)
+    ]
 
 
 def _refine(matcher: _Matcher, x: FloatArray, cfg: ScanMatchConfig) -> FloatArray:
