@@ -1199,3 +1199,29 @@ def test_a_robot_standing_still_keeps_a_bounded_stretch_of_scans():
     assert slam.counters["scan_matches_between"] == n  # every one matched, none a keyframe
     assert len(slam._stretch) == pipeline.MAX_STRETCH_SCANS
     assert slam._stretch[-1].scan_no == n  # the latest kept
+
+
+def test_grid_nearest_point_is_the_brute_force_nearest_within_reach():
+    """The grid's query (cells of side ``cell``, reach ``d_max ≤ cell``) finds the point a
+    search over all points finds, and none when no point is within reach, wherever the
+    points and queries lie (columns empty, outside the grid, many points in one cell)."""
+    from slam.frontend.scan_match import _grid, _nearest
+
+    rng = np.random.default_rng(7)
+    checked = found = 0
+    for trial in range(300):
+        m = int(rng.integers(1, 150))
+        spread = [0.2, 2.0, 40.0][trial % 3]
+        p = rng.normal(0.0, spread, (m, 2)) + rng.normal(0.0, 30.0, 2)
+        cell = float(rng.choice([0.05, 0.3, 1.0]))
+        keys, order, columns = _grid(p, cell)
+        queries = p[rng.integers(0, m, 20)] + rng.normal(0.0, cell, (20, 2))
+        for qx, qy in queries:
+            for d_max in (cell, 0.4 * cell):
+                d = np.hypot(p[:, 0] - qx, p[:, 1] - qy)
+                expected = int(np.argmin(d)) if d.min() <= d_max else -1
+                got = _nearest(qx, qy, p, keys, order, columns, cell, d_max)
+                assert got == expected, (trial, qx, qy, d_max)
+                checked += 1
+                found += got >= 0
+    assert 0.2 * checked < found < checked  # both outcomes exercised
