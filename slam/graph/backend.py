@@ -158,6 +158,8 @@ class Isam2Backend:
             "full_refreshes": s.full_refreshes,
             "resets": self.resets,
             "final_relinearizations": s.final_relinearizations,
+            "relinearizations_predicted": s.relinearizations_predicted,
+            "relinearizations_unforeseen": s.relinearizations_unforeseen,
             "qr_fallbacks": s.qr_fallbacks,
             "final_step": s.final_step,
             "time_s": dict(s.time_s),

@@ -153,7 +153,15 @@ class Isam2Config:
         relinearisations then cascade over the whole graph (``docs/graph.md``).
     partial_relinearization_check : bool
         iSAM2's ``enablePartialRelinearizationCheck``: only the top of the tree is checked for
-        variables to relinearise (cheap; deep variables may keep large updates).
+        variables to relinearise (deep variables may keep large updates).  Off (default),
+        every variable is checked (every ``relinearize_skip`` updates, a pass over ``δ``), and
+        which ones iSAM2 relinearises can be foreseen (``blocks_relinearized_in_step``).
+    blocks_relinearized_in_step : bool
+        On an update where iSAM2 relinearises, foresee which variables it moves (those with a
+        component of ``δ`` above the thresholds; needs ``partial_relinearization_check``
+        off, else ignored) and rebuild the blocks on them at the new ``θ`` in the same update.
+        Otherwise the blocks follow one update later: iSAM2 then re-eliminates the same part
+        of the tree twice, first with the blocks' old Jacobians.
     """
 
     RENAMED_KEYS: ClassVar[dict[str, str]] = {
@@ -173,7 +181,8 @@ class Isam2Config:
     final_step_tolerance: float = 1e-4
     final_weight_refresh: bool = True
     relinearize_skip: int = 10
-    partial_relinearization_check: bool = True
+    partial_relinearization_check: bool = False
+    blocks_relinearized_in_step: bool = True
 
     def __post_init__(self) -> None:
         positive("relinearize_threshold_m", self.relinearize_threshold_m)

@@ -12,12 +12,14 @@ Design (measured in ``scripts/bench_graph.py``; see ``docs/graph.md``):
   the block is rebuilt on the same landmarks, overwritten in place (:class:`_BlockTemplate`).
 * **Relinearisation policy.**  A ``LinearContainerFactor`` keeps its Jacobian; when iSAM2
   moves ``θ`` of one of its variables (its own relinearisation, ``relinearize_threshold_*``) it
-  only shifts the right-hand side.  After every update whose result reports relinearised
-  variables, ``θ`` is read back (one C++ call) and every keyframe block with a variable that
-  moved since the block was built (beyond ``relin_*`` thresholds; default: any move) is queued;
-  the next update removes those blocks by factor index and adds fresh ones linearised at the
-  new ``θ``, in the same ``ISAM2.update`` call.  With the default thresholds the line factors
-  are thus always linearised where iSAM2 linearises its native factors.
+  only shifts the right-hand side.  So on an update where iSAM2 relinearises (every
+  ``relinearize_skip`` updates), the variables it is about to move are foreseen first — its
+  full check: any component of ``δ`` above the threshold — the mirrored ``θ`` takes the same
+  step, and every keyframe block with such a variable is removed by factor index and added
+  again linearised at the new ``θ``, in that same ``ISAM2.update`` call; iSAM2's ``θ`` is
+  then read back and compared with the mirror (a variable it moved unforeseen queues its
+  blocks for the next update).  With the default thresholds the line factors are thus always
+  linearised where iSAM2 linearises its native factors.
 * **Robust kernels** weight a block when it is (re)built, from the residual at ``θ`` (IRLS with
   weights refreshed on relinearisation).  ``θ`` lags the estimate by up to the relinearisation
   thresholds, so the final convergence rebuilds iSAM2 at the estimate
@@ -30,8 +32,8 @@ Design (measured in ``scripts/bench_graph.py``; see ``docs/graph.md``):
 * **Landmark fusion**: the blocks of keyframes that saw the retired landmark are rebuilt
   against the kept one; the retired variable keeps a weak prior (σ = 1) so that the system
   stays well posed (iSAM2 cannot delete a variable).
-* iSAM2's ``enablePartialRelinearizationCheck`` is on: without it, the relinearisation check
-  visits the whole tree every update and the cost per update grows linearly with the graph.
+* iSAM2's ``enablePartialRelinearizationCheck`` is off: its full check is the one that can
+  be foreseen, and it runs only every ``relinearize_skip`` updates.
 
 The estimate is read back after each update: the variables touched by the update, or the whole
 estimate (iSAM2's ``δ`` in one vector, retracted onto the mirrored ``θ`` in numpy) after a large
@@ -91,6 +93,12 @@ class Isam2Stats:
         Whole-estimate read-backs.
     final_relinearizations : int
         Rebuilds of iSAM2 at the estimate by ``optimize(exact=True)``.
+    relinearizations_predicted : int
+        Variables whose relinearisation by iSAM2 was foreseen and their blocks rebuilt in the
+        same update (``Isam2Config.blocks_relinearized_in_step``).
+    relinearizations_unforeseen : int
+        Variables iSAM2 relinearised that were not foreseen (their blocks follow one update
+        later; 0 when the prediction holds).
     qr_fallbacks : int
         Times an update hit a system too poorly conditioned for the Cholesky factorisation
         (GTSAM's ``IndeterminateLinearSystemException``) and iSAM2 was rebuilt with QR.
@@ -107,6 +115,8 @@ class Isam2Stats:
     variables_relinearized: int = 0
     full_refreshes: int = 0
     final_relinearizations: int = 0
+    relinearizations_predicted: int = 0
+    relinearizations_unforeseen: int = 0
     qr_fallbacks: int = 0
     final_step: float = float("nan")
     time_s: dict[str, float] = field(
@@ -304,6 +314,7 @@ class Isam2Solver:
         self._theta_lms = GrowableArray((2,))
         self._theta_changed = False
         self._since_full = 0
+        self._isam_updates = 0  # iSAM2's own count of updates (its relinearisation steps)
 
     # -- native factors ----------------------------------------------------------------------
     def _odometry_factors(self, graph: LineGraph, start: int) -> gtsam.NonlinearFactorGraph:
@@ -334,11 +345,65 @@ class Isam2Solver:
 
     # -- linearisation point -----------------------------------------------------------------
     def _refresh_theta(self) -> None:
+        poses, lms = self._isam_theta()
+        self._theta_poses.data[:] = poses
+        self._theta_lms.data[:] = lms
+
+    def _isam_theta(self) -> tuple[FloatArray, FloatArray]:
+        """iSAM2's linearisation point: poses ``(N, 3)``, landmarks ``(M, 2)``."""
         lp = self.isam.getLinearizationPoint()
         poses = np.asarray(gtsam.utilities.extractPose2(lp), dtype=float).reshape(-1, 3)
         lms = np.asarray(gtsam.utilities.extractPoint2(lp), dtype=float).reshape(-1, 2)
-        self._theta_poses.data[:] = poses
-        self._theta_lms.data[:] = lms
+        return poses, lms
+
+    @property
+    def _foresees_relinearization(self) -> bool:
+        cfg = self.config
+        return cfg.blocks_relinearized_in_step and not cfg.partial_relinearization_check
+
+    def _foresee_relinearization(self) -> None:
+        """Move the mirrored ``θ`` as iSAM2 is about to in this update.
+
+        iSAM2's full relinearisation check (``enablePartialRelinearizationCheck`` off)
+        relinearises every variable with a component of its ``δ`` above the threshold and
+        moves its ``θ`` to ``θ ⊕ δ`` before it linearises the update's new factors.  The same
+        step on the mirror makes the blocks on those variables stale now, so that they are
+        rebuilt at the new ``θ`` in this very update (:meth:`update`) instead of one update
+        later, after iSAM2 has re-eliminated them once already with their old Jacobians.
+        """
+        n_p, n_l = self._n_poses, self._n_landmarks
+        d_lms, d_poses = split_delta(self.isam.getDelta(), n_l, n_p)
+        m, rad = self.config.relinearize_threshold_m, self.config.relinearize_threshold_rad
+        moved_p = np.flatnonzero(np.any(np.abs(d_poses) > np.array([m, m, rad]), axis=1))
+        moved_l = np.flatnonzero(np.any(np.abs(d_lms) > np.array([m, rad]), axis=1))
+        if moved_p.size:
+            theta = pose_retract(self._theta_poses.data[moved_p], d_poses[moved_p])
+            theta[:, 2] = np.asarray(wrap_angle(theta[:, 2]))
+            self._theta_poses.data[moved_p] = theta
+        if moved_l.size:
+            self._theta_lms.data[moved_l] += d_lms[moved_l]
+        if moved_p.size or moved_l.size:
+            self._theta_changed = True
+        self.stats.relinearizations_predicted += int(moved_p.size + moved_l.size)
+
+    def _check_foreseen_theta(self) -> None:
+        """After a relinearisation step, iSAM2's ``θ`` against the mirror's foresight.
+
+        Agreement to 1e-9 keeps the mirror (so that the blocks just built stay current);
+        a variable iSAM2 moved otherwise takes iSAM2's ``θ``, and its blocks follow one
+        update later.
+        """
+        poses, lms = self._isam_theta()
+        mine_p, mine_l = self._theta_poses.data, self._theta_lms.data
+        dp = np.abs(poses - mine_p)
+        dp[:, 2] = np.abs(np.asarray(wrap_angle(poses[:, 2] - mine_p[:, 2])))
+        off_p = np.flatnonzero(np.any(dp > 1e-9, axis=1))
+        off_l = np.flatnonzero(np.any(np.abs(lms - mine_l) > 1e-9, axis=1))
+        if off_p.size or off_l.size:
+            mine_p[off_p] = poses[off_p]
+            mine_l[off_l] = lms[off_l]
+            self._theta_changed = True
+            self.stats.relinearizations_unforeseen += int(off_p.size + off_l.size)
 
     def _stale_groups(self) -> set[int]:
         """Keyframes whose block was built at a linearisation point iSAM2 has since left."""
@@ -453,6 +518,13 @@ class Isam2Solver:
         if graph.prior_pose is None:
             raise EstimationError("the graph has no prior on its first pose (gauge)")
         t0 = time.perf_counter()
+        self._isam_updates += 1  # the count iSAM2 will have during this update
+        relinearization_step = (
+            force_relinearize or self._isam_updates % self.config.relinearize_skip == 0
+        )
+        foreseen = relinearization_step and self._foresees_relinearization and self._n_poses > 0
+        if foreseen:
+            self._foresee_relinearization()
         nfg = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         touched_poses: set[int] = set()
@@ -554,7 +626,9 @@ class Isam2Solver:
         n_relin = int(result.getVariablesRelinearized())
         self.stats.variables_relinearized += n_relin
         t0 = time.perf_counter()
-        if n_relin > 0:
+        if foreseen:
+            self._check_foreseen_theta()
+        elif n_relin > 0:
             self._refresh_theta()
             self._theta_changed = True
         self._since_full += 1
