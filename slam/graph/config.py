@@ -148,8 +148,9 @@ class Isam2Config:
         NEES is 2.08 against the batch solver's 2.74 (``docs/graph.md``); with it 2.71.
     relinearize_skip : int
         iSAM2 checks for variables to relinearise only every this many updates (GTSAM's
-        default 10).  Relinearising at every update (1) lets the one-update lag of the block
-        rebuilds feed back into the next relinearisation: on long open chains the
+        default 10).  With the blocks rebuilt one update after iSAM2 relinearises
+        (``blocks_relinearized_in_step`` false), relinearising at every update (1) lets that
+        lag feed back into the next relinearisation: on long open chains the
         relinearisations then cascade over the whole graph (``docs/graph.md``).
     partial_relinearization_check : bool
         iSAM2's ``enablePartialRelinearizationCheck``: only the top of the tree is checked for
