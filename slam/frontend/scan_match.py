@@ -1009,6 +1009,9 @@ class _Matcher:
 
         One compiled call; returns ``(xs (K, 3), inliers (K,))``.
         """
+        if self.p.shape[0] < 3:  # as solve and inliers: the starts, no inliers
+            xs = np.array(x0, dtype=float) + np.outer(offsets, [0.0, 0.0, 1.0])
+            return xs, np.zeros(offsets.shape[0], dtype=np.int64)
         return _gauss_newton_starts(
             np.array(x0, dtype=float), offsets, iterations, self.x_prior, self.info_prior,
             self.p, self.n, self.var_ref, self._grid(d_max), d_max,
@@ -1270,8 +1273,6 @@ def _coarse_starts(
     matcher: _Matcher, x0: FloatArray, offsets: list[float], cfg: ScanMatchConfig
 ) -> list[tuple[int, float, FloatArray]]:
     """A few iterations from ``x0`` rotated by each offset: ``(inliers, offset, x)`` each."""
-    if matcher.p.shape[0] < 3:
-        return [(0, off, x0 + np.array([0.0, 0.0, off])) for off in offsets]
     xs, inliers = matcher.solve_starts(
         x0, np.asarray(offsets, dtype=float), cfg.coarse_iterations, cfg.max_correspondence_m
     )

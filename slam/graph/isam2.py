@@ -124,6 +124,13 @@ class Isam2Stats:
     )
 
 
+def _retracted(poses: FloatArray, delta: FloatArray) -> FloatArray:
+    """``poses ⊕ delta`` (GTSAM's ``Pose2.retract``), headings wrapped as GTSAM reads them."""
+    out = pose_retract(poses, delta)
+    out[:, 2] = np.asarray(wrap_angle(out[:, 2]))
+    return out
+
+
 @njit(cache=True, nogil=True)
 def _block_layout(
     column: NDArray[np.int64],
@@ -377,9 +384,9 @@ class Isam2Solver:
         moved_p = np.flatnonzero(np.any(np.abs(d_poses) > np.array([m, m, rad]), axis=1))
         moved_l = np.flatnonzero(np.any(np.abs(d_lms) > np.array([m, rad]), axis=1))
         if moved_p.size:
-            theta = pose_retract(self._theta_poses.data[moved_p], d_poses[moved_p])
-            theta[:, 2] = np.asarray(wrap_angle(theta[:, 2]))
-            self._theta_poses.data[moved_p] = theta
+            self._theta_poses.data[moved_p] = _retracted(
+                self._theta_poses.data[moved_p], d_poses[moved_p]
+            )
         if moved_l.size:
             self._theta_lms.data[moved_l] += d_lms[moved_l]
         if moved_p.size or moved_l.size:
@@ -651,9 +658,8 @@ class Isam2Solver:
         ``calculateEstimate``, which builds a new ``Values`` of every variable).
         """
         d_lms, d_poses = split_delta(self.isam.getDelta(), self._n_landmarks, self._n_poses)
-        poses = pose_retract(self._theta_poses.data, d_poses)
+        poses = _retracted(self._theta_poses.data, d_poses)
         lms = self._theta_lms.data + d_lms
-        poses[:, 2] = np.asarray(wrap_angle(poses[:, 2]))
         lms[:, 1] = np.asarray(wrap_angle(lms[:, 1]))
         graph.poses[:] = poses
         graph.landmarks[:] = lms
