@@ -56,7 +56,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import binom
+from scipy.special import bdtrc
 
 from linefit.config import LineFitConfig
 from linefit.line import Line
@@ -383,7 +383,8 @@ class LineSlam:
         self.counters["scan_match_turns_against"] += int(turn_odom * float(match.delta[2]) < 0.0)
         n, k = self.counters["scan_match_turns"], self.counters["scan_match_turns_against"]
         if not self._warned_mirrored and 2 * k > n:
-            p_value = float(binom.sf(k - 1, n, 0.5))
+            # P(at least k of n against), scipy.stats.binom.sf(k - 1, n, 0.5) from scipy.special
+            p_value = float(bdtrc(k - 1, n, 0.5))
             if p_value < MIRRORED_P_VALUE:
                 self._warned_mirrored = True
                 warnings.warn(warn_mirrored(n, k), SlamWarning, stacklevel=4)

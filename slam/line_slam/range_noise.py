@@ -19,9 +19,8 @@ reports, the configuration decides.
 
 from __future__ import annotations
 
+import bisect
 import math
-
-import numpy as np
 
 from slam.frontend.scan_match import ScanPoints
 
@@ -59,15 +58,13 @@ class RangeNoiseCheck:
 
     def __init__(self, sigma_range_m: float) -> None:
         self.sigma_range_m = float(sigma_range_m)
-        self._ratios: list[float] = []
-        self._sigma_ratio: float | None = None  # of the ratios so far, None: not computed
+        self._ratios: list[float] = []  # sorted: the median is read at every keyframe
         self.warned = False
 
     def add(self, points: ScanPoints) -> None:
         """Count a keyframe's points (a NaN ratio, no window to measure, is left out)."""
         if math.isfinite(points.noise_ratio):
-            self._ratios.append(float(points.noise_ratio))
-            self._sigma_ratio = None
+            bisect.insort(self._ratios, float(points.noise_ratio))
 
     @property
     def keyframes(self) -> int:
@@ -77,11 +74,12 @@ class RangeNoiseCheck:
     @property
     def sigma_ratio(self) -> float | None:
         """Square root of the median ratio; None before :data:`MIN_KEYFRAMES` keyframes."""
-        if len(self._ratios) < MIN_KEYFRAMES:
+        n = len(self._ratios)
+        if n < MIN_KEYFRAMES:
             return None
-        if self._sigma_ratio is None:  # once per keyframe at most, however often it is read
-            self._sigma_ratio = math.sqrt(max(float(np.median(self._ratios)), 0.0))
-        return self._sigma_ratio
+        r = self._ratios
+        median = r[n // 2] if n % 2 else (r[n // 2 - 1] + r[n // 2]) / 2.0  # as np.median
+        return math.sqrt(max(median, 0.0))
 
     def warning(self) -> str | None:
         """The warning, the first time the ratio is above :data:`WARN_SIGMA_RATIO`; else None."""
