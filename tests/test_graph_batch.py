@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import signal
 from dataclasses import replace
 
@@ -88,7 +89,12 @@ def test_fast_path_and_custom_factor_reach_the_same_solution():
     ref = gtsam.LevenbergMarquardtOptimizer(nfg, values, params).optimize()
     ref_poses = gtsam.utilities.extractPose2(ref)
     st = BatchSolver(
-        SolverConfig(robust_kernel="none", relative_tolerance=1e-12, step_tolerance=1e-10)
+        SolverConfig(
+            robust_kernel="none",
+            relative_tolerance=1e-12,
+            absolute_tolerance=0.0,
+            step_tolerance=1e-10,
+        )
     ).solve(g)
     assert st.final_cost == pytest.approx(nfg.error(ref), rel=1e-8)
     np.testing.assert_allclose(g.poses[:, :2], ref_poses[:, :2], atol=1e-7)
@@ -167,6 +173,7 @@ def test_solve_with_held_poses_returns_to_the_full_optimum(linear_solver):
         SolverConfig(
             robust_kernel="none",
             relative_tolerance=1e-14,
+            absolute_tolerance=0.0,
             step_tolerance=1e-11,
             linear_solver=linear_solver,
         )
@@ -285,6 +292,29 @@ def test_packed_factors_hold_the_same_rows():
     keys = keys_of("x", np.arange(10))
     for a, c in zip(system(single, keys), system(packed, keys), strict=True):
         np.testing.assert_array_equal(c, a)
+
+
+def test_solve_stops_once_an_iteration_gains_less_than_the_absolute_tolerance():
+    """The first iteration whose cost decrease is below ``absolute_tolerance`` ends the solve;
+    without it the same iterations come first, and the solve gains less than the tolerance
+    after them."""
+    p = synthetic_problem(80, seed=6)
+    tight = SolverConfig(robust_kernel="cauchy", relative_tolerance=0.0, absolute_tolerance=0.0)
+    runs = {}
+    for tol in (0.0, 0.5):
+        g = copy.deepcopy(p.graph)
+        g.poses[1:] += np.random.default_rng(2).normal(0.0, [0.05, 0.05, 0.02], (g.n_poses - 1, 3))
+        st = BatchSolver(replace(tight, absolute_tolerance=tol)).solve(g)
+        runs[tol] = (st, g.poses.copy())
+    st, _ = runs[0.5]
+    assert st.reason == "decrease below absolute tolerance"
+    costs = [st.initial_cost] + [c for c, _, accepted in st.history if accepted]
+    gains = -np.diff(costs)
+    assert gains[-1] <= 0.5 and np.all(gains[:-1] > 0.5)
+    full, _ = runs[0.0]
+    assert full.iterations > st.iterations
+    assert full.history[: len(st.history)] == st.history  # the same steps up to there
+    assert 0.0 <= st.final_cost - full.final_cost < 0.5
 
 
 @pytest.mark.parametrize("linear_solver", ["sparse", "gtsam"])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import gtsam
 import numpy as np
 import pytest
@@ -252,11 +254,13 @@ def test_batch_final_solver_ends_at_the_batch_solution_with_its_covariances():
     solver.optimize(g, exact=True)
     assert solver.stats.final_relinearizations >= 1
     online_poses = g_online.poses.copy()
-    reference = g_online  # solved in place by the batch solver
-    assert BatchSolver(cauchy).solve(reference).converged
+    reference = g_online  # solved in place by the batch solver, to the last digits
+    assert BatchSolver(replace(cauchy, absolute_tolerance=0.0)).solve(reference).converged
     err_online = np.max(np.abs(online_poses[:, :2] - reference.poses[:, :2]))
     err = np.max(np.abs(g.poses[:, :2] - reference.poses[:, :2]))
-    assert err < 1e-4 < err_online
+    # the final solve stops once an iteration gains less than 0.01 in cost: a tenth of a
+    # millimetre from the optimum here, where the online estimate is centimetres away
+    assert err < 2e-4 and err < 0.01 * err_online
     # iSAM2 holds the final estimate
     for i in (0, 60, 119):
         p = solver.isam.calculateEstimatePose2(keys_of("x", np.array([i]))[0])

@@ -684,6 +684,9 @@ class BatchSolver:
                 if decrease <= cfg.relative_tolerance * max(cost, 1e-300):
                     stats.converged, stats.reason = True, "relative decrease below tolerance"
                     break
+                if decrease <= cfg.absolute_tolerance:
+                    stats.converged, stats.reason = True, "decrease below absolute tolerance"
+                    break
             else:
                 relinearize = False
                 if lam == 0.0:

@@ -29,6 +29,14 @@ class SolverConfig:
         grows with the graph.
     relative_tolerance : float
         Converged when the cost decreases by less than this fraction.
+    absolute_tolerance : float
+        Converged when the cost decreases by less than this.  The cost is a negative
+        log-likelihood (half the whitened χ², robust where the kernel is), so a decrease of
+        0.01 makes the new estimate 1 % more likely than the last: no estimate the data can
+        tell apart.  A robust kernel's weights otherwise let a few landmarks with one
+        outlying observation creep by a tenth of a millimetre per iteration for tens of
+        iterations, the cost falling by a few thousandths each time.  0: the relative
+        tolerance alone.
     step_tolerance : float
         Converged when the largest update component is below this (m or rad).
     lambda_initial, lambda_min, lambda_max : float
@@ -58,6 +66,7 @@ class SolverConfig:
     online_iterations: int = 3
     batch_interval: int = 1
     relative_tolerance: float = 1e-8
+    absolute_tolerance: float = 0.01
     step_tolerance: float = 1e-7
     lambda_initial: float = 1e-3
     lambda_min: float = 1e-7
@@ -72,6 +81,7 @@ class SolverConfig:
         require(self.online_iterations >= 1, "online_iterations must be >= 1")
         require(self.batch_interval >= 1, "batch_interval must be >= 1")
         nonneg("relative_tolerance", self.relative_tolerance)
+        nonneg("absolute_tolerance", self.absolute_tolerance)
         nonneg("step_tolerance", self.step_tolerance)
         positive("lambda_initial", self.lambda_initial)
         positive("lambda_min", self.lambda_min)
