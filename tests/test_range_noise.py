@@ -104,6 +104,26 @@ def test_the_check_reports_after_enough_keyframes_and_warns_once_above_its_limit
     assert noisy.warning() is None  # once
 
 
+def test_the_ratio_is_the_square_root_of_the_median_of_every_keyframe_so_far() -> None:
+    """Read after every keyframe, in any order of arrival, odd and even counts, NaN left out:
+    the square root of ``np.median`` of the finite ratios added, to the bit."""
+    noise = SensorNoiseConfig()
+    check = RangeNoiseCheck(noise.sigma_range_m)
+    points = scan_points(room_ranges(BEARINGS), BEARINGS, 80.0, noise, ScanMatchConfig())
+    rng = np.random.default_rng(4)
+    added: list[float] = []
+    for i in range(3 * MIN_KEYFRAMES + 1):
+        ratio = float("nan") if i % 7 == 3 else float(rng.gamma(2.0, 1.0))
+        check.add(replace(points, noise_ratio=ratio))
+        if math.isfinite(ratio):
+            added.append(ratio)
+        if len(added) < MIN_KEYFRAMES:
+            assert check.sigma_ratio is None
+        else:
+            assert check.sigma_ratio == math.sqrt(float(np.median(added)))
+    assert check.keyframes == len(added)
+
+
 def test_a_run_reports_its_range_noise_and_warns_when_the_scans_are_noisier() -> None:
     from slam.line_slam.config import KeyframeConfig, SlamConfig
     from slam.line_slam.pipeline import LineSlam
