@@ -207,12 +207,15 @@ def simulate_run(
     """Scans along ``poses_true`` with noisy odometry (odometry frame = world at the start).
 
     ``bias``: the odometry misreads every step so that ``bias.apply`` of its step is the true
-    one (then the random walk of ``motion`` is added).
+    one (then the random walk of ``motion`` is added); with a mounting, the odometry reports
+    the motion of the point ``bias.mount_*`` behind the laser.
     """
     rng = np.random.default_rng(seed)
     rel = pose_between(poses_true[:-1], poses_true[1:])
     if bias is not None:
-        raw = rel.copy()
+        mount = np.array([bias.mount_x_m, bias.mount_y_m, 0.0])
+        # the laser's step M⁻¹·B·M undone: the odometry's point moves by B = M·step·M⁻¹
+        raw = pose_compose(pose_compose(mount, rel), pose_inverse(mount))
         raw[:, :2] /= 1.0 + bias.scale
         d_raw = np.hypot(raw[:, 0], raw[:, 1])
         raw[:, 2] = (rel[:, 2] - bias.heading_drift_rad_per_m * d_raw) / (1.0 + bias.turn_gain)

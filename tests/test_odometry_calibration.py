@@ -8,26 +8,83 @@ import numpy as np
 import pytest
 from line_world import corridor_loop, loop_path, relations_error, simulate_run
 
-from slam.geometry import pose_between, pose_log
+from slam.geometry import pose_between, pose_compose, pose_inverse, pose_log
 from slam.line_slam import LineSlam, SlamConfig, SlamWarning
-from slam.line_slam.odometry_calibration import OdometryCalibrator
+from slam.line_slam.odometry_calibration import MountingEstimator, OdometryCalibrator
 from slam.models.motion import MotionNoiseConfig, OdometryCalibration
 
 BIAS = OdometryCalibration(scale=0.03, turn_gain=-0.05, heading_drift_rad_per_m=0.03)
+MOUNT = OdometryCalibration(mount_x_m=0.3)
 
 
 def test_calibration_jacobian_matches_numerical_derivative(rng):
     for step in rng.normal(scale=[0.4, 0.1, 0.3], size=(5, 3)):
         A = OdometryCalibration().jacobian(step)
-        num = np.zeros((3, 3))
-        for k in range(3):
-            e = np.zeros(3)
+        num = np.zeros((3, 5))
+        for k in range(5):
+            e = np.zeros(5)
             e[k] = 1e-6
             plus = OdometryCalibration(*e).apply(step)
             minus = OdometryCalibration(*(-e)).apply(step)
             num[:, k] = pose_log(pose_between(step, plus)) - pose_log(pose_between(step, minus))
             num[:, k] /= 2e-6
         np.testing.assert_allclose(A, num, atol=1e-7)
+
+
+def test_a_mounted_laser_moves_by_the_step_seen_from_the_mounting(rng):
+    """``M⁻¹ · δ · M``: the laser's motion when the odometry reports the motion of a point
+    ``m`` behind it, composed pose by pose (a known answer, not the formula again)."""
+    m = np.array([0.08, -0.03, 0.0])
+    cal = OdometryCalibration(mount_x_m=m[0], mount_y_m=m[1])
+    for step in rng.normal(scale=[0.4, 0.1, 0.8], size=(5, 3)):
+        base_i = rng.normal(size=3)
+        base_j = pose_compose(base_i, step)
+        laser_i, laser_j = pose_compose(base_i, m), pose_compose(base_j, m)
+        np.testing.assert_allclose(cal.apply(step), pose_between(laser_i, laser_j), atol=1e-12)
+    # a turn on the spot moves the laser sideways by m·sin θ; a straight step not at all
+    np.testing.assert_allclose(
+        cal.apply(np.array([0.0, 0.0, 0.3])),
+        [
+            m[0] * (np.cos(0.3) - 1) - m[1] * np.sin(0.3),
+            m[0] * np.sin(0.3) + m[1] * (np.cos(0.3) - 1),
+            0.3,
+        ],
+        atol=1e-15,
+    )
+    np.testing.assert_allclose(cal.apply(np.array([0.5, 0.0, 0.0])), [0.5, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("mount", [(0.08, -0.03), (0.0, 0.0)])
+def test_mounting_estimator_recovers_the_mounting_from_exact_step_estimates(rng, mount):
+    """Steps estimated exactly (the graph's poses are the truth): the fit is the mounting
+    within four standard deviations and significant; with none it is not applied."""
+    truth = OdometryCalibration(mount_x_m=mount[0], mount_y_m=mount[1])
+    M = np.array([*mount, 0.0])
+    est = MountingEstimator(min_samples=20, update_every=10)
+    Q = np.diag([0.01, 0.01, 0.01]) ** 2
+    poses = [np.zeros(3)]
+    for k in range(400):
+        turn = k % 2 == 1
+        laser_step = np.array(
+            [0.0, 0.0, rng.choice([-1, 1]) * rng.uniform(0.2, 0.6)]
+            if turn
+            else [rng.uniform(0.2, 0.4), 0.0, rng.normal(0.0, 0.02)]
+        )
+        base_step = pose_compose(pose_compose(M, laser_step), pose_inverse(M))
+        raw = pose_compose(base_step, rng.multivariate_normal(np.zeros(3), Q))
+        poses.append(pose_compose(poses[-1], laser_step))
+        est.add_step(k, k + 1, raw, est.apply(raw), Q)
+        est.keyframe(np.array(poses))
+    got = est.summary()
+    assert got["fits"] >= 1 and got["turning_samples"] > 100
+    for name, value in (("mount_x_m", mount[0]), ("mount_y_m", mount[1])):
+        assert abs(got[f"fit_{name}"] - value) < 4 * got[f"sd_{name}"], name
+    assert got["significant"] == (mount != (0.0, 0.0))
+    applied = np.array([got["mount_x_m"], got["mount_y_m"]])
+    expected = np.array(mount) if got["significant"] else np.zeros(2)
+    np.testing.assert_array_equal(applied == 0.0, expected == 0.0)
+    turn = np.array([0.0, 0.0, 0.5])
+    assert np.linalg.norm((est.apply(turn) - truth.apply(turn))[:2]) < 3e-3
 
 
 def test_calibrator_recovers_a_bias_while_it_corrects_the_steps(rng):
@@ -88,3 +145,59 @@ def test_the_calibrated_run_is_more_accurate_on_a_biased_odometry(biased_loop):
     path, out = biased_loop
     off, calibrated = (relations_error(out[m].poses_world_laser, path, 10).mean() for m in out)
     assert calibrated < 0.7 * off
+
+
+@pytest.fixture(scope="module")
+def mounted_loop():
+    """Four laps of the corridor loop with the laser 30 cm ahead of the point the odometry
+    reports (a mounting the log does not state), and without: each run with and without the
+    calibration of the mounting."""
+    motion = MotionNoiseConfig(
+        sigma_xy_per_m=0.01, sigma_theta_per_m=0.01, sigma_theta_per_rad=0.01
+    )
+    world = corridor_loop(piece=3.0, door=1.0)
+    path = loop_path(16, 8, 0.4, laps=4)
+    out = {}
+    for mounted in (True, False):
+        run = simulate_run(
+            world, path, seed=3, motion=motion, bias=MOUNT if mounted else OdometryCalibration()
+        )
+        for mode in ("off", "mounting"):
+            slam = LineSlam(SlamConfig(motion=motion, odometry_calibration=mode))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", SlamWarning)
+                for scan, lines in zip(run.scans, run.lines, strict=True):
+                    slam.add_scan(scan, lines)
+                slam.optimize()
+            out[mounted, mode] = slam.result()
+    return path, out
+
+
+def test_a_run_estimates_an_unstated_mounting_and_is_more_accurate(mounted_loop):
+    """The graph's estimate of a step is the odometry fused with the lines, so the fit lags
+    the truth (it approaches it as the calibration is applied), but not its sign; relative
+    poses 4 m apart are then far closer to the truth."""
+    path, out = mounted_loop
+    got = out[True, "mounting"].stats["odometry_calibration"]
+    assert got["parameters"] == "mounting" and got["fits"] >= 1 and got["significant"]
+    assert 0.5 * MOUNT.mount_x_m < got["mount_x_m"] <= 1.1 * MOUNT.mount_x_m
+    assert abs(got["mount_y_m"]) < 0.1 * MOUNT.mount_x_m
+    assert got["scale"] == got["turn_gain"] == got["heading_drift_rad_per_m"] == 0.0
+    off, mounted = (
+        relations_error(out[True, m].poses_world_laser, path, 10).mean()
+        for m in ("off", "mounting")
+    )
+    assert mounted < 0.6 * off
+
+
+def test_a_mounting_the_steps_cannot_tell_from_none_is_not_applied(mounted_loop):
+    """Without a mounting the fit is not significant: the steps are used as logged, and the
+    run is the one without the calibration, pose for pose."""
+    _, out = mounted_loop
+    got = out[False, "mounting"].stats["odometry_calibration"]
+    assert got["fits"] >= 1 and not got["significant"]
+    assert got["mount_x_m"] == got["mount_y_m"] == 0.0
+    assert abs(got["fit_mount_x_m"]) < 4 * got["sd_mount_x_m"]
+    np.testing.assert_array_equal(
+        out[False, "mounting"].poses_world_laser, out[False, "off"].poses_world_laser
+    )

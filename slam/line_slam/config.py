@@ -161,13 +161,18 @@ class SlamConfig:
         ``"off"``: every observation's error is independent of the others'.
     line_pass_gap_s : float
         Observations of a wall this far apart in time (s) or more are separate passes.
-    odometry_calibration : {"off", "estimated"}
+    odometry_calibration : {"off", "estimated", "mounting"}
         ``"estimated"``: the odometry's persistent error (translation scale, turn gain, heading
         drift per metre) is estimated during the run from the registrations that pin a
         keyframe down, and taken out of every later step of the log's odometry before the
         front end and the graph use it (:mod:`slam.line_slam.odometry_calibration`;
-        ``summary.json`` ``odometry_calibration``).  ``"off"`` (default): the odometry's steps
-        are used as logged, with the random-walk noise of ``motion``.
+        ``summary.json`` ``odometry_calibration``).  ``"mounting"``: where the laser sits in the
+        frame whose motion the odometry reports (a lever arm the log does not state, on top
+        of any mounting it does: every turn moves such a laser sideways), estimated from the
+        graph's estimate of every keyframe step and applied once significant
+        (:class:`slam.line_slam.odometry_calibration.MountingEstimator`).  ``"off"``
+        (default): the odometry's steps are used as logged, with the random-walk noise of
+        ``motion``.
     min_line_points : int
         Lines with fewer supporting points are ignored (neither matched nor new landmarks).
         Default 3, the fewest with a residual: how much wall a usable line covers is
@@ -202,7 +207,7 @@ class SlamConfig:
     line_model_sigma_alpha_rad: float = 0.01
     line_pass_error: Literal["estimated", "off"] = "estimated"
     line_pass_gap_s: float = 30.0
-    odometry_calibration: Literal["off", "estimated"] = "off"
+    odometry_calibration: Literal["off", "estimated", "mounting"] = "off"
     min_line_points: int = 3
     min_line_length_m: float = 0.3
     pose_covariances: Literal["keyframes", "none"] = "keyframes"
@@ -234,8 +239,9 @@ class SlamConfig:
         )
         positive("line_pass_gap_s", self.line_pass_gap_s)
         require(
-            self.odometry_calibration in ("off", "estimated"),
-            f"odometry_calibration must be off or estimated: {self.odometry_calibration!r}",
+            self.odometry_calibration in ("off", "estimated", "mounting"),
+            "odometry_calibration must be off, estimated or mounting: "
+            f"{self.odometry_calibration!r}",
         )
         require(self.map_min_observations >= 1, "map_min_observations must be >= 1")
 

@@ -1,4 +1,4 @@
-"""The odometry's persistent error (scale, turn gain, heading drift), estimated during the run.
+"""The odometry's persistent error and the laser's unstated mounting, estimated during the run.
 
 The motion model is a random walk: it describes errors that are independent from step to step.
 An odometry whose wheels or gyro are miscalibrated errs the same way on every step, and over a
@@ -19,21 +19,36 @@ and a second fit; later steps are calibrated before the front end and the graph 
 A sample is measured against the calibrated prediction; it is referred back to the raw step by
 adding ``A(δ) θ_applied``.  Steps whose covariance the log states (laser odometry) are not
 calibrated.
+
+A laser mounted away from the point whose motion the odometry reports, where the log does not
+say so, errs the same way too: every turn ``θ`` moves the laser by ``(R(θ) − I) m`` that the
+odometry does not show.  :class:`MountingEstimator` estimates ``m`` from the graph's own
+estimate of every keyframe step (``[slam] odometry_calibration = "mounting"``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import gammaincinv
 
+from slam.geometry import pose_between, pose_log
+from slam.graph.problem import GrowableArray
 from slam.models.motion import OdometryCalibration
 
-__all__ = ["OdometryCalibrator"]
+__all__ = ["SIGNIFICANCE", "MountingEstimator", "OdometryCalibrator"]
 
 FloatArray = NDArray[np.float64]
 
 #: χ² (3 dof) at 99.99 %: a sample beyond it under the first fit is left out of the second.
 _OUTLIER_CHI2 = 21.1
+
+#: The mounting is applied when its χ² against none (its own covariance) exceeds this quantile.
+SIGNIFICANCE = 0.99
+
+#: A step informs the mounting only if it turned by more than this many standard deviations of
+#: its heading's error.
+_TURN_SIGMAS = 3.0
 
 
 class OdometryCalibrator:
@@ -69,7 +84,7 @@ class OdometryCalibrator:
 
     def add(self, raw_delta: FloatArray, nu: FloatArray, cov: FloatArray) -> None:
         """One sample: the error ``nu`` of the calibrated step, covariance ``cov`` (Q + P_L)."""
-        A = self.calibration.jacobian(raw_delta)
+        A = self.calibration.jacobian(raw_delta)[:, :3]
         theta = np.array(
             [
                 self.calibration.scale,
@@ -122,6 +137,151 @@ class OdometryCalibrator:
                 "sd_scale": float(sd[0]),
                 "sd_turn_gain": float(sd[1]),
                 "sd_heading_drift_rad_per_m": float(sd[2]),
+            }
+        )
+        return out
+
+
+class MountingEstimator:
+    """The laser's unstated mounting, from the graph's own estimate of every keyframe step.
+
+    Each keyframe step whose factor is the (calibrated) odometry is kept with its raw step,
+    the step the graph was given and its covariance ``Q``.  At each refit every such step is
+    compared with the graph's current estimate of it (``x_{i-1}⁻¹ x_i``, smoothed by all the
+    lines seen since): ``ν = Log(used⁻¹ · estimate)``, referred back to the raw step by the
+    mounting applied when it was given, and regressed on the mounting's Jacobian at the
+    estimated turn, ``I − R(θ)ᵀ``: weighted least squares (weights ``Q⁻¹``) with a zero-mean
+    prior, a first fit, then the steps whose squared Mahalanobis residual exceeds χ²₃'s
+    99.99 % quantile left out and a second fit.  Only turns beyond three standard deviations
+    of their heading (``Q``) inform it: below that the regressor is mostly noise.  The fit is
+    applied only where the steps tell it from none, ``mᵀ C⁻¹ m`` beyond χ²₂'s 99 % quantile
+    (``C`` its covariance; :data:`SIGNIFICANCE`); the later steps of keyframes and of the
+    scans between them are then calibrated.
+
+    Unlike the registrations' samples of :class:`OdometryCalibrator` this uses every step,
+    not only those whose registration pinned the keyframe down, which on a turn depends on the
+    very error measured.  The graph's estimate of a step is the odometry fused with the lines,
+    so ``ν`` holds only part of the odometry's error and a fit falls short of the mounting;
+    refitted as the calibration is applied, it tends to where the graph and the calibrated
+    odometry agree.
+
+    Parameters
+    ----------
+    prior_sigma_m : float
+        Standard deviation of the zero-mean prior of each of ``(x, y)`` (m).
+    min_samples, update_every : int
+        The first fit needs ``min_samples`` turning steps; refitted every ``update_every``
+        keyframes.
+    """
+
+    parameters = "mounting"
+
+    def __init__(
+        self, prior_sigma_m: float = 0.3, min_samples: int = 30, update_every: int = 25
+    ) -> None:
+        self.calibration = OdometryCalibration()
+        self._prior_info = np.eye(2) / prior_sigma_m**2
+        self._info = self._prior_info.copy()
+        self._ends = GrowableArray((2,), dtype=np.intp)
+        self._raw = GrowableArray((3,))
+        self._used = GrowableArray((3,))
+        self._mount_used = GrowableArray((2,))
+        self._Q = GrowableArray((3, 3))
+        self.min_samples = min_samples
+        self.update_every = update_every
+        self._since = 0
+        self.fits = 0
+        self.n_turns = 0
+        self.estimate = np.zeros(2)
+        self.significant = False
+
+    @property
+    def n_samples(self) -> int:
+        """Keyframe steps kept."""
+        return len(self._raw)
+
+    def apply(self, delta: FloatArray) -> FloatArray:
+        """The step calibrated with the current estimate."""
+        return np.asarray(self.calibration.apply(delta), dtype=float)
+
+    def add_step(
+        self, first: int, second: int, raw_delta: FloatArray, used_delta: FloatArray, Q: FloatArray
+    ) -> None:
+        """The odometry factor between poses ``first`` and ``second``: raw, given, covariance."""
+        self._ends.append(np.array([[first, second]]))
+        self._raw.append(np.asarray(raw_delta, dtype=float)[None])
+        self._used.append(np.asarray(used_delta, dtype=float)[None])
+        c = self.calibration
+        self._mount_used.append(np.array([[c.mount_x_m, c.mount_y_m]]))
+        self._Q.append(np.asarray(Q, dtype=float)[None])
+
+    def keyframe(self, poses: FloatArray) -> bool:
+        """Count a keyframe; refit from ``poses`` (the graph's estimate) when due.
+
+        Returns whether the calibration changed.
+        """
+        self._since += 1
+        if self._since < self.update_every or self.n_samples == 0:
+            return False
+        ends, Q = self._ends.data, self._Q.data
+        estimate = pose_between(poses[ends[:, 0]], poses[ends[:, 1]])
+        turning = np.abs(estimate[:, 2]) > _TURN_SIGMAS * np.sqrt(Q[:, 2, 2])
+        self.n_turns = int(np.count_nonzero(turning))
+        if self.n_turns < self.min_samples:
+            return False
+        self._since = 0
+        estimate, Q = estimate[turning], Q[turning]
+        nu = pose_log(pose_between(self._used.data[turning], estimate))
+        c, s = np.cos(estimate[:, 2]), np.sin(estimate[:, 2])
+        A = np.zeros((c.size, 3, 2))
+        A[:, 0, 0], A[:, 0, 1], A[:, 1, 0], A[:, 1, 1] = 1.0 - c, -s, s, 1.0 - c
+        nu = nu + np.einsum("nij,nj->ni", A, self._mount_used.data[turning])
+        W = np.linalg.inv(0.5 * (Q + np.swapaxes(Q, 1, 2)))
+        WA = W @ A
+
+        def fit(keep: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+            info = self._prior_info + np.einsum("nik,nil->kl", A[keep], WA[keep])
+            vec = np.einsum("nik,ni->k", WA[keep], nu[keep])
+            return np.asarray(np.linalg.solve(info, vec), dtype=np.float64), info
+
+        m, info = fit(np.ones(c.size, bool))
+        r = nu - np.einsum("nij,j->ni", A, m)
+        m, info = fit(np.einsum("ni,nij,nj->n", r, W, r) <= _OUTLIER_CHI2)
+        self._info, self.estimate = info, m
+        self.significant = bool(m @ info @ m > 2.0 * float(gammaincinv(1.0, SIGNIFICANCE)))
+        self.fits += 1
+        new = OdometryCalibration(
+            mount_x_m=float(m[0]) if self.significant else 0.0,
+            mount_y_m=float(m[1]) if self.significant else 0.0,
+        )
+        changed = new != self.calibration
+        self.calibration = new
+        return changed
+
+    def summary(self) -> dict[str, float | int | str | bool]:
+        """``summary.json`` ``odometry_calibration``: the mounting applied and the last fit.
+
+        ``mount_x_m``, ``mount_y_m`` as applied (zero until a fit is significant), the other
+        parameters of :class:`~slam.models.motion.OdometryCalibration` (zero),
+        ``significant``, ``fit_mount_*`` and ``sd_mount_*`` (the last fit and its standard
+        deviations), ``samples`` (keyframe steps kept) and ``turning_samples`` (those that
+        informed the last fit).
+        """
+        sd = np.sqrt(np.diag(np.linalg.inv(self._info)))
+        out: dict[str, float | int | str | bool] = {
+            "parameters": self.parameters,
+            "samples": self.n_samples,
+            "turning_samples": self.n_turns,
+            "fits": self.fits,
+            "significant": self.significant,
+        }
+        out.update(self.calibration.as_dict())
+        out.update(
+            {
+                "fit_mount_x_m": float(self.estimate[0]),
+                "sd_mount_x_m": float(sd[0]),
+                "fit_mount_y_m": float(self.estimate[1]),
+                "sd_mount_y_m": float(sd[1]),
             }
         )
         return out

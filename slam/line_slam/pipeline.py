@@ -91,7 +91,7 @@ from slam.line_slam.line_noise import LineModelErrorEstimator, LineReweighting
 from slam.line_slam.local_map import LocalMap, build_local_map
 from slam.line_slam.loop_closer import LoopCloser
 from slam.line_slam.observations import usable_lines
-from slam.line_slam.odometry_calibration import OdometryCalibrator
+from slam.line_slam.odometry_calibration import MountingEstimator, OdometryCalibrator
 from slam.line_slam.odometry_noise import MotionNoiseEstimator, odometry_error
 from slam.line_slam.passes import (
     PassError,
@@ -191,7 +191,11 @@ class LineSlam:
         self.track = KeyframeTrack(cfg.keyframes)
         self.drift = DriftAccumulator(cfg.frontend.drift_xy_per_m, cfg.frontend.drift_theta_per_m)
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
-        self.odometry_calibrator = OdometryCalibrator()  # with odometry_calibration = "estimated"
+        # used with odometry_calibration other than "off": the three biases from the
+        # registrations, or the laser's mounting from the graph's estimate of the steps
+        self.odometry_calibrator: OdometryCalibrator | MountingEstimator = (
+            MountingEstimator() if cfg.odometry_calibration == "mounting" else OdometryCalibrator()
+        )
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
         # the latest scans matched since that keyframe
         self._stretch: deque[_StretchScan] = deque(maxlen=MAX_STRETCH_SCANS)
@@ -306,6 +310,13 @@ class LineSlam:
         slipped, the scans not yet searched are (:meth:`_research_stretch`).
         """
         smc = self.config.frontend.scan_matching
+        if (
+            isinstance(self.odometry_calibrator, MountingEstimator)
+            and not step.first
+            and step.cov is None
+        ):
+            # the laser's mounting, as estimated so far (as for a keyframe's step)
+            step = replace(step, delta=self.odometry_calibrator.apply(step.delta))
         if not (smc.enabled and smc.between_keyframes) or self._points is None:
             return step.delta, None
         with self.clock("frontend"):
@@ -430,7 +441,7 @@ class LineSlam:
         cfg = self.config
         g = self.graph
         raw_delta = step.delta
-        calibrate = cfg.odometry_calibration == "estimated" and not step.first and step.cov is None
+        calibrate = cfg.odometry_calibration != "off" and not step.first and step.cov is None
         if calibrate:
             # the odometry's persistent error, as estimated so far, taken out of the step
             step = replace(step, delta=self.odometry_calibrator.apply(step.delta))
@@ -508,10 +519,12 @@ class LineSlam:
             if measured is not None:
                 nu, P_L = measured
                 self.odometry_noise.add_error(step.delta, nu, P_L)
-                if calibrate:
+                if calibrate and isinstance(self.odometry_calibrator, OdometryCalibrator):
                     self.odometry_calibrator.add(raw_delta, nu, Q + P_L)
         self.odometry_noise.keyframe()
-        if cfg.odometry_calibration == "estimated":
+        if isinstance(self.odometry_calibrator, MountingEstimator):
+            self.odometry_calibrator.keyframe(g.poses)
+        elif cfg.odometry_calibration != "off":
             self.odometry_calibrator.keyframe()
         with self.clock("associate"):
             # 5. the pose and its odometry
@@ -521,6 +534,12 @@ class LineSlam:
             else:
                 if slip is None:
                     g.add_odometry(prev, i, step_delta, Q)
+                    if (
+                        calibrate
+                        and step_delta is step.delta
+                        and isinstance(self.odometry_calibrator, MountingEstimator)
+                    ):
+                        self.odometry_calibrator.add_step(prev, i, raw_delta, step_delta, Q)
                 else:
                     # the odometry's heading slipped: the step's factor is the match (the
                     # points' rotation, the translation moved with the slip)
@@ -668,7 +687,7 @@ class LineSlam:
         stats["backend"] = self.backend.stats()
         stats["loop_closures_log"] = [a.as_log() for a in self.loop_closer.attempts]
         stats["odometry_noise"] = self.odometry_noise.summary()
-        if self.config.odometry_calibration == "estimated":
+        if self.config.odometry_calibration != "off":
             stats["odometry_calibration"] = self.odometry_calibrator.summary()
         stats["range_noise"] = self.range_noise.summary()
         warning = self.range_noise.warning()

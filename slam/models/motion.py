@@ -107,7 +107,10 @@ class OdometryCalibration:
     """A persistent odometry error, applied to each step ``(dx, dy, dθ)`` of path length ``d``.
 
     The calibrated step is ``((1 + scale)·dx, (1 + scale)·dy, (1 + turn_gain)·dθ +
-    heading_drift_rad_per_m·d)``.
+    heading_drift_rad_per_m·d)``, then seen from a laser mounted at ``m = (mount_x_m,
+    mount_y_m)`` in the frame the odometry reports (an unstated lever arm):
+    ``M⁻¹ · step · M`` with ``M`` the translation ``m``, i.e. ``m`` rotated with the step,
+    ``t + (R(θ) − I) m``.  A pure turn ``θ`` then moves the laser by ``(R(θ) − I) m``.
 
     Attributes
     ----------
@@ -117,11 +120,15 @@ class OdometryCalibration:
         Relative rotation error.
     heading_drift_rad_per_m : float
         Heading change per metre travelled that the odometry does not report (rad/m).
+    mount_x_m, mount_y_m : float
+        Where the laser is in the frame the odometry reports (m; 0.08: 8 cm ahead of it).
     """
 
     scale: float = 0.0
     turn_gain: float = 0.0
     heading_drift_rad_per_m: float = 0.0
+    mount_x_m: float = 0.0
+    mount_y_m: float = 0.0
 
     def apply(self, steps: FloatArray) -> FloatArray:
         """The calibrated steps, shape ``(..., 3)`` as ``steps``."""
@@ -129,30 +136,37 @@ class OdometryCalibration:
         d = np.hypot(s[..., 0], s[..., 1])
         s[..., :2] *= 1.0 + self.scale
         s[..., 2] = s[..., 2] * (1.0 + self.turn_gain) + self.heading_drift_rad_per_m * d
+        if self.mount_x_m or self.mount_y_m:
+            c, n = np.cos(s[..., 2]) - 1.0, np.sin(s[..., 2])
+            s[..., 0] += c * self.mount_x_m - n * self.mount_y_m
+            s[..., 1] += n * self.mount_x_m + c * self.mount_y_m
         return s
 
     def jacobian(self, step: FloatArray) -> FloatArray:
-        """``∂ Log(δ⁻¹ · calibrated(δ)) / ∂(scale, turn_gain, heading_drift)`` at zero, (3, 3).
+        """``∂ Log(δ⁻¹ · calibrated(δ)) / ∂(scale, turn_gain, heading_drift, mount_x, mount_y)``.
 
-        The error of an uncalibrated step ``δ`` in its end frame (right perturbation), to first
-        order in the three parameters.
+        At zero, shape (3, 5): the error of an uncalibrated step ``δ`` in its end frame (right
+        perturbation), to first order in the five parameters.  The mounting's columns are
+        ``I − R(dθ)ᵀ``: zero on a straight step, so only turns tell where the laser is.
         """
         dx, dy, dth = (float(v) for v in step)
         c, s = np.cos(dth), np.sin(dth)
         return np.array(
             [
-                [c * dx + s * dy, 0.0, 0.0],
-                [-s * dx + c * dy, 0.0, 0.0],
-                [0.0, dth, np.hypot(dx, dy)],
+                [c * dx + s * dy, 0.0, 0.0, 1.0 - c, -s],
+                [-s * dx + c * dy, 0.0, 0.0, s, 1.0 - c],
+                [0.0, dth, np.hypot(dx, dy), 0.0, 0.0],
             ]
         )
 
     def as_dict(self) -> dict[str, float]:
-        """The three parameters by name (``summary.json``)."""
+        """The five parameters by name (``summary.json``)."""
         return {
             "scale": self.scale,
             "turn_gain": self.turn_gain,
             "heading_drift_rad_per_m": self.heading_drift_rad_per_m,
+            "mount_x_m": self.mount_x_m,
+            "mount_y_m": self.mount_y_m,
         }
 
 
