@@ -21,6 +21,7 @@ that three numbers describe, which a random-walk model cannot represent.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -150,11 +151,17 @@ def fit_odometry_calibration(
     pairs: RelationPairs,
     noise: MotionNoiseConfig,
     use: NDArray[np.bool_] | None = None,
+    parameters: Literal["bias", "mounting"] = "bias",
 ) -> OdometryCalibration:
     """The calibration that best explains the relations ``use`` (default all) under ``noise``.
 
     Robust least squares (``soft_l1`` at 3 σ) on the whitened errors, from no calibration.
+    ``parameters``: the translation scale, turn gain and heading drift (``"bias"``), or where
+    the laser sits in the frame whose motion the odometry reports (``"mounting"``: the
+    calibration's ``mount_x_m``, ``mount_y_m``; the others zero).
     """
+    if parameters not in ("bias", "mounting"):
+        raise EvaluationError(f"parameters must be bias or mounting, got {parameters!r}")
     sel = np.ones(pairs.first.shape[0], bool) if use is None else np.asarray(use, bool)
     if np.count_nonzero(sel) < 3:
         raise EvaluationError("fewer than 3 relations to fit an odometry calibration to")
@@ -162,9 +169,14 @@ def fit_odometry_calibration(
         pairs.first[sel], pairs.second[sel], pairs.poses[sel], pairs.duration_s[sel]
     )
 
-    def residuals(p: FloatArray) -> FloatArray:
-        cal = OdometryCalibration(float(p[0]), float(p[1]), float(p[2]))
-        return _whitened_errors(odometry, sub, noise, cal).ravel()
+    def calibration(p: FloatArray) -> OdometryCalibration:
+        if parameters == "mounting":
+            return OdometryCalibration(mount_x_m=float(p[0]), mount_y_m=float(p[1]))
+        return OdometryCalibration(float(p[0]), float(p[1]), float(p[2]))
 
-    fit = least_squares(residuals, np.zeros(3), loss="soft_l1", f_scale=3.0)
-    return OdometryCalibration(float(fit.x[0]), float(fit.x[1]), float(fit.x[2]))
+    def residuals(p: FloatArray) -> FloatArray:
+        return _whitened_errors(odometry, sub, noise, calibration(p)).ravel()
+
+    n = 2 if parameters == "mounting" else 3
+    fit = least_squares(residuals, np.zeros(n), loss="soft_l1", f_scale=3.0)
+    return calibration(fit.x)
