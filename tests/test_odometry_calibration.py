@@ -201,3 +201,18 @@ def test_a_mounting_the_steps_cannot_tell_from_none_is_not_applied(mounted_loop)
     np.testing.assert_array_equal(
         out[False, "mounting"].poses_world_laser, out[False, "off"].poses_world_laser
     )
+
+
+def test_every_run_reports_the_mounting_its_final_estimate_implies(mounted_loop):
+    """``laser_mounting_fit`` (never applied): significant and of the right sign where the
+    laser is mounted ahead, short of it where the graph leans on the odometry; not
+    significant without a mounting."""
+    _, out = mounted_loop
+    mounted = out[True, "off"].stats["laser_mounting_fit"]
+    assert mounted["significant"] and mounted["turning_samples"] >= 30
+    assert mounted["fit_mount_x_m"] > 4 * mounted["sd_mount_x_m"]
+    assert mounted["fit_mount_x_m"] < MOUNT.mount_x_m
+    # with the calibration applied the graph's steps follow the mounting further
+    calibrated = out[True, "mounting"].stats["laser_mounting_fit"]
+    assert calibrated["fit_mount_x_m"] > mounted["fit_mount_x_m"]
+    assert not out[False, "off"].stats["laser_mounting_fit"]["significant"]

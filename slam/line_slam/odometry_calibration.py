@@ -142,6 +142,11 @@ class OdometryCalibrator:
         return out
 
 
+def _significant(m: FloatArray, info: FloatArray) -> bool:
+    """Whether a mounting fit tells itself from none: ``mᵀ C⁻¹ m`` beyond χ²₂'s quantile."""
+    return bool(m @ info @ m > 2.0 * float(gammaincinv(1.0, SIGNIFICANCE)))
+
+
 class MountingEstimator:
     """The laser's unstated mounting, from the graph's own estimate of every keyframe step.
 
@@ -223,13 +228,53 @@ class MountingEstimator:
         self._since += 1
         if self._since < self.update_every or self.n_samples == 0:
             return False
+        fitted = self._fit(poses)
+        if fitted is None:
+            return False
+        self._since = 0
+        m, info, self.n_turns = fitted
+        self._info, self.estimate = info, m
+        self.significant = _significant(m, info)
+        self.fits += 1
+        new = OdometryCalibration(
+            mount_x_m=float(m[0]) if self.significant else 0.0,
+            mount_y_m=float(m[1]) if self.significant else 0.0,
+        )
+        changed = new != self.calibration
+        self.calibration = new
+        return changed
+
+    def check(self, poses: FloatArray) -> dict[str, float | int | bool] | None:
+        """The fit to ``poses`` (e.g. the final estimate), not applied; None without enough turns.
+
+        The mounting is the total since the raw steps (``fit_mount_x_m``, ``fit_mount_y_m``),
+        with ``sd_mount_*``, ``turning_samples`` and ``significant``.
+        """
+        fitted = self._fit(poses) if self.n_samples else None
+        if fitted is None:
+            return None
+        m, info, n = fitted
+        sd = np.sqrt(np.diag(np.linalg.inv(info)))
+        return {
+            "fit_mount_x_m": float(m[0]),
+            "sd_mount_x_m": float(sd[0]),
+            "fit_mount_y_m": float(m[1]),
+            "sd_mount_y_m": float(sd[1]),
+            "turning_samples": n,
+            "significant": _significant(m, info),
+        }
+
+    def _fit(self, poses: FloatArray) -> tuple[FloatArray, FloatArray, int] | None:
+        """The mounting fitted to the steps as ``poses`` estimate them: (m, information, turns).
+
+        None with fewer than ``min_samples`` turns.
+        """
         ends, Q = self._ends.data, self._Q.data
         estimate = pose_between(poses[ends[:, 0]], poses[ends[:, 1]])
         turning = np.abs(estimate[:, 2]) > _TURN_SIGMAS * np.sqrt(Q[:, 2, 2])
-        self.n_turns = int(np.count_nonzero(turning))
-        if self.n_turns < self.min_samples:
-            return False
-        self._since = 0
+        n_turns = int(np.count_nonzero(turning))
+        if n_turns < self.min_samples:
+            return None
         estimate, Q = estimate[turning], Q[turning]
         nu = pose_log(pose_between(self._used.data[turning], estimate))
         c, s = np.cos(estimate[:, 2]), np.sin(estimate[:, 2])
@@ -247,16 +292,7 @@ class MountingEstimator:
         m, info = fit(np.ones(c.size, bool))
         r = nu - np.einsum("nij,j->ni", A, m)
         m, info = fit(np.einsum("ni,nij,nj->n", r, W, r) <= _OUTLIER_CHI2)
-        self._info, self.estimate = info, m
-        self.significant = bool(m @ info @ m > 2.0 * float(gammaincinv(1.0, SIGNIFICANCE)))
-        self.fits += 1
-        new = OdometryCalibration(
-            mount_x_m=float(m[0]) if self.significant else 0.0,
-            mount_y_m=float(m[1]) if self.significant else 0.0,
-        )
-        changed = new != self.calibration
-        self.calibration = new
-        return changed
+        return m, info, n_turns
 
     def summary(self) -> dict[str, float | int | str | bool]:
         """``summary.json`` ``odometry_calibration``: the mounting applied and the last fit.

@@ -196,6 +196,13 @@ class LineSlam:
         self.odometry_calibrator: OdometryCalibrator | MountingEstimator = (
             MountingEstimator() if cfg.odometry_calibration == "mounting" else OdometryCalibrator()
         )
+        # the keyframe steps, for the mounting they imply at the end (never applied unless
+        # it is the calibrator above)
+        self.mounting_steps = (
+            self.odometry_calibrator
+            if isinstance(self.odometry_calibrator, MountingEstimator)
+            else MountingEstimator()
+        )
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
         # the latest scans matched since that keyframe
         self._stretch: deque[_StretchScan] = deque(maxlen=MAX_STRETCH_SCANS)
@@ -534,12 +541,8 @@ class LineSlam:
             else:
                 if slip is None:
                     g.add_odometry(prev, i, step_delta, Q)
-                    if (
-                        calibrate
-                        and step_delta is step.delta
-                        and isinstance(self.odometry_calibrator, MountingEstimator)
-                    ):
-                        self.odometry_calibrator.add_step(prev, i, raw_delta, step_delta, Q)
+                    if step_delta is step.delta and step.cov is None:
+                        self.mounting_steps.add_step(prev, i, raw_delta, step_delta, Q)
                 else:
                     # the odometry's heading slipped: the step's factor is the match (the
                     # points' rotation, the translation moved with the slip)
@@ -689,6 +692,7 @@ class LineSlam:
         stats["odometry_noise"] = self.odometry_noise.summary()
         if self.config.odometry_calibration != "off":
             stats["odometry_calibration"] = self.odometry_calibrator.summary()
+        stats["laser_mounting_fit"] = self.mounting_steps.check(self.graph.poses)
         stats["range_noise"] = self.range_noise.summary()
         warning = self.range_noise.warning()
         if warning is not None:
