@@ -73,7 +73,7 @@ def test_mounting_estimator_recovers_the_mounting_from_exact_step_estimates(rng,
         base_step = pose_compose(pose_compose(M, laser_step), pose_inverse(M))
         raw = pose_compose(base_step, rng.multivariate_normal(np.zeros(3), Q))
         poses.append(pose_compose(poses[-1], laser_step))
-        est.add_step(k, k + 1, raw, est.apply(raw), Q)
+        est.add_step(k, k + 1, est.apply(raw), Q)
         est.keyframe(np.array(poses))
     got = est.summary()
     assert got["fits"] >= 1 and got["turning_samples"] > 100
@@ -109,6 +109,17 @@ def test_calibrator_recovers_a_bias_while_it_corrects_the_steps(rng):
         assert abs(got[name] - getattr(BIAS, name)) < 4 * got[sd] + 2e-3, name
 
 
+def _slam(run, motion, mode):
+    """The run's result with ``odometry_calibration = mode``."""
+    slam = LineSlam(SlamConfig(motion=motion, odometry_calibration=mode))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SlamWarning)
+        for scan, lines in zip(run.scans, run.lines, strict=True):
+            slam.add_scan(scan, lines)
+        slam.optimize()
+    return slam.result()
+
+
 @pytest.fixture(scope="module")
 def biased_loop():
     motion = MotionNoiseConfig(
@@ -117,16 +128,7 @@ def biased_loop():
     world = corridor_loop(piece=3.0, door=1.0)
     path = loop_path(16, 8, 0.4, laps=1.25)
     run = simulate_run(world, path, seed=3, motion=motion, bias=BIAS)
-    out = {}
-    for mode in ("off", "estimated"):
-        slam = LineSlam(SlamConfig(motion=motion, odometry_calibration=mode))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", SlamWarning)
-            for scan, lines in zip(run.scans, run.lines, strict=True):
-                slam.add_scan(scan, lines)
-            slam.optimize()
-        out[mode] = slam.result()
-    return path, out
+    return path, {mode: _slam(run, motion, mode) for mode in ("off", "estimated")}
 
 
 def test_a_run_estimates_the_bias_of_a_simulated_odometry(biased_loop):
@@ -163,13 +165,7 @@ def mounted_loop():
             world, path, seed=3, motion=motion, bias=MOUNT if mounted else OdometryCalibration()
         )
         for mode in ("off", "mounting"):
-            slam = LineSlam(SlamConfig(motion=motion, odometry_calibration=mode))
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", SlamWarning)
-                for scan, lines in zip(run.scans, run.lines, strict=True):
-                    slam.add_scan(scan, lines)
-                slam.optimize()
-            out[mounted, mode] = slam.result()
+            out[mounted, mode] = _slam(run, motion, mode)
     return path, out
 
 

@@ -34,7 +34,7 @@ from scipy.special import gammaincinv
 
 from slam.geometry import pose_between, pose_log
 from slam.graph.problem import GrowableArray
-from slam.models.motion import OdometryCalibration
+from slam.models.motion import OdometryCalibration, mounting_jacobian
 
 __all__ = ["SIGNIFICANCE", "MountingEstimator", "OdometryCalibrator"]
 
@@ -147,21 +147,33 @@ def _significant(m: FloatArray, info: FloatArray) -> bool:
     return bool(m @ info @ m > 2.0 * float(gammaincinv(1.0, SIGNIFICANCE)))
 
 
+def _fit_report(m: FloatArray, info: FloatArray) -> dict[str, float]:
+    """A mounting fit and its standard deviations, by name (``summary.json``)."""
+    sd = np.sqrt(np.diag(np.linalg.inv(info)))
+    return {
+        "fit_mount_x_m": float(m[0]),
+        "sd_mount_x_m": float(sd[0]),
+        "fit_mount_y_m": float(m[1]),
+        "sd_mount_y_m": float(sd[1]),
+    }
+
+
 class MountingEstimator:
     """The laser's unstated mounting, from the graph's own estimate of every keyframe step.
 
-    Each keyframe step whose factor is the (calibrated) odometry is kept with its raw step,
-    the step the graph was given and its covariance ``Q``.  At each refit every such step is
-    compared with the graph's current estimate of it (``x_{i-1}⁻¹ x_i``, smoothed by all the
-    lines seen since): ``ν = Log(used⁻¹ · estimate)``, referred back to the raw step by the
-    mounting applied when it was given, and regressed on the mounting's Jacobian at the
-    estimated turn, ``I − R(θ)ᵀ``: weighted least squares (weights ``Q⁻¹``) with a zero-mean
-    prior, a first fit, then the steps whose squared Mahalanobis residual exceeds χ²₃'s
-    99.99 % quantile left out and a second fit.  Only turns beyond three standard deviations
-    of their heading (``Q``) inform it: below that the regressor is mostly noise.  The fit is
-    applied only where the steps tell it from none, ``mᵀ C⁻¹ m`` beyond χ²₂'s 99 % quantile
-    (``C`` its covariance; :data:`SIGNIFICANCE`); the later steps of keyframes and of the
-    scans between them are then calibrated.
+    Each keyframe step whose factor is the (calibrated) odometry is kept with the step the
+    graph was given, the mounting it was calibrated with and its covariance ``Q``.  At each
+    refit every such step is compared with the graph's current estimate of it
+    (``x_{i-1}⁻¹ x_i``, smoothed by all the lines seen since): ``ν = Log(used⁻¹ · estimate)``,
+    referred back to the raw step by the mounting applied when it was given, and regressed on
+    the mounting's Jacobian at the estimated turn, ``I − R(θ)ᵀ``
+    (:func:`~slam.models.motion.mounting_jacobian`): weighted least squares (weights ``Q⁻¹``)
+    with a zero-mean prior, a first fit, then the steps whose squared Mahalanobis residual
+    exceeds χ²₃'s 99.99 % quantile left out and a second fit.  Only turns beyond three
+    standard deviations of their heading (``Q``) inform it: below that the regressor is mostly
+    noise.  The fit is applied only where the steps tell it from none, ``mᵀ C⁻¹ m`` beyond
+    χ²₂'s 99 % quantile (``C`` its covariance; :data:`SIGNIFICANCE`); the later steps of
+    keyframes and of the scans between them are then calibrated.
 
     Unlike the registrations' samples of :class:`OdometryCalibrator` this uses every step,
     not only those whose registration pinned the keyframe down, which on a turn depends on the
@@ -188,7 +200,6 @@ class MountingEstimator:
         self._prior_info = np.eye(2) / prior_sigma_m**2
         self._info = self._prior_info.copy()
         self._ends = GrowableArray((2,), dtype=np.intp)
-        self._raw = GrowableArray((3,))
         self._used = GrowableArray((3,))
         self._mount_used = GrowableArray((2,))
         self._Q = GrowableArray((3, 3))
@@ -203,18 +214,19 @@ class MountingEstimator:
     @property
     def n_samples(self) -> int:
         """Keyframe steps kept."""
-        return len(self._raw)
+        return len(self._ends)
 
     def apply(self, delta: FloatArray) -> FloatArray:
         """The step calibrated with the current estimate."""
         return np.asarray(self.calibration.apply(delta), dtype=float)
 
-    def add_step(
-        self, first: int, second: int, raw_delta: FloatArray, used_delta: FloatArray, Q: FloatArray
-    ) -> None:
-        """The odometry factor between poses ``first`` and ``second``: raw, given, covariance."""
+    def add_step(self, first: int, second: int, used_delta: FloatArray, Q: FloatArray) -> None:
+        """The odometry factor between poses ``first`` and ``second``.
+
+        ``used_delta``: the step it was given (calibrated with the current mounting); ``Q``
+        its covariance.
+        """
         self._ends.append(np.array([[first, second]]))
-        self._raw.append(np.asarray(raw_delta, dtype=float)[None])
         self._used.append(np.asarray(used_delta, dtype=float)[None])
         c = self.calibration
         self._mount_used.append(np.array([[c.mount_x_m, c.mount_y_m]]))
@@ -254,15 +266,7 @@ class MountingEstimator:
         if fitted is None:
             return None
         m, info, n = fitted
-        sd = np.sqrt(np.diag(np.linalg.inv(info)))
-        return {
-            "fit_mount_x_m": float(m[0]),
-            "sd_mount_x_m": float(sd[0]),
-            "fit_mount_y_m": float(m[1]),
-            "sd_mount_y_m": float(sd[1]),
-            "turning_samples": n,
-            "significant": _significant(m, info),
-        }
+        return {**_fit_report(m, info), "turning_samples": n, "significant": _significant(m, info)}
 
     def _fit(self, poses: FloatArray) -> tuple[FloatArray, FloatArray, int] | None:
         """The mounting fitted to the steps as ``poses`` estimate them: (m, information, turns).
@@ -277,9 +281,7 @@ class MountingEstimator:
             return None
         estimate, Q = estimate[turning], Q[turning]
         nu = pose_log(pose_between(self._used.data[turning], estimate))
-        c, s = np.cos(estimate[:, 2]), np.sin(estimate[:, 2])
-        A = np.zeros((c.size, 3, 2))
-        A[:, 0, 0], A[:, 0, 1], A[:, 1, 0], A[:, 1, 1] = 1.0 - c, -s, s, 1.0 - c
+        A = mounting_jacobian(estimate[:, 2])
         nu = nu + np.einsum("nij,nj->ni", A, self._mount_used.data[turning])
         W = np.linalg.inv(0.5 * (Q + np.swapaxes(Q, 1, 2)))
         WA = W @ A
@@ -289,7 +291,7 @@ class MountingEstimator:
             vec = np.einsum("nik,ni->k", WA[keep], nu[keep])
             return np.asarray(np.linalg.solve(info, vec), dtype=np.float64), info
 
-        m, info = fit(np.ones(c.size, bool))
+        m, info = fit(np.ones(nu.shape[0], bool))
         r = nu - np.einsum("nij,j->ni", A, m)
         m, info = fit(np.einsum("ni,nij,nj->n", r, W, r) <= _OUTLIER_CHI2)
         return m, info, n_turns
@@ -303,7 +305,6 @@ class MountingEstimator:
         deviations), ``samples`` (keyframe steps kept) and ``turning_samples`` (those that
         informed the last fit).
         """
-        sd = np.sqrt(np.diag(np.linalg.inv(self._info)))
         out: dict[str, float | int | str | bool] = {
             "parameters": self.parameters,
             "samples": self.n_samples,
@@ -312,12 +313,5 @@ class MountingEstimator:
             "significant": self.significant,
         }
         out.update(self.calibration.as_dict())
-        out.update(
-            {
-                "fit_mount_x_m": float(self.estimate[0]),
-                "sd_mount_x_m": float(sd[0]),
-                "fit_mount_y_m": float(self.estimate[1]),
-                "sd_mount_y_m": float(sd[1]),
-            }
-        )
+        out.update(_fit_report(self.estimate, self._info))
         return out

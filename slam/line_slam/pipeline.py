@@ -542,7 +542,7 @@ class LineSlam:
                 if slip is None:
                     g.add_odometry(prev, i, step_delta, Q)
                     if step_delta is step.delta and step.cov is None:
-                        self.mounting_steps.add_step(prev, i, raw_delta, step_delta, Q)
+                        self.mounting_steps.add_step(prev, i, step_delta, Q)
                 else:
                     # the odometry's heading slipped: the step's factor is the match (the
                     # points' rotation, the translation moved with the slip)

@@ -151,13 +151,14 @@ class OdometryCalibration:
         """
         dx, dy, dth = (float(v) for v in step)
         c, s = np.cos(dth), np.sin(dth)
-        return np.array(
-            [
-                [c * dx + s * dy, 0.0, 0.0, 1.0 - c, -s],
-                [-s * dx + c * dy, 0.0, 0.0, s, 1.0 - c],
-                [0.0, dth, np.hypot(dx, dy), 0.0, 0.0],
-            ]
-        )
+        J = np.zeros((3, 5))
+        J[:, :3] = [
+            [c * dx + s * dy, 0.0, 0.0],
+            [-s * dx + c * dy, 0.0, 0.0],
+            [0.0, dth, np.hypot(dx, dy)],
+        ]
+        J[:, 3:] = mounting_jacobian(np.array(dth))
+        return J
 
     def as_dict(self) -> dict[str, float]:
         """The five parameters by name (``summary.json``)."""
@@ -168,6 +169,19 @@ class OdometryCalibration:
             "mount_x_m": self.mount_x_m,
             "mount_y_m": self.mount_y_m,
         }
+
+
+def mounting_jacobian(dtheta: FloatArray) -> FloatArray:
+    """``∂ Log(δ⁻¹ · M⁻¹ δ M) / ∂m`` at ``m = 0`` for steps turning by ``dtheta``: ``I − R(θ)ᵀ``.
+
+    Shape ``(..., 3, 2)`` (the heading row zero): how a laser mounted at ``m`` in the frame
+    the odometry reports moves, in the step's end frame, beyond what the step says.
+    """
+    th = np.asarray(dtheta, dtype=float)
+    c, s = np.cos(th), np.sin(th)
+    J = np.zeros((*th.shape, 3, 2))
+    J[..., 0, 0], J[..., 0, 1], J[..., 1, 0], J[..., 1, 1] = 1.0 - c, -s, s, 1.0 - c
+    return J
 
 
 def moved_enough(delta: FloatArray, min_distance_m: float, min_angle_rad: float) -> bool:
