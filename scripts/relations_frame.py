@@ -16,6 +16,17 @@ translation error is least near the frame the relations relate.  The frame the r
 the mounting it used are printed, so the laser frame's offset is known: ``+mount_x`` when the
 run reports the base.
 
+``--lever-arm`` also fits where the relations' frame sits in the run's reported frame from the
+relations shorter than ``--short`` seconds: ``relation ≈ M⁻¹ · (the run's relative pose) · M``
+with ``M = (x, y, 0)``, the lever arm that moves a frame sideways on every turn
+(:func:`slam.evaluation.odometry_bias.fit_odometry_calibration`, ``parameters="mounting"``,
+the run's trajectory in place of the odometry), with its spread over bootstrap resamples of
+those relations (``--seed``).  Straight relations carry no information on it, turns do.  Near
+zero: the relations relate the frame the run reports (the laser's, as its scans see it);
+``scripts/odometry_bias.py NAME --mounting`` gives the same fit for the raw odometry.
+
+    python scripts/relations_frame.py results/fr079 --log fr079 --lever-arm
+
 Nothing is written.
 """
 
@@ -27,14 +38,23 @@ from pathlib import Path
 
 import numpy as np
 
+from slam.evaluation.odometry_bias import (
+    RelationPairs,
+    fit_odometry_calibration,
+    relation_pairs,
+)
 from slam.evaluation.relations_metric import relations_metric, relations_within
 from slam.evaluation.timestamps import match_timestamps
 from slam.geometry import pose_compose
 from slam.io.catalog import resolve_log
 from slam.io.g2o import read_line_graph_g2o
-from slam.io.relations import read_relations
+from slam.io.relations import Relations, read_relations
 from slam.io.trajectory import Trajectory
 from slam.io.tum import read_tum
+from slam.models.motion import MotionNoiseConfig
+
+#: Bootstrap resamples of the lever arm's spread.
+RESAMPLES = 50
 
 
 def main() -> None:
@@ -49,6 +69,13 @@ def main() -> None:
         default=[-0.04, -0.02, 0.0, 0.02, 0.04, 0.06, 0.08, 0.10],
         help="offsets x (m) along the reported frame's axis",
     )
+    ap.add_argument(
+        "--lever-arm",
+        action="store_true",
+        help="also fit where the relations' frame sits in the reported frame (module doc)",
+    )
+    ap.add_argument("--short", type=float, default=10.0, help="s: relations the fit uses")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the bootstrap resamples")
     args = ap.parse_args()
 
     rel_path = args.relations or resolve_log(args.log).relations
@@ -79,6 +106,36 @@ def main() -> None:
             f"{x:>+13.3f}  {every.abs_trans_m.mean:>15.4f}  {every.abs_rot_deg.mean:>9.3f}  "
             f"{kf.abs_trans_m.mean:>20.4f}"
         )
+    if args.lever_arm:
+        _lever_arm(run, relations, args.short, args.seed)
+
+
+def _lever_arm(run: Trajectory, relations: Relations, short_s: float, seed: int) -> None:
+    """Print the relations' frame in the run's frame, fitted to the short relations."""
+    pairs = relation_pairs(run.timestamps, relations.t1, relations.t2, relations.poses)
+    short = pairs.duration_s < short_s
+    if np.count_nonzero(short) < 3:
+        print(f"lever arm: fewer than 3 relations shorter than {short_s:g} s")
+        return
+    noise = MotionNoiseConfig()
+    fit = fit_odometry_calibration(run.poses, pairs, noise, use=short, parameters="mounting")
+    rng = np.random.default_rng(seed)
+    rows = np.flatnonzero(short)
+    draws = []
+    for _ in range(RESAMPLES):
+        k = rng.choice(rows, rows.size)  # with replacement: a relation may count twice
+        resampled = RelationPairs(
+            pairs.first[k], pairs.second[k], pairs.poses[k], pairs.duration_s[k]
+        )
+        c = fit_odometry_calibration(run.poses, resampled, noise, parameters="mounting")
+        draws.append((c.mount_x_m, c.mount_y_m))
+    sd = np.std(np.asarray(draws), axis=0)
+    print(
+        f"lever arm from the {rows.size} relations shorter than {short_s:g} s: the relations' "
+        f"frame at x {fit.mount_x_m:+.4f} m (sd {sd[0]:.4f}), y {fit.mount_y_m:+.4f} m "
+        f"(sd {sd[1]:.4f}) in the reported frame ({RESAMPLES} bootstrap resamples, "
+        f"seed {seed})"
+    )
 
 
 if __name__ == "__main__":
