@@ -338,7 +338,7 @@ class LoopClosureConfig:
         ``judge_unconfirmed``, ``judge_replaced`` and ``agreement_same_place``) judge every
         hypothesis that passes the gates: at once when another of the same revisit agrees
         with it, else a few keyframes late, before any later hypothesis that contradicts it
-        (``docs/real-logs.md``, Pipeline step 3 and Opt-in settings).
+        (``docs/real-logs.md``, Pipeline step 8 and Opt-in settings).
     agreement_same_place : bool
         Two hypotheses agree (for ``confirmations`` and the robust second chance of
         ``judge_robust_cost``) only when their old keyframes, like their current ones, lie

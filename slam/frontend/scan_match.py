@@ -108,7 +108,7 @@ class ScanMatchConfig:
         posterior along its axis is then a fraction of the odometry's.  0 (default): the
         short line alone; 1 m makes the corridor's posterior the odometry's
         (``tests/test_scan_match.py``), but on the real logs' rows it loses fr079's last loop
-        more often (docs/real-logs.md, Tried and rejected).
+        more often (docs/real-logs.md, Alternatives not used).
     max_neighbour_gap_m : float
         A reference point's local line is used only when its neighbours are within this of
         each other (m; no line across a depth jump).

@@ -112,7 +112,7 @@ class Isam2Config:
         estimate decides which loop closures pass: coarser thresholds (0.03 / 0.03) make Intel
         16-28 % faster, while fr079 went to 1.08 m and the simulated loop of
         ``tests/test_graph_sim.py`` accepted two wrong closures with translation thresholds
-        from 0.015 m on (``docs/real-logs.md``, "Tried and rejected").
+        from 0.015 m on (``docs/real-logs.md``, "Alternatives not used").
     relin_translation_m, relin_angle_rad, relin_range_m : float
         A keyframe's line-factor block (a ``LinearContainerFactor``) is linearised again at
         iSAM2's linearisation point when a variable of it moved more than these (pose
