@@ -38,11 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from slam.evaluation.odometry_bias import (
-    RelationPairs,
-    fit_odometry_calibration,
-    relation_pairs,
-)
+from slam.errors import EvaluationError
+from slam.evaluation.odometry_bias import relations_frame_offset
 from slam.evaluation.relations_metric import relations_metric, relations_within
 from slam.evaluation.timestamps import match_timestamps
 from slam.geometry import pose_compose
@@ -51,7 +48,6 @@ from slam.io.g2o import read_line_graph_g2o
 from slam.io.relations import Relations, read_relations
 from slam.io.trajectory import Trajectory
 from slam.io.tum import read_tum
-from slam.models.motion import MotionNoiseConfig
 
 #: Bootstrap resamples of the lever arm's spread.
 RESAMPLES = 50
@@ -112,28 +108,18 @@ def main() -> None:
 
 def _lever_arm(run: Trajectory, relations: Relations, short_s: float, seed: int) -> None:
     """Print the relations' frame in the run's frame, fitted to the short relations."""
-    pairs = relation_pairs(run.timestamps, relations.t1, relations.t2, relations.poses)
-    short = pairs.duration_s < short_s
-    if np.count_nonzero(short) < 3:
-        print(f"lever arm: fewer than 3 relations shorter than {short_s:g} s")
+    try:
+        off = relations_frame_offset(
+            run.timestamps, run.poses, relations.t1, relations.t2, relations.poses,
+            short_s=short_s, resamples=RESAMPLES, seed=seed,
+        )  # fmt: skip
+    except EvaluationError as exc:
+        print(f"lever arm: {exc}")
         return
-    noise = MotionNoiseConfig()
-    fit = fit_odometry_calibration(run.poses, pairs, noise, use=short, parameters="mounting")
-    rng = np.random.default_rng(seed)
-    rows = np.flatnonzero(short)
-    draws = []
-    for _ in range(RESAMPLES):
-        k = rng.choice(rows, rows.size)  # with replacement: a relation may count twice
-        resampled = RelationPairs(
-            pairs.first[k], pairs.second[k], pairs.poses[k], pairs.duration_s[k]
-        )
-        c = fit_odometry_calibration(run.poses, resampled, noise, parameters="mounting")
-        draws.append((c.mount_x_m, c.mount_y_m))
-    sd = np.std(np.asarray(draws), axis=0)
     print(
-        f"lever arm from the {rows.size} relations shorter than {short_s:g} s: the relations' "
-        f"frame at x {fit.mount_x_m:+.4f} m (sd {sd[0]:.4f}), y {fit.mount_y_m:+.4f} m "
-        f"(sd {sd[1]:.4f}) in the reported frame ({RESAMPLES} bootstrap resamples, "
+        f"lever arm from the {off.relations} relations shorter than {short_s:g} s: the "
+        f"relations' frame at x {off.x_m:+.4f} m (sd {off.sd_x_m:.4f}), y {off.y_m:+.4f} m "
+        f"(sd {off.sd_y_m:.4f}) in the reported frame ({RESAMPLES} bootstrap resamples, "
         f"seed {seed})"
     )
 

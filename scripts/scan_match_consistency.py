@@ -20,6 +20,13 @@ laser mounting):
     LINESLAM_DATA=/path/to/shared/datasets .venv/bin/python scripts/scan_match_consistency.py fr079
     .venv/bin/python scripts/scan_match_consistency.py aces --max-scans 3000 --config my.toml
 
+``--lever-arm``: where the relations' frame sits in the chain's frame, the laser's as its
+scans see it, fitted to the turns of the relations shorter than ``--max-gap-s``
+(:func:`slam.evaluation.odometry_bias.relations_frame_offset`; the same fit to the raw
+odometry is ``scripts/odometry_bias.py --mounting``, to a run ``scripts/relations_frame.py
+--lever-arm``).  The matches start from the odometry as the prior, so a lever arm the
+odometry leaves out pulls them partway towards it.
+
 Nothing is written.
 """
 
@@ -32,6 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 from slam.config import RunConfig
+from slam.evaluation.odometry_bias import relations_frame_offset
 from slam.evaluation.timestamps import match_timestamps
 from slam.frontend.scan_match import contradicted_covariance, match_scans, scan_points
 from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse, pose_log
@@ -47,6 +55,11 @@ def main() -> None:
     parser.add_argument("--max-gap-s", type=float, default=10.0)
     parser.add_argument("--max-scans", type=int, default=None)
     parser.add_argument("--config", type=Path, default=None, help="TOML run configuration")
+    parser.add_argument(
+        "--lever-arm",
+        action="store_true",
+        help="also fit where the relations' frame sits in the chain's (module docstring)",
+    )
     args = parser.parse_args()
     config = RunConfig() if args.config is None else RunConfig.from_toml(args.config)
     source = open_log(args.log, config.scanner, max_scans=args.max_scans)
@@ -123,6 +136,16 @@ def main() -> None:
         f"median {np.median(nees):.2f} (2.37), inside the 95 % ellipsoid "
         f"{np.mean(np.asarray(nees) <= 7.815):.3f}"
     )
+    if args.lever_arm:
+        chain_poses = compose_chain(steps_a)[0]  # the laser's, from the first scan
+        off = relations_frame_offset(
+            t, chain_poses, rel.t1, rel.t2, rel.poses, short_s=args.max_gap_s
+        )
+        print(
+            f"lever arm from the {off.relations} relations shorter than {args.max_gap_s:g} s: "
+            f"the relations' frame at x {off.x_m:+.4f} m (sd {off.sd_x_m:.4f}), "
+            f"y {off.y_m:+.4f} m (sd {off.sd_y_m:.4f}) in the chain's (the laser's) frame"
+        )
 
 
 if __name__ == "__main__":

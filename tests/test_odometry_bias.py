@@ -11,6 +11,7 @@ from slam.evaluation.odometry_bias import (
     fit_odometry_calibration,
     odometry_relations_nees,
     relation_pairs,
+    relations_frame_offset,
 )
 from slam.geometry import pose_between, pose_compose, pose_inverse
 from slam.lines.transform import compose_chain
@@ -118,3 +119,25 @@ def test_short_relations_recover_a_laser_mounted_ahead_of_the_odometry(rng):
     assert 2.4 < odometry_relations_nees(odometry, short, noise, fit).mean() < 3.6
     with pytest.raises(EvaluationError, match="bias or mounting"):
         fit_odometry_calibration(odometry, short, noise, parameters="scale")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("offset", [(0.05, -0.02), (0.0, 0.0)])
+def test_relations_frame_offset_finds_the_frame_the_relations_relate(rng, offset):
+    """Relations of a frame 5 cm ahead and 2 cm right of a trajectory's (or of the trajectory's
+    own frame), with noise: the fit finds it within four of its bootstrap standard deviations,
+    and those are a few millimetres."""
+    n = 3000
+    steps = np.column_stack([np.full(n, 0.05), np.zeros(n), 0.15 * np.sin(np.arange(n) / 25.0)])
+    trajectory, _ = compose_chain(steps)
+    M = np.array([offset[0], offset[1], 0.0])
+    frame = pose_compose(trajectory, M)
+    t, t1, t2, rel = _relations(rng, frame, 5, 500)
+    rel = pose_compose(rel, rng.normal(0.0, [0.005, 0.005, 0.002], size=rel.shape))
+    off = relations_frame_offset(t, trajectory, t1, t2, rel, short_s=10.0, resamples=20, seed=1)
+    assert off.relations == 500
+    assert 0.0 < off.sd_x_m < 0.005 and 0.0 < off.sd_y_m < 0.005
+    assert abs(off.x_m - offset[0]) < 4 * off.sd_x_m + 1e-4
+    assert abs(off.y_m - offset[1]) < 4 * off.sd_y_m + 1e-4
+    # the relations are 5 steps long: none is shorter than 1 s of these 1 s steps
+    with pytest.raises(EvaluationError, match="at least 3"):
+        relations_frame_offset(t, trajectory, t1, t2, rel, short_s=1.0)

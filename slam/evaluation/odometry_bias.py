@@ -16,6 +16,11 @@ short ones) by robust least squares on the whitened errors.  If a calibration fi
 short relations makes the long ones consistent too, the odometry's long-range error is a bias
 that three numbers describe, which a random-walk model cannot represent.
 ``scripts/odometry_bias.py`` prints both for a log.
+
+:func:`relations_frame_offset` applies the same lever-arm fit to any trajectory (a run's, a
+chain of scan matches): where the frame the relations relate sits in the trajectory's frame,
+with its spread over bootstrap resamples (``scripts/relations_frame.py --lever-arm``,
+``scripts/scan_match_consistency.py --lever-arm``).
 """
 
 from __future__ import annotations
@@ -34,11 +39,13 @@ from slam.lines.transform import compose_chain
 from slam.models.motion import MotionNoiseConfig, OdometryCalibration
 
 __all__ = [
+    "FrameOffset",
     "OdometryCalibration",
     "RelationPairs",
     "fit_odometry_calibration",
     "odometry_relations_nees",
     "relation_pairs",
+    "relations_frame_offset",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -180,3 +187,87 @@ def fit_odometry_calibration(
     n = 2 if parameters == "mounting" else 3
     fit = least_squares(residuals, np.zeros(n), loss="soft_l1", f_scale=3.0)
     return calibration(fit.x)
+
+
+@dataclass(frozen=True)
+class FrameOffset:
+    """Where the relations' frame sits in a trajectory's frame (:func:`relations_frame_offset`).
+
+    Attributes
+    ----------
+    x_m, y_m : float
+        The offset (m) along and across the trajectory frame's x axis.
+    sd_x_m, sd_y_m : float
+        Their standard deviations over the bootstrap resamples.
+    relations : int
+        How many relations the fit used.
+    """
+
+    x_m: float
+    y_m: float
+    sd_x_m: float
+    sd_y_m: float
+    relations: int
+
+
+def relations_frame_offset(
+    timestamps: FloatArray,
+    poses: FloatArray,
+    t1: FloatArray,
+    t2: FloatArray,
+    relation_poses: FloatArray,
+    short_s: float = 10.0,
+    resamples: int = 50,
+    seed: int = 0,
+) -> FrameOffset:
+    """Where the frame the relations relate sits in the frame of the trajectory ``poses``.
+
+    The lever arm ``m = (x, y)`` with ``relation ≈ M⁻¹ · (the trajectory's relative pose) · M``,
+    ``M = (x, y, 0)``, fitted to the relations shorter than ``short_s`` seconds as
+    :func:`fit_odometry_calibration` fits a mounting (the trajectory in place of the odometry,
+    the default motion model as the weights): a frame ``m`` away moves sideways by
+    ``(R(θ) − I) m`` on every turn ``θ``, so the turns carry the information, straight
+    relations none.  Its spread: the same fit on ``resamples`` bootstrap resamples of those
+    relations (drawn with replacement, ``seed``).
+
+    Parameters
+    ----------
+    timestamps : ndarray, shape (N,)
+    poses : ndarray, shape (N, 3)
+        The trajectory, in time order.
+    t1, t2 : ndarray, shape (m,)
+        The relations' time stamps.
+    relation_poses : ndarray, shape (m, 3)
+        The relations (the pose at ``t2`` in the frame at ``t1``).
+    short_s : float
+        Only relations shorter than this (s) are used.
+    resamples : int
+        Bootstrap resamples of the spread (at least 2).
+    seed : int
+
+    Raises
+    ------
+    EvaluationError
+        Fewer than 3 relations shorter than ``short_s`` match the trajectory's stamps.
+    """
+    if resamples < 2:
+        raise EvaluationError(f"resamples must be at least 2, got {resamples}")
+    pairs = relation_pairs(timestamps, t1, t2, relation_poses)
+    rows = np.flatnonzero(pairs.duration_s < short_s)
+    if rows.size < 3:
+        raise EvaluationError(
+            f"{rows.size} relations shorter than {short_s:g} s match the trajectory: "
+            "at least 3 are needed to fit a frame offset"
+        )
+    noise = MotionNoiseConfig()
+
+    def fit(k: IntArray) -> tuple[float, float]:
+        sub = RelationPairs(pairs.first[k], pairs.second[k], pairs.poses[k], pairs.duration_s[k])
+        c = fit_odometry_calibration(poses, sub, noise, parameters="mounting")
+        return c.mount_x_m, c.mount_y_m
+
+    x, y = fit(rows)
+    rng = np.random.default_rng(seed)
+    draws = np.array([fit(rng.choice(rows, rows.size)) for _ in range(resamples)])
+    sd = draws.std(axis=0)
+    return FrameOffset(float(x), float(y), float(sd[0]), float(sd[1]), int(rows.size))
