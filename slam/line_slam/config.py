@@ -166,13 +166,14 @@ class SlamConfig:
         drift per metre) is estimated during the run from the registrations that pin a
         keyframe down, and taken out of every later step of the log's odometry before the
         front end and the graph use it (:mod:`slam.line_slam.odometry_calibration`;
-        ``summary.json`` ``odometry_calibration``).  ``"mounting"``: where the laser sits in the
-        frame whose motion the odometry reports (a lever arm the log does not state, on top
-        of any mounting it does: every turn moves such a laser sideways), estimated from the
-        graph's estimate of every keyframe step and applied once significant
-        (:class:`slam.line_slam.odometry_calibration.MountingEstimator`).  ``"off"``
-        (default): the odometry's steps are used as logged, with the random-walk noise of
-        ``motion``.
+        ``summary.json`` ``odometry_calibration``).  ``"mounting"`` (default): where the laser
+        sits in the frame whose motion the odometry reports (a lever arm the log does not
+        state, on top of any mounting it does or the catalogue records: every turn moves such
+        a laser sideways), estimated from the graph's estimate of every keyframe step and
+        applied once significant (:class:`slam.line_slam.odometry_calibration.
+        MountingEstimator`); until then, and on a log with fewer than 30 turning keyframe
+        steps, the odometry is used as with ``"off"``.  ``"off"``: the odometry's steps are
+        used as logged (with the stated mounting), with the random-walk noise of ``motion``.
     min_line_points : int
         Lines with fewer supporting points are ignored (neither matched nor new landmarks).
         Default 3, the fewest with a residual: how much wall a usable line covers is
@@ -207,7 +208,7 @@ class SlamConfig:
     line_model_sigma_alpha_rad: float = 0.01
     line_pass_error: Literal["estimated", "off"] = "estimated"
     line_pass_gap_s: float = 30.0
-    odometry_calibration: Literal["off", "estimated", "mounting"] = "off"
+    odometry_calibration: Literal["off", "estimated", "mounting"] = "mounting"
     min_line_points: int = 3
     min_line_length_m: float = 0.3
     pose_covariances: Literal["keyframes", "none"] = "keyframes"

@@ -23,7 +23,7 @@ calibrated.
 A laser mounted away from the point whose motion the odometry reports, where the log does not
 say so, errs the same way too: every turn ``θ`` moves the laser by ``(R(θ) − I) m`` that the
 odometry does not show.  :class:`MountingEstimator` estimates ``m`` from the graph's own
-estimate of every keyframe step (``[slam] odometry_calibration = "mounting"``).
+estimate of every keyframe step (``[slam] odometry_calibration = "mounting"``, the default).
 """
 
 from __future__ import annotations
