@@ -9,8 +9,9 @@ leaves the odometry step with its prior covariance, and one that contradicts the
 are chained
 (:func:`slam.lines.transform.compose_chain`, independent steps) and, for every relation
 shorter than ``--max-gap-s`` seconds, the chain's relative pose between the relation's two
-scans is compared with the relation in the relation's frame (the base, through the log's
-laser mounting):
+scans is compared with the relation in the frame a run reports for the log (the
+catalogue's ``relations_frame``: the laser's for the catalogued logs; the base, through the
+log's laser mounting, where the run reports the base):
 
 * the mean absolute translation and rotation errors of the chain and of the odometry alone;
 * the chain's NEES ``eᵀ C⁻¹ e`` (``e = Log(relation⁻¹ · chain)``, ``C`` its chained covariance):
@@ -71,11 +72,13 @@ def main() -> None:
     noise = config.linefit.noise
     stamps, steps, covs, odo_steps, mounts = [], [], [], [], []
     prev = prev_points = None
+    prev_odom = np.zeros(3)
     n_used = n_slips = n_contradicted = 0
     for scan in tqdm(source.scans(args.max_scans), desc="matching", unit="scan"):
         points = scan_points(scan.ranges, scan.bearings, scan.max_range_m, noise, sm)
+        odom = source.policy.pose_odom_laser(scan)  # the laser's, as the estimators read it
         if prev is not None and prev_points is not None:
-            delta = pose_between(prev.pose_odom_laser, scan.pose_odom_laser)
+            delta = pose_between(prev_odom, odom)
             Q = motion.covariance(delta)
             m = match_scans(prev_points, points, delta, Q, sm)
             n_used += int(m.accepted)
@@ -92,8 +95,8 @@ def main() -> None:
                 covs.append(Q)
             odo_steps.append(delta)
         stamps.append(scan.timestamp)
-        mounts.append(pose_between(scan.pose_odom_base, scan.pose_odom_laser))
-        prev, prev_points = scan, points
+        mounts.append(source.policy.mount)
+        prev, prev_points, prev_odom = scan, points, odom
     t = np.asarray(stamps)
     steps_a, covs_a, odo_a = np.asarray(steps), np.asarray(covs), np.asarray(odo_steps)
     rel = read_relations(relations_path)
@@ -106,8 +109,8 @@ def main() -> None:
         poses, pcov = compose_chain(steps_a[a:b], covs_a[a:b])
         chain, C = poses[-1], pcov[-1]
         odo = compose_chain(odo_a[a:b])[0][-1]
-        # laser-frame relative poses in the base frame: mount ∘ δ ∘ mount⁻¹
-        mount = mounts[a]
+        # laser-frame relative poses in the reported frame: mount ∘ δ ∘ mount⁻¹ for the base
+        mount = mounts[a] if source.policy.output_frame == "base" else np.zeros(3)
         to_base = pose_compose(mount, pose_compose(chain, pose_inverse(mount)))
         odo_base = pose_compose(mount, pose_compose(odo, pose_inverse(mount)))
         Ad = adjoint_pose2(mount)
