@@ -130,3 +130,33 @@ def test_relations_within_keeps_exactly_those_inside_a_partial_run(rng):
     assert metric.n_unmatched == 0 and metric.abs_trans_m.mean < 1e-9
     with pytest.raises(EvaluationError):
         relations_metric(run, rel)  # the whole file would be a time stamp mistake
+
+
+def test_evaluate_reports_where_the_relations_frame_sits(rng):
+    """Relations of a frame 4 cm ahead of the trajectory's: ``evaluate_results`` finds it
+    (within four bootstrap standard deviations) and writes it to ``metrics.json``; relations
+    of the trajectory's own frame give about zero; with no short relations it says why."""
+    from slam.evaluation.report import evaluate_results
+    from slam.lines.transform import compose_chain
+
+    n = 2000
+    steps = np.column_stack([np.full(n, 0.05), np.zeros(n), 0.15 * np.sin(np.arange(n) / 25.0)])
+    poses, _ = compose_chain(steps)
+    t = np.arange(n + 1, dtype=float)
+    trajectory = Trajectory(t, poses)
+    first = rng.choice(n - 5, size=400, replace=False)
+    for ahead in (0.04, 0.0):
+        frame = pose_compose(poses, np.array([ahead, 0.0, 0.0]))
+        rel = relations_from_trajectory(t, frame, np.column_stack([first, first + 5]))
+        noisy = pose_compose(rel.poses, rng.normal(0.0, [0.004, 0.004, 0.002], rel.poses.shape))
+        report = evaluate_results(trajectory, relations=Relations.planar(rel.t1, rel.t2, noisy))
+        f = report.relations_frame
+        assert f is not None and f.relations == 400
+        assert abs(f.x_m - ahead) < 4 * f.sd_x_m + 1e-4 and abs(f.y_m) < 4 * f.sd_y_m + 1e-4
+        assert report.to_dict()["relations_frame"]["x_m"] == f.x_m
+        assert "relations' frame" in report.format_table()
+    far = relations_from_trajectory(t, poses, np.column_stack([first, first + 5]))
+    far = Relations.planar(far.t1 * 3.0, far.t2 * 3.0, far.poses)  # 15 s apart: none short
+    report = evaluate_results(Trajectory(3.0 * t, poses), relations=far)
+    assert report.relations_frame is None
+    assert "at least 3" in report.to_dict()["relations_frame"]["skipped"]

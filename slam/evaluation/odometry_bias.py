@@ -219,6 +219,7 @@ def relations_frame_offset(
     short_s: float = 10.0,
     resamples: int = 50,
     seed: int = 0,
+    tolerance_s: float = 1e-3,
 ) -> FrameOffset:
     """Where the frame the relations relate sits in the frame of the trajectory ``poses``.
 
@@ -244,6 +245,8 @@ def relations_frame_offset(
     resamples : int
         Bootstrap resamples of the spread (at least 2).
     seed : int
+    tolerance_s : float
+        How far a relation's stamp may lie from the trajectory's (s).
 
     Raises
     ------
@@ -252,7 +255,7 @@ def relations_frame_offset(
     """
     if resamples < 2:
         raise EvaluationError(f"resamples must be at least 2, got {resamples}")
-    pairs = relation_pairs(timestamps, t1, t2, relation_poses)
+    pairs = relation_pairs(timestamps, t1, t2, relation_poses, tolerance_s)
     rows = np.flatnonzero(pairs.duration_s < short_s)
     if rows.size < 3:
         raise EvaluationError(

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from slam.errors import EvaluationError
 from slam.evaluation.ate import AteResult, ate
 from slam.evaluation.nees import JointCovariance, NeesResult, pose_nees
+from slam.evaluation.odometry_bias import FrameOffset, relations_frame_offset
 from slam.evaluation.reference_noise import RelationNoise, relation_noise
 from slam.evaluation.relations_metric import RelationsMetric, relations_metric, relations_within
 from slam.evaluation.relations_nees import (
@@ -33,6 +34,11 @@ from slam.io.results import Results
 from slam.io.trajectory import Trajectory
 
 __all__ = ["EvaluationReport", "evaluate_results"]
+
+#: The relations the frame offset is fitted to are shorter than this (s).
+FRAME_MAX_GAP_S = 10.0
+#: Bootstrap resamples of the frame offset's spread (seed 0).
+FRAME_RESAMPLES = 50
 
 FloatArray = NDArray[np.float64]
 
@@ -53,6 +59,10 @@ class EvaluationReport:
     relations_noise: RelationNoise | None = None
     relations_nees_with_relations_noise: RelationsNees | None = None
     relations_noise_skipped: str | None = None
+    #: Where the relations' frame sits in the trajectory's (:func:`slam.evaluation.
+    #: odometry_bias.relations_frame_offset`), or why it was not fitted.
+    relations_frame: FrameOffset | None = None
+    relations_frame_skipped: str | None = None
     #: How far passes along the same walls disagree (:func:`slam.line_slam.passes.pass_consistency`,
     #: as its ``to_dict``), when the results folder has a ``graph.g2o``.
     walls_between_passes: dict[str, Any] | None = None
@@ -113,6 +123,19 @@ class EvaluationReport:
         bracket = self.relations_nees_bracket()
         if bracket is not None:
             out["relations_nees_bracket"] = bracket
+        if self.relations_frame is not None:
+            f = self.relations_frame
+            out["relations_frame"] = {
+                "x_m": f.x_m,
+                "y_m": f.y_m,
+                "sd_x_m": f.sd_x_m,
+                "sd_y_m": f.sd_y_m,
+                "relations": f.relations,
+                "max_gap_s": FRAME_MAX_GAP_S,
+                "bootstrap_resamples": FRAME_RESAMPLES,
+            }
+        elif self.relations_frame_skipped is not None:
+            out["relations_frame"] = {"skipped": self.relations_frame_skipped}
         if self.walls_between_passes is not None:
             out["walls_between_passes"] = dict(self.walls_between_passes)
         return out
@@ -156,6 +179,16 @@ class EvaluationReport:
                 ("abs rot (deg)", str(m.abs_rot_deg)),
                 ("sqr rot (deg^2)", str(m.sqr_rot_deg2)),
             ]
+        if self.relations_frame is not None:
+            f = self.relations_frame
+            rows.append(
+                (
+                    "relations' frame",
+                    f"x {f.x_m:+.4f} m (sd {f.sd_x_m:.4f}), y {f.y_m:+.4f} m (sd {f.sd_y_m:.4f}) "
+                    f"in the {self.frame} frame (from the turns of {f.relations} relations "
+                    f"< {FRAME_MAX_GAP_S:g} s; 0: they relate that frame)",
+                )
+            )
         if self.ate is not None:
             a = self.ate
             rows += [
@@ -339,6 +372,11 @@ def evaluate_results(
 ) -> EvaluationReport:
     """Relations metric (with ``relations``), ATE, RPE and NEES (with ``ground_truth``).
 
+    With relations, also where the frame they relate sits in the trajectory's
+    (:func:`slam.evaluation.odometry_bias.relations_frame_offset`, from the turns of the
+    relations shorter than :data:`FRAME_MAX_GAP_S`): about zero when they relate the frame
+    the run reports.
+
     NEES is computed when ``results`` carries pose covariances and ground truth is given; the
     relations NEES (:mod:`slam.evaluation.relations_nees`) when relations and
     ``relative_covariances`` (covariances of relative poses between time stamps) are given;
@@ -380,8 +418,18 @@ def evaluate_results(
     rel_nees = rel_nees_ref = None
     rel_noise: RelationNoise | None = None
     noise_skipped: str | None = None
+    frame_offset: FrameOffset | None = None
+    frame_skipped: str | None = None
     if relations is not None:
         rel = relations_metric(trajectory, relations, tolerance_s=tol, max_unmatched_fraction=frac)
+        try:
+            frame_offset = relations_frame_offset(
+                trajectory.timestamps, trajectory.poses, relations.t1, relations.t2,
+                relations.poses, short_s=FRAME_MAX_GAP_S, resamples=FRAME_RESAMPLES,
+                tolerance_s=tol,
+            )  # fmt: skip
+        except EvaluationError as exc:  # too few short relations: the rest stands
+            frame_skipped = str(exc)
         if relative_covariances is not None:
             rel_nees = relations_nees(
                 trajectory,
@@ -440,4 +488,6 @@ def evaluate_results(
         relations_noise=rel_noise,
         relations_nees_with_relations_noise=rel_nees_ref,
         relations_noise_skipped=noise_skipped,
+        relations_frame=frame_offset,
+        relations_frame_skipped=frame_skipped,
     )
