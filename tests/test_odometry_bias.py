@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -141,3 +143,26 @@ def test_relations_frame_offset_finds_the_frame_the_relations_relate(rng, offset
     # the relations are 5 steps long: none is shorter than 1 s of these 1 s steps
     with pytest.raises(EvaluationError, match="at least 3"):
         relations_frame_offset(t, trajectory, t1, t2, rel, short_s=1.0)
+
+
+def test_a_model_that_leaves_a_turn_on_the_spot_no_error_is_a_clear_error():
+    """Turns on the spot under a model with no translation noise per radian and negligible
+    floors (as ``scripts/odometry_bias.py --noise-from`` uses a run's fit):
+    the relations across them have a singular covariance, said in an EvaluationError (not a
+    LinAlgError from inside numpy)."""
+    noise = MotionNoiseConfig(
+        sigma_xy_per_m=0.02,
+        sigma_xy_per_rad=0.0,
+        sigma_theta_per_m=0.02,
+        sigma_theta_per_rad=0.05,
+        sigma_xy_min_m=1e-9,
+        sigma_theta_min_rad=1e-9,
+    )
+    steps = np.tile([0.0, 0.0, 0.1], (50, 1))  # turning on the spot
+    odometry, _ = compose_chain(steps)
+    t = np.arange(51, dtype=float)
+    pairs = relation_pairs(t, t[:10], t[:10] + 5, pose_between(odometry[:10], odometry[5:15]))
+    with pytest.raises(EvaluationError, match="no error in some direction"):
+        odometry_relations_nees(odometry, pairs, noise)
+    floored = replace(noise, sigma_xy_min_m=0.001)
+    assert np.all(np.isfinite(odometry_relations_nees(odometry, pairs, floored)))

@@ -126,7 +126,19 @@ def _whitened_errors(
     xi = pose_log(pose_between(pairs.poses, pose_between(poses[i], poses[j])))
     Aj = np.linalg.inv(adjoint_pose2(poses[j]))
     P = Aj @ (S[j] - S[i]) @ np.swapaxes(Aj, 1, 2)
-    L = np.linalg.cholesky(0.5 * (P + np.swapaxes(P, 1, 2)))
+    P = 0.5 * (P + np.swapaxes(P, 1, 2))
+    # a chain the model leaves no error in some direction (a turn on the spot with no
+    # translation noise per radian and no floor), or one lost to rounding in the sums
+    scale = np.maximum(np.abs(S[j]).max(axis=(1, 2)), np.finfo(float).tiny)
+    singular = np.linalg.eigvalsh(P)[:, 0] <= 1e-12 * scale
+    if np.any(singular):
+        k = int(np.flatnonzero(singular)[0])
+        raise EvaluationError(
+            f"the noise model gives {int(singular.sum())} relations no error in some "
+            f"direction (the first between odometry poses {int(i[k])} and {int(j[k])}): "
+            "give it a floor (sigma_xy_min_m, sigma_theta_min_rad) or noise per radian turned"
+        )
+    L = np.linalg.cholesky(P)
     return np.asarray(np.linalg.solve(L, xi[..., None])[..., 0], dtype=np.float64)
 
 
