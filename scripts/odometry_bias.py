@@ -82,7 +82,7 @@ def main() -> None:
     noise = _noise(args.noise_from)
     short = pairs.duration_s < args.short
     try:
-        odometry_relations_nees(odometry.poses, pairs, noise)
+        as_logged = odometry_relations_nees(odometry.poses, pairs, noise)
     except EvaluationError as exc:
         # the run's model leaves some chain no error without its floors (e.g. no translation
         # noise per radian turned, on a turn on the spot)
@@ -90,6 +90,7 @@ def main() -> None:
             raise SystemExit(f"{args.log}: {exc}") from exc
         print(f"# {exc}: the run's per-step floors are kept")
         noise = _noise(args.noise_from, floors=True)
+        as_logged = odometry_relations_nees(odometry.poses, pairs, noise)
     calibration = fit_odometry_calibration(odometry.poses, pairs, noise, use=short)
     print(f"# {log.name}: {pairs.first.shape[0]} of {len(rel)} relations matched; {noise}")
     print(
@@ -98,7 +99,7 @@ def main() -> None:
         f"heading drift {calibration.heading_drift_rad_per_m:+.5f} rad/m"
     )
     nees = {
-        "as logged": odometry_relations_nees(odometry.poses, pairs, noise),
+        "as logged": as_logged,
         "calibrated": odometry_relations_nees(odometry.poses, pairs, noise, calibration),
     }
     if args.mounting:

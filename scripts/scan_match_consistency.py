@@ -70,7 +70,7 @@ def main() -> None:
     sm = config.slam.frontend.scan_matching
     motion = config.slam.motion
     noise = config.linefit.noise
-    stamps, steps, covs, odo_steps, mounts = [], [], [], [], []
+    stamps, steps, covs, odo_steps = [], [], [], []
     prev = prev_points = None
     prev_odom = np.zeros(3)
     n_used = n_slips = n_contradicted = 0
@@ -95,7 +95,6 @@ def main() -> None:
                 covs.append(Q)
             odo_steps.append(delta)
         stamps.append(scan.timestamp)
-        mounts.append(source.policy.mount)
         prev, prev_points, prev_odom = scan, points, odom
     t = np.asarray(stamps)
     steps_a, covs_a, odo_a = np.asarray(steps), np.asarray(covs), np.asarray(odo_steps)
@@ -104,13 +103,13 @@ def main() -> None:
     i2, ok2 = match_timestamps(rel.t2, t, 1e-5)
     keep = ok1 & ok2 & (rel.t2 - rel.t1 < args.max_gap_s) & (rel.t2 > rel.t1) & (i2 > i1)
     err_m, err_rad, odo_m, odo_rad, nees = [], [], [], [], []
+    # laser-frame relative poses in the reported frame: mount ∘ δ ∘ mount⁻¹ for the base
+    mount = source.policy.mount if source.policy.output_frame == "base" else np.zeros(3)
     for k in np.flatnonzero(keep):
         a, b = int(i1[k]), int(i2[k])
         poses, pcov = compose_chain(steps_a[a:b], covs_a[a:b])
         chain, C = poses[-1], pcov[-1]
         odo = compose_chain(odo_a[a:b])[0][-1]
-        # laser-frame relative poses in the reported frame: mount ∘ δ ∘ mount⁻¹ for the base
-        mount = mounts[a] if source.policy.output_frame == "base" else np.zeros(3)
         to_base = pose_compose(mount, pose_compose(chain, pose_inverse(mount)))
         odo_base = pose_compose(mount, pose_compose(odo, pose_inverse(mount)))
         Ad = adjoint_pose2(mount)
