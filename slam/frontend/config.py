@@ -382,6 +382,19 @@ class LoopClosureConfig:
         and fr079 no accepted closure had fewer than 2 explained pairs after 5
         linearisations, while about half of the rejected ones had at most 1.  0: judgements
         always run their ``judge_iterations``.
+    graph_gate : bool
+        Before the judge, the hypothesis is tested against the graph's own estimate of the
+        two keyframes' relative pose (:meth:`slam.line_slam.loop_closer.LoopCloser.graph_test`):
+        the back end's joint marginal covariance of the two keyframes, scaled by what the
+        closures accepted so far measured of it (the graph's covariance of a loop that has not
+        closed is too small, by one to two orders of magnitude on the real logs; the scale at
+        its upper confidence bound, ``consistency_probability``), plus the hypothesis' own
+        covariance, within the ``consistency_probability`` quantile of χ² (the direction along
+        a corridor left out).  One beyond it is turned away (``gated``, "inconsistent with the
+        graph"; the log has ``graph_chi2`` and ``graph_scale``) and counts as a rejection
+        (``skip_repeated_rejections``, ``reconsider_keyframes``).  Until the first closure is
+        accepted there is no scale and no test.  Not for a reconsidered hypothesis (the graph
+        still holds the closure it would replace).
     judge_from_converged : bool
         The loop is solved without the closure first (the judge's solver, its
         ``judge_iterations``, the same poses freed), and the F statistic's cost before is
@@ -448,6 +461,7 @@ class LoopClosureConfig:
     skip_repeated_rejections: bool = True
     judge_hopeless_after: int = 5
     judge_from_converged: bool = True
+    graph_gate: bool = True
     large_correction_m: float = 0.1
     large_correction_rad: float = 0.01
     reconsider_keyframes: int | None = None

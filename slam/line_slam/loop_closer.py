@@ -66,13 +66,14 @@ from numpy.typing import NDArray
 
 from linefit.line import wrap_angle
 from slam.association import candidate_landmarks
+from slam.errors import EstimationError
 from slam.frontend.loop_closure import (
     LoopClosure,
     correction_covariance,
     same_correction,
     search_loop_closure,
 )
-from slam.geometry import pose_between, pose_compose, pose_inverse, pose_log
+from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend
 from slam.graph.batch import BatchSolver
 from slam.graph.problem import MergeRecord
@@ -95,7 +96,17 @@ _WHERE = ("scan", "old_keyframe", "old_scan", "pose_before", "old_pose_before")
 _ORDER = {
     "not_found": ("keyframe", "local", "old", "window", "accepted", "reason"),
     "repeated": ("keyframe", "pairs", "correction", "accepted", "reason"),
-    "gated": ("keyframe", "pairs", "correction", "correction_chi2", "accepted", "reason", *_WHERE),
+    "gated": (
+        "keyframe",
+        "pairs",
+        "correction",
+        "correction_chi2",
+        "graph_chi2",
+        "graph_scale",
+        "accepted",
+        "reason",
+        *_WHERE,
+    ),
     "judged": (
         "keyframe",
         "pairs",
@@ -116,6 +127,8 @@ _ORDER = {
         "judged_late",
         "judged_at_keyframe",
         "correction_chi2",
+        "graph_chi2",
+        "graph_scale",
         *_WHERE,
         "accepted",
         "backend_restarted",
@@ -184,6 +197,22 @@ class _Accepted:
         return self.hypothesis.keyframe
 
 
+@dataclass(frozen=True)
+class GraphTest:
+    """A hypothesis against the graph's own estimate (:meth:`LoopCloser.graph_test`).
+
+    ``raw``: ``eᵀ S⁻¹ e`` under the graph's covariance as it is, with ``dof`` degrees of
+    freedom; ``chi2``: ``eᵀ (k S + C)⁻¹ e`` with the graph's covariance scaled by ``scale``
+    (``k``) and the hypothesis' own ``C``, None before any closure has been accepted (no
+    scale yet).
+    """
+
+    raw: float
+    dof: int
+    chi2: float | None
+    scale: float | None
+
+
 @dataclass
 class ClosureAttempt:
     """One loop-closure attempt that found a hypothesis or searched in vain.
@@ -194,7 +223,8 @@ class ClosureAttempt:
     closure: ``reason``) or ``"judged"``.  Keyframes and scans are 0-based; ``correction`` is
     ``(t_x, t_y, dθ)`` (m, m, rad) about the current pose; ``correction_chi2`` the hypothesis'
     squared Mahalanobis distance from the front end's own trajectory
-    (:meth:`LoopCloser.chain_chi2`);
+    (:meth:`LoopCloser.chain_chi2`); ``graph_chi2`` its distance from the graph's estimate
+    under the graph's covariance scaled by ``graph_scale`` (:meth:`LoopCloser.graph_test`);
     ``pose_before``/``old_pose_before`` the two keyframes' estimates before the attempt;
     ``consistent_pairs`` of ``pairs`` were explained by the judge, whose worst pair left
     ``worst_pair_chi2``; along a corridor (``single_direction``) ``corridor_normal`` is the
@@ -213,6 +243,8 @@ class ClosureAttempt:
     pairs: int | None = None
     correction: list[float] | None = None
     correction_chi2: float | None = None
+    graph_chi2: float | None = None
+    graph_scale: float | None = None
     consistent_pairs: int | None = None
     worst_pair_chi2: float | None = None
     single_direction: bool | None = None
@@ -329,6 +361,10 @@ class LoopCloser:
         self._pending: _Pending | None = None
         self._replaced: _Pending | None = None
         self._every = EveryKeyframes()
+        # the graph's covariance against the closures accepted so far (graph_gate): Σ eᵀS⁻¹e
+        # and Σ dof
+        self._graph_chi2 = 0.0
+        self._graph_dof = 0
         self._judge = BatchSolver(
             replace(config.solver, relative_tolerance=config.loop_closure.judge_relative_tolerance)
         )
@@ -384,7 +420,6 @@ class LoopCloser:
 
     def _judge_late(self, candidate: _Pending, now: int | None) -> int:
         """Judge a hypothesis that waited (``judged_late``, by the attempt at ``now``)."""
-        self.counters["loop_closure_candidates"] += 1
         return self.apply(
             candidate.local,
             candidate.old,
@@ -499,7 +534,6 @@ class LoopCloser:
             )
             self.counters["loop_closures_gated"] += 1
             return 0
-        self.counters["loop_closure_candidates"] += 1
         return self.apply(local, near, found, pose, chi2_t, agree, hyp)
 
     # -- the rules ---------------------------------------------------------------------------
@@ -582,6 +616,70 @@ class LoopCloser:
         x = g.poses[h.keyframe]
         target = pose_compose(g.poses[h.k_old], h.z)
         return np.array([target[0] - x[0], target[1] - x[1], float(wrap_angle(target[2] - x[2]))])
+
+    def graph_scale(self) -> float | None:
+        """How many times too small the graph's covariance of a loop is, from its closures.
+
+        Each closure accepted so far measured it: its hypothesis' ``eᵀ S⁻¹ e`` (the graph's
+        relative pose of the two keyframes and its covariance ``S``, before the closure) over
+        its degrees of freedom, the hypothesis' own covariance left out (which makes the scale
+        come out larger).  Returned at its upper confidence bound at
+        ``consistency_probability`` (``Σ eᵀS⁻¹e / χ²_{Σ dof}`` quantile ``1 − p``), at least
+        1; None before the first closure.
+        """
+        if self._graph_dof == 0:
+            return None
+        p = self.config.loop_closure.consistency_probability
+        low = chi2_ppf(1.0 - p, self._graph_dof)
+        return max(self._graph_chi2 / max(low, 1e-12), 1.0)
+
+    def graph_report(self) -> dict[str, Any]:
+        """``summary.json`` ``loop_closure_graph_scale``: what the accepted closures measured."""
+        n = self._graph_dof
+        return {
+            "dof": n,
+            "chi2_per_dof": self._graph_chi2 / n if n else None,
+            "scale": self.graph_scale(),
+        }
+
+    def graph_test(
+        self, found: LoopClosure, old: IntArray, pose: int, k_old: int, h: Hypothesis
+    ) -> GraphTest | None:
+        """The hypothesis against the graph's estimate of the same relative pose.
+
+        ``e = Log(x̂⁻¹ z)``: ``z`` the hypothesis' pose of keyframe ``pose`` in the frame of
+        ``k_old`` (:meth:`hypothesis`, at the current estimate), ``x̂`` the graph's; ``S =
+        J Σ Jᵀ`` the covariance of ``x̂`` from the back end's joint marginal ``Σ`` of the two
+        keyframes (right perturbations: ``∂x̂/∂x_old = −Ad(x̂⁻¹)``, ``∂x̂/∂x_k = I``); ``C`` the
+        hypothesis' own covariance (its paired lines' and the drift across the local submap);
+        along a corridor the direction along the walls left out.  The graph's covariance of a
+        loop that has not closed is too small (on the real logs by one to two orders of
+        magnitude: it counts every sighting of a wall as an independent measurement, while the
+        sightings of one pass share their error), so ``S`` is scaled by :meth:`graph_scale`.
+        None when the back end gives no covariance or ``h`` has none.
+        """
+        if h.cov is None:
+            return None
+        g = self.book.graph
+        now = self.hypothesis(found, old, pose, k_old)
+        est = pose_between(g.poses[k_old], g.poses[pose])
+        e = pose_log(pose_between(est, now.z))
+        try:
+            P = self.backend.joint_pose_covariance(g, np.array([k_old, pose]))
+        except EstimationError:
+            return None
+        J = np.hstack([-adjoint_pose2(pose_inverse(est)), np.eye(3)])
+        S = J @ P @ J.T
+        if not (np.all(np.isfinite(S)) and np.all(np.isfinite(e))):
+            return None
+        normals = [] if now.normal is None else [now.normal]
+        k = self.graph_scale()
+        try:
+            raw, dof = self._mahalanobis(e, S + 1e-12 * np.eye(3), normals)
+            chi2 = None if k is None else self._mahalanobis(e, k * S + h.cov, normals)[0]
+        except np.linalg.LinAlgError:
+            return None
+        return GraphTest(float(raw), int(dof), chi2, k)
 
     def hypothesis(
         self,
@@ -789,6 +887,39 @@ class LoopCloser:
         kernel = self._judge_kernel()
         k_old = int(np.median(old_last))
         where = self.where(pose, k_old)  # as the search saw it
+        # the graph's own estimate, its covariance scaled by the closures so far: a hypothesis
+        # beyond it is turned away before the judge (not a reconsidered one: the graph still
+        # holds the closure it would replace)
+        graph = None
+        if lcc.graph_gate and reconsidering is None and hypothesis is not None:
+            graph = self.graph_test(found, old, pose, k_old, hypothesis)
+        if (
+            graph is not None
+            and graph.chi2 is not None
+            and graph.chi2 > self._chi2_limit(graph.dof)
+        ):
+            self.attempts.append(
+                ClosureAttempt(
+                    "gated",
+                    int(pose),
+                    reason=(
+                        f"inconsistent with the graph (chi2 {graph.chi2:.1f} with its covariance "
+                        f"scaled by {graph.scale:.1f})"
+                    ),
+                    pairs=len(found.pairs),
+                    correction=[float(v) for v in found.correction],
+                    correction_chi2=chi2_t,
+                    graph_chi2=graph.chi2,
+                    graph_scale=graph.scale,
+                    where=where,
+                )
+            )
+            self.counters["loop_closures_gated"] += 1
+            return self._rejected_now(
+                local, old, found, pose, chi2_t, agree, hypothesis, late, judged_at, reconsidering
+            )
+        if reconsidering is None:
+            self.counters["loop_closure_candidates"] += 1
         # the map before the loop is the reference: held, only the loop is solved
         free_from = loop_from if lcc.judge_loop_only else 0
         if lcc.judge_from_converged:
@@ -872,6 +1003,8 @@ class LoopCloser:
             attempt.judged_at_keyframe = judged_at
         attempt.f_statistic = float(f_stat)
         attempt.f_statistic_robust = float(f_robust)
+        if graph is not None:
+            attempt.graph_chi2, attempt.graph_scale = graph.chi2, graph.scale
         attempt.agreeing_hypotheses = int(agree)
         if reconsidering is not None:
             attempt.reconsidered_closure = reconsidering.keyframe
@@ -906,6 +1039,9 @@ class LoopCloser:
             )
             attempt.accepted = True
             attempt.backend_restarted = big
+            if graph is not None:  # what this closure says of the graph's covariance
+                self._graph_chi2 += graph.raw
+                self._graph_dof += graph.dof
             if hypothesis is not None:
                 kept = [r for r in records if not r.undo and not g.landmark_alive[r.drop]]
                 self._accepted.append(
@@ -917,6 +1053,29 @@ class LoopCloser:
         book.restore(before)
         book.refresh_extents()
         self.counters["loop_closures_undone"] += 1
+        return self._rejected_now(
+            local, old, found, pose, chi2_t, agree, hypothesis, late, judged_at, reconsidering
+        )
+
+    def _rejected_now(
+        self,
+        local: IntArray,
+        old: IntArray,
+        found: LoopClosure,
+        pose: int,
+        chi2_t: float,
+        agree: int,
+        hypothesis: Hypothesis | None,
+        late: bool,
+        judged_at: int | None,
+        reconsidering: _Accepted | None,
+    ) -> int:
+        """After a rejection (by the judge or the graph): remember it; reconsider a rival.
+
+        The rejection is remembered for ``skip_repeated_rejections``; a rejected hypothesis
+        may overturn an accepted closure it contradicts (:meth:`rival`, :meth:`reconsider`).
+        Returns what :meth:`reconsider` returns, else 0.
+        """
         self._rejected.append(
             (int(pose), np.asarray(found.correction, dtype=float), len(found.pairs))
         )

@@ -704,6 +704,7 @@ class LineSlam:
         elif pass_skipped is not None:
             stats["line_pass_error"] = {"skipped": pass_skipped}
         stats["drift_scale"] = {"xy": self.drift.scale_xy, "theta": self.drift.scale_theta}
+        stats["loop_closure_graph_scale"] = self.loop_closer.graph_report()
         stats["runtime_s"] = {
             "total": float(np.sum(self.track.scan_runtime_s)) + time_s["optimize"],
             **{k: float(v) for k, v in time_s.items()},
