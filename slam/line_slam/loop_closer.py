@@ -30,6 +30,11 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    covariance (its paired lines' and the drift across its local submap): right after a
    closure the two places are tied, and a hypothesis that moves the robot further than that
    matched other walls; it is turned away before the judge (:meth:`LoopCloser.contradiction`).
+   With ``graph_gate``, when it is about to be judged, it must also agree with the graph's
+   own estimate of that relative pose, under the covariance the back end's joint marginal of
+   the two keyframes gives it, scaled by what the closures accepted so far measured of that
+   covariance (:meth:`LoopCloser.graph_test`, :meth:`LoopCloser.graph_scale`); one that does
+   not is rejected without the judge's solves.
 4. **Judge.**  A large correction is first spread over the loop (:func:`spread_correction`); the
    paired landmarks are merged and a batch solve of the loop
    (:class:`slam.graph.batch.BatchSolver`, at most ``judge_iterations``) outside the back-end
@@ -863,7 +868,10 @@ class LoopCloser:
         judged_at: int | None = None,
         reconsidering: _Accepted | None = None,
     ) -> int:
-        """Spread the correction, merge the verified pairs, judge; keep only if explained.
+        """Test against the graph; spread the correction, merge the pairs, judge; keep if explained.
+
+        With ``graph_gate`` a hypothesis the graph's own estimate rules out
+        (:meth:`graph_test`) is rejected first, without the solves (logged ``gated``).
 
         The candidate is judged by a batch solve in our own loop (``judge_iterations`` at most)
         of the loop (the poses since ``local_keyframes`` before the old landmarks were last
