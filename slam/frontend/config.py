@@ -462,6 +462,7 @@ class LoopClosureConfig:
     judge_hopeless_after: int = 5
     judge_from_converged: bool = True
     graph_gate: bool = True
+    graph_window: bool = False
     large_correction_m: float = 0.1
     large_correction_rad: float = 0.01
     reconsider_keyframes: int | None = None

@@ -465,6 +465,27 @@ class LoopCloser:
         )
         if near.size < lcc.min_matches:
             return 0
+        if lcc.graph_window:
+            k = self.graph_scale()
+            if k is not None:
+                k_ref = int(np.median(last[near]))
+                try:
+                    P = self.backend.joint_pose_covariance(g, np.array([k_ref, pose]))
+                except EstimationError:
+                    P = None
+                if P is not None:
+                    est = pose_between(g.poses[k_ref], x)
+                    J = np.hstack([-adjoint_pose2(pose_inverse(est)), np.eye(3)])
+                    S = k * (J @ P @ J.T)
+                    if np.all(np.isfinite(S)):
+                        gxy = lcc.window_sigmas * float(
+                            np.sqrt(np.max(np.linalg.eigvalsh(S[:2, :2])))
+                        )
+                        gth = lcc.window_sigmas * float(np.sqrt(S[2, 2]))
+                        win_xy = win_xy.copy()
+                        win_th = win_th.copy()
+                        win_xy[near] = np.minimum(win_xy[near], max(gxy, lcc.min_window_xy_m))
+                        win_th[near] = np.minimum(win_th[near], max(gth, lcc.min_window_theta_rad))
         # the window: what the oldest candidate allows (capped); a hypothesis must also lie
         # within what the old lines it pairs allow (window_of_pairs)
         wxy = float(np.max(win_xy[near]))
