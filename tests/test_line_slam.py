@@ -1054,6 +1054,17 @@ def test_graph_test_is_the_mahalanobis_distance_of_the_relative_pose():
     assert scaled is not None and scaled.scale == k
     assert scaled.chi2 == pytest.approx(float(e @ np.linalg.solve(k * S + C, e)), rel=1e-5)
     assert scaled.chi2 < scaled.raw / k
+    # graph_window: window_sigmas standard deviations of the scaled covariance, at least the
+    # minimum windows
+    lcc = closer.config.loop_closure
+    window = closer.graph_window(0, 1)
+    assert window is not None
+    expected_xy = lcc.window_sigmas * np.sqrt(np.max(np.linalg.eigvalsh(k * S[:2, :2])))
+    expected_th = lcc.window_sigmas * np.sqrt(k * S[2, 2])
+    assert window[0] == pytest.approx(max(expected_xy, lcc.min_window_xy_m), rel=1e-5)
+    assert window[1] == pytest.approx(max(expected_th, lcc.min_window_theta_rad), rel=1e-5)
+    closer._graph_chi2, closer._graph_dof = 0.0, 0
+    assert closer.graph_window(0, 1) is None  # no closure yet: the drift's window alone
 
 
 def test_graph_scale_is_the_upper_confidence_bound_of_what_closures_measured():

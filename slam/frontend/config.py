@@ -395,6 +395,13 @@ class LoopClosureConfig:
         (``skip_repeated_rejections``, ``reconsider_keyframes``).  Until the first closure is
         accepted there is no scale and no test.  Not for a reconsidered hypothesis (the graph
         still holds the closure it would replace).
+    graph_window : bool
+        Opt-in.  Once a closure has been accepted (``graph_gate``'s scale exists), the search
+        window is at most ``window_sigmas`` standard deviations of the graph's covariance of
+        the relative pose between the current keyframe and the one where the candidate old
+        landmarks were last seen (their median; the back end's joint marginal of the two,
+        scaled by :meth:`slam.line_slam.loop_closer.LoopCloser.graph_scale`), and at least
+        ``min_window_*``; before, and where it is wider, the drift's window.
     judge_from_converged : bool
         The loop is solved without the closure first (the judge's solver, its
         ``judge_iterations``, the same poses freed), and the F statistic's cost before is

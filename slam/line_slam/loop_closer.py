@@ -466,26 +466,12 @@ class LoopCloser:
         if near.size < lcc.min_matches:
             return 0
         if lcc.graph_window:
-            k = self.graph_scale()
-            if k is not None:
-                k_ref = int(np.median(last[near]))
-                try:
-                    P = self.backend.joint_pose_covariance(g, np.array([k_ref, pose]))
-                except EstimationError:
-                    P = None
-                if P is not None:
-                    est = pose_between(g.poses[k_ref], x)
-                    J = np.hstack([-adjoint_pose2(pose_inverse(est)), np.eye(3)])
-                    S = k * (J @ P @ J.T)
-                    if np.all(np.isfinite(S)):
-                        gxy = lcc.window_sigmas * float(
-                            np.sqrt(np.max(np.linalg.eigvalsh(S[:2, :2])))
-                        )
-                        gth = lcc.window_sigmas * float(np.sqrt(S[2, 2]))
-                        win_xy = win_xy.copy()
-                        win_th = win_th.copy()
-                        win_xy[near] = np.minimum(win_xy[near], max(gxy, lcc.min_window_xy_m))
-                        win_th[near] = np.minimum(win_th[near], max(gth, lcc.min_window_theta_rad))
+            window = self.graph_window(int(np.median(last[near])), pose)
+            if window is not None:  # the graph's, where it is narrower than the drift's
+                win_xy = win_xy.copy()
+                win_th = win_th.copy()
+                win_xy[near] = np.minimum(win_xy[near], window[0])
+                win_th[near] = np.minimum(win_th[near], window[1])
         # the window: what the oldest candidate allows (capped); a hypothesis must also lie
         # within what the old lines it pairs allow (window_of_pairs)
         wxy = float(np.max(win_xy[near]))
@@ -668,6 +654,42 @@ class LoopCloser:
             "scale": self.graph_scale(),
         }
 
+    def graph_relative_cov(self, k_old: int, pose: int) -> tuple[FloatArray, FloatArray] | None:
+        """The graph's pose of keyframe ``pose`` in the frame of ``k_old``, and its covariance.
+
+        ``J Σ Jᵀ`` from the back end's joint marginal ``Σ`` of the two keyframes (right
+        perturbations: ``∂x̂/∂x_old = −Ad(x̂⁻¹)``, ``∂x̂/∂x_k = I``).  None when the back end
+        gives no covariance or it is not finite.
+        """
+        g = self.book.graph
+        try:
+            P = self.backend.joint_pose_covariance(g, np.array([k_old, pose]))
+        except EstimationError:
+            return None
+        est = pose_between(g.poses[k_old], g.poses[pose])
+        J = np.hstack([-adjoint_pose2(pose_inverse(est)), np.eye(3)])
+        S = J @ P @ J.T
+        if not np.all(np.isfinite(S)):
+            return None
+        return est, S
+
+    def graph_window(self, k_old: int, pose: int) -> tuple[float, float] | None:
+        """Search window (m, rad) from the graph's scaled relative covariance (``graph_window``).
+
+        ``window_sigmas`` standard deviations of :meth:`graph_relative_cov` scaled by
+        :meth:`graph_scale` (the largest in the plane; the heading's), at least the
+        ``min_window_*``; None before the first closure or without a covariance.
+        """
+        lcc = self.config.loop_closure
+        k = self.graph_scale()
+        rel = None if k is None else self.graph_relative_cov(k_old, pose)
+        if k is None or rel is None:
+            return None
+        S = k * rel[1]
+        wxy = lcc.window_sigmas * float(np.sqrt(np.max(np.linalg.eigvalsh(S[:2, :2]))))
+        wth = lcc.window_sigmas * float(np.sqrt(S[2, 2]))
+        return max(wxy, lcc.min_window_xy_m), max(wth, lcc.min_window_theta_rad)
+
     def graph_test(
         self, found: LoopClosure, old: IntArray, pose: int, k_old: int, h: Hypothesis
     ) -> GraphTest | None:
@@ -686,17 +708,13 @@ class LoopCloser:
         """
         if h.cov is None:
             return None
-        g = self.book.graph
         now = self.hypothesis(found, old, pose, k_old)
-        est = pose_between(g.poses[k_old], g.poses[pose])
-        e = pose_log(pose_between(est, now.z))
-        try:
-            P = self.backend.joint_pose_covariance(g, np.array([k_old, pose]))
-        except EstimationError:
+        rel = self.graph_relative_cov(k_old, pose)
+        if rel is None:
             return None
-        J = np.hstack([-adjoint_pose2(pose_inverse(est)), np.eye(3)])
-        S = J @ P @ J.T
-        if not (np.all(np.isfinite(S)) and np.all(np.isfinite(e))):
+        est, S = rel
+        e = pose_log(pose_between(est, now.z))
+        if not np.all(np.isfinite(e)):
             return None
         normals = [] if now.normal is None else [now.normal]
         k = self.graph_scale()
