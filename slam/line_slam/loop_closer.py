@@ -468,8 +468,6 @@ class LoopCloser:
         if lcc.graph_window:
             window = self.graph_window(int(np.median(last[near])), pose)
             if window is not None:  # the graph's, where it is narrower than the drift's
-                win_xy = win_xy.copy()
-                win_th = win_th.copy()
                 win_xy[near] = np.minimum(win_xy[near], window[0])
                 win_th[near] = np.minimum(win_th[near], window[1])
         # the window: what the oldest candidate allows (capped); a hypothesis must also lie
