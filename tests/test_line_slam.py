@@ -650,12 +650,16 @@ def test_reconsider_keyframes_reads_from_a_config_file(tmp_path):
 def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepted):
     """The right pairs judged with the wrong closure's merge undone.  Accepted (a permissive
     judge): the wrong pair is apart again and vetoed, the right pairs merged, the closure
-    dropped, counted and no longer turning hypotheses away, the judgement logged with the
-    dropped closure's keyframe.  Rejected (a judge that accepts nothing): the graph, the
-    estimate and the merge log are exactly as before, the closure still accepted."""
+    dropped, counted and no longer turning hypotheses away, what it measured of the graph's
+    covariance gone from the graph gate's scale, the judgement logged with the dropped
+    closure's keyframe.  Rejected (a judge that accepts nothing): the graph, the estimate,
+    the merge log and the scale are exactly as before, the closure still accepted."""
     slam, (a, b), h, found, local, old = _with_wrong_closure()
     g, closer = slam.graph, slam.loop_closer
-    rival = closer._accepted[0]
+    # the graph gate's record: the wrong closure's χ² beside a right one's (3 dof each)
+    rival = replace(closer._accepted[0], graph_raw=900.0, graph_dof=3)
+    closer._accepted[0] = rival
+    closer._graph_chi2, closer._graph_dof = 900.0 + 6.0, 6
     # an observation added to the merged landmark since the merge (the current pass's: a copy
     # of one of the dropped landmark's) goes back with the merge
     f = int(rival.records[0].factors[-1])
@@ -687,6 +691,9 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
         assert not np.any(g.landmark_alive[local])  # the right pairs merged
         assert slam.counters["loop_closures_dropped"] == 1
         assert rival not in closer._accepted
+        # the reconsidering hypothesis is not tested against the graph: only the right one left
+        assert closer.graph_report()["dof"] == 3
+        assert closer.graph_report()["chi2_per_dof"] == pytest.approx(2.0)
     else:
         assert got == 0 and not entry["accepted"]
         np.testing.assert_array_equal(g.factor_landmark, before[0])
@@ -696,6 +703,8 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
         assert np.all(g.factor_landmark[later] == b)
         assert slam.counters["loop_closures_dropped"] == 0
         assert rival in closer._accepted
+        assert closer.graph_report()["dof"] == 6
+        assert closer.graph_report()["chi2_per_dof"] == pytest.approx(151.0)
 
 
 def _moved(x, corr):

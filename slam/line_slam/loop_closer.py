@@ -187,8 +187,10 @@ class _Pending:
 class _Accepted:
     """An accepted closure, as a later hypothesis may overturn it.
 
-    Its hypothesis, its chain χ², the merges it made, how many hypotheses agreed with it and
-    the first pose its judgement solved.
+    Its hypothesis, its chain χ², the merges it made, how many hypotheses agreed with it, the
+    first pose its judgement solved, and what it measured of the graph's covariance (its
+    :class:`GraphTest` ``raw`` and ``dof``, 0 without one), which leaves
+    :meth:`LoopCloser.graph_scale` with it when it is dropped.
     """
 
     hypothesis: Hypothesis
@@ -196,6 +198,8 @@ class _Accepted:
     records: list[MergeRecord]
     agreeing: int = 0
     free_from: int = 0
+    graph_raw: float = 0.0
+    graph_dof: int = 0
 
     @property
     def keyframe(self) -> int:
@@ -630,12 +634,12 @@ class LoopCloser:
     def graph_scale(self) -> float | None:
         """How many times too small the graph's covariance of a loop is, from its closures.
 
-        Each closure accepted so far measured it: its hypothesis' ``eᵀ S⁻¹ e`` (the graph's
-        relative pose of the two keyframes and its covariance ``S``, before the closure) over
-        its degrees of freedom, the hypothesis' own covariance left out (which makes the scale
-        come out larger).  Returned at its upper confidence bound at
-        ``consistency_probability`` (``Σ eᵀS⁻¹e / χ²_{Σ dof}`` quantile ``1 − p``), at least
-        1; None before the first closure.
+        Each closure accepted so far, and not dropped since (:meth:`reconsider`), measured it:
+        its hypothesis' ``eᵀ S⁻¹ e`` (the graph's relative pose of the two keyframes and its
+        covariance ``S``, before the closure) over its degrees of freedom, the hypothesis' own
+        covariance left out (which makes the scale come out larger).  Returned at its upper
+        confidence bound at ``consistency_probability`` (``Σ eᵀS⁻¹e / χ²_{Σ dof}`` quantile
+        ``1 − p``), at least 1; None before the first closure.
         """
         if self._graph_dof == 0:
             return None
@@ -1090,7 +1094,15 @@ class LoopCloser:
             if hypothesis is not None:
                 kept = [r for r in records if not r.undo and not g.landmark_alive[r.drop]]
                 self._accepted.append(
-                    _Accepted(hypothesis, float(chi2_t), kept, int(agree), free_from)
+                    _Accepted(
+                        hypothesis,
+                        float(chi2_t),
+                        kept,
+                        int(agree),
+                        free_from,
+                        0.0 if graph is None else float(graph.raw),
+                        0 if graph is None else int(graph.dof),
+                    )
                 )
             self.counters["loop_closures"] += 1
             return 1
@@ -1212,6 +1224,9 @@ class LoopCloser:
         ):
             self.audit.vetoed.update((min(r.keep, r.drop), max(r.keep, r.drop)) for r in undone)
             self._accepted.remove(rival)
+            # a dropped closure no longer says how far the graph's covariance is off
+            self._graph_chi2 -= rival.graph_raw
+            self._graph_dof -= rival.graph_dof
             self.counters["loop_closures_dropped"] += 1
             return 1
         book.restore(before)  # the undone merges are merged again
