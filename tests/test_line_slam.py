@@ -657,9 +657,12 @@ def test_reconsidering_a_closure_drops_it_or_leaves_everything_as_it_was(accepte
     slam, (a, b), h, found, local, old = _with_wrong_closure()
     g, closer = slam.graph, slam.loop_closer
     # the graph gate's record: the wrong closure's χ² beside a right one's (3 dof each)
-    rival = replace(closer._accepted[0], graph_raw=900.0, graph_dof=3)
+    S, C = np.eye(3) * 1e-4, np.eye(3) * 1e-12
+    wrong = _graph_test_of(np.full(3, np.sqrt(300 * 1e-4)), S, C)
+    right = _graph_test_of(np.full(3, np.sqrt(2 * 1e-4)), S, C)
+    rival = replace(closer._accepted[0], graph=wrong)
     closer._accepted[0] = rival
-    closer._graph_chi2, closer._graph_dof = 900.0 + 6.0, 6
+    closer._graph_tests = [right, wrong]
     # an observation added to the merged landmark since the merge (the current pass's: a copy
     # of one of the dropped landmark's) goes back with the merge
     f = int(rival.records[0].factors[-1])
@@ -1056,13 +1059,18 @@ def test_graph_test_is_the_mahalanobis_distance_of_the_relative_pose():
     S = J @ P @ J.T
     assert first.raw == pytest.approx(float(e @ np.linalg.solve(S, e)), rel=1e-5)
     # with a scale the graph's part grows, the hypothesis' own covariance adds
-    closer._graph_chi2, closer._graph_dof = 40.0, 10
+    closer._graph_tests = [_graph_test_of(np.full(3, 0.02), np.eye(3) * 1e-4, np.eye(3) * 1e-12)]
     k = closer.graph_scale()
-    assert k is not None
+    assert k is not None and k > 100
     scaled = closer.graph_test(found, np.arange(2), 1, 0, h)
     assert scaled is not None and scaled.scale == k
     assert scaled.chi2 == pytest.approx(float(e @ np.linalg.solve(k * S + C, e)), rel=1e-5)
     assert scaled.chi2 < scaled.raw / k
+    # its terms give the same χ² at any scale (what it adds to the scale once accepted)
+    for k_any in (1.0, k, 10 * k):
+        assert scaled.chi2_at(k_any) == pytest.approx(
+            float(e @ np.linalg.solve(k_any * S + C, e)), rel=1e-5
+        )
     # graph_window: window_sigmas standard deviations of the scaled covariance, at least the
     # minimum windows
     lcc = closer.config.loop_closure
@@ -1072,14 +1080,46 @@ def test_graph_test_is_the_mahalanobis_distance_of_the_relative_pose():
     expected_th = lcc.window_sigmas * np.sqrt(k * S[2, 2])
     assert window[0] == pytest.approx(max(expected_xy, lcc.min_window_xy_m), rel=1e-5)
     assert window[1] == pytest.approx(max(expected_th, lcc.min_window_theta_rad), rel=1e-5)
-    closer._graph_chi2, closer._graph_dof = 0.0, 0
+    closer._graph_tests, closer._graph_scale = [], None
     assert closer.graph_window(0, 1) is None  # no closure yet: the drift's window alone
 
 
-def test_graph_scale_is_the_upper_confidence_bound_of_what_closures_measured():
-    """Σ χ² of the accepted closures over the χ² quantile ``1 − p`` of their degrees of
-    freedom: with few closures far above their mean χ² per dof, with many close to it; never
-    below 1; None before any."""
+def _graph_test_of(e, S, C):
+    from slam.line_slam.loop_closer import GraphTest, scaled_chi2_terms
+
+    w2, lam = scaled_chi2_terms(e, S, C)
+    return GraphTest(float(e @ np.linalg.solve(S, e)), e.shape[0], None, None, w2, lam)
+
+
+def test_a_closures_chi2_at_every_scale_from_its_terms(rng):
+    """``Σ w² / (k λ + 1)`` is ``eᵀ (k S + C)⁻¹ e`` for any scale ``k`` (S and C diagonalised
+    together), including ``k = 0`` (``C`` alone) and a singular ``S``."""
+    from slam.line_slam.loop_closer import scaled_chi2_terms
+
+    for d in (2, 3):
+        for _ in range(20):
+            a, b = rng.normal(size=(d, d)), rng.normal(size=(d, d))
+            S, C = a @ a.T * rng.uniform(1e-6, 1e2), b @ b.T + 1e-3 * np.eye(d)
+            e = rng.normal(size=d)
+            w2, lam = scaled_chi2_terms(e, S, C)
+            for k in (0.0, 1.0, 37.5, 1e4):
+                direct = e @ np.linalg.solve(k * S + C, e)
+                assert np.sum(w2 / (k * lam + 1.0)) == pytest.approx(direct, rel=1e-8)
+    v = np.array([1.0, 2.0, 0.0])
+    S = np.outer(v, v)  # rank one
+    e = np.array([0.3, -0.1, 0.2])
+    w2, lam = scaled_chi2_terms(e, S, np.eye(3))
+    assert np.sum(w2 / (5.0 * lam + 1.0)) == pytest.approx(
+        e @ np.linalg.solve(5 * S + np.eye(3), e)
+    )
+
+
+def test_graph_scale_is_the_upper_confidence_bound_of_what_closures_measured(rng):
+    """The scale ``k`` at which the closures' ``Σ eᵀ(k S + C)⁻¹e`` equals χ²'s quantile
+    ``1 − p`` of their dof: with hypotheses whose own covariance ``C`` is negligible, ``Σ eᵀS⁻¹e``
+    over that quantile (few closures far above their mean χ² per dof, many close to it);
+    where ``C`` explains the closures, 1; with closures drawn from ``k₀ S + C``, an upper bound
+    close to ``k₀`` over many closures; never below 1; None before any."""
     from scipy.stats import chi2
 
     from slam.line_slam.clock import StageClock
@@ -1089,15 +1129,36 @@ def test_graph_scale_is_the_upper_confidence_bound_of_what_closures_measured():
     p = config.loop_closure.consistency_probability
     closer = LoopCloser(None, None, None, None, None, config, {}, StageClock())  # type: ignore[arg-type]
     assert closer.graph_scale() is None
-    assert closer.graph_report() == {"dof": 0, "chi2_per_dof": None, "scale": None}
-    closer._graph_chi2, closer._graph_dof = 300.0, 3  # one closure, 100 per dof
-    assert closer.graph_scale() == pytest.approx(300.0 / chi2.ppf(1 - p, 3))
-    assert closer.graph_scale() > 50 * 100
-    closer._graph_chi2, closer._graph_dof = 100.0 * 300, 300  # a hundred closures
-    assert closer.graph_scale() == pytest.approx(100.0 * 300 / chi2.ppf(1 - p, 300))
-    assert 100 < closer.graph_scale() < 135
-    closer._graph_chi2, closer._graph_dof = 0.1 * 300, 300  # a graph too cautious
-    assert closer.graph_scale() == 1.0
+    assert closer.graph_report() == {
+        "dof": 0,
+        "chi2_per_dof": None,
+        "chi2_per_dof_with_hypotheses": None,
+        "scale": None,
+    }
+
+    def measured(tests):
+        closer._graph_tests, closer._graph_scale = tests, None
+        return closer.graph_scale()
+
+    S, tiny = np.diag([1e-4, 1e-4, 1e-6]), 1e-12 * np.eye(3)
+    e = np.sqrt(np.diag(S)) * 10.0  # 100 per dof under S
+    assert measured([_graph_test_of(e, S, tiny)]) == pytest.approx(300.0 / chi2.ppf(1 - p, 3))
+    k100 = measured([_graph_test_of(e, S, tiny)] * 100)
+    assert k100 == pytest.approx(100.0 * 300 / chi2.ppf(1 - p, 300), rel=1e-6)
+    assert 100 < k100 < 135
+    report = closer.graph_report()
+    assert report["dof"] == 300 and report["chi2_per_dof"] == pytest.approx(100.0)
+    # the same errors, each within a hypothesis covariance of 20 sd: the graph is not faulted
+    C = np.diag(np.diag(S) * 400.0)
+    assert measured([_graph_test_of(e, S, C)] * 100) == 1.0
+    assert closer.graph_report()["chi2_per_dof_with_hypotheses"] == pytest.approx(100 / 401)
+    # closures drawn with the graph's covariance 30 times too small beside C = 10 S
+    k0, C = 30.0, 10.0 * S
+    L = np.linalg.cholesky(k0 * S + C)
+    tests = [_graph_test_of(L @ rng.normal(size=3), S, C) for _ in range(400)]
+    k = measured(tests)
+    assert k0 < k < 1.3 * k0
+    assert sum(t.chi2_at(k) for t in tests) == pytest.approx(chi2.ppf(1 - p, 1200), rel=1e-6)
 
 
 def test_the_graph_gate_on_a_simulated_loop(loop_runs):

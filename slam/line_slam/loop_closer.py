@@ -63,6 +63,7 @@ Every attempt is recorded as a :class:`ClosureAttempt` (``summary.json``:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -189,8 +190,8 @@ class _Accepted:
 
     Its hypothesis, its chain χ², the merges it made, how many hypotheses agreed with it, the
     first pose its judgement solved, and what it measured of the graph's covariance (its
-    :class:`GraphTest` ``raw`` and ``dof``, 0 without one), which leaves
-    :meth:`LoopCloser.graph_scale` with it when it is dropped.
+    :class:`GraphTest`, None without one), which leaves :meth:`LoopCloser.graph_scale` with it
+    when it is dropped.
     """
 
     hypothesis: Hypothesis
@@ -198,8 +199,7 @@ class _Accepted:
     records: list[MergeRecord]
     agreeing: int = 0
     free_from: int = 0
-    graph_raw: float = 0.0
-    graph_dof: int = 0
+    graph: GraphTest | None = None
 
     @property
     def keyframe(self) -> int:
@@ -213,13 +213,59 @@ class GraphTest:
     ``raw``: ``eᵀ S⁻¹ e`` under the graph's covariance as it is, with ``dof`` degrees of
     freedom; ``chi2``: ``eᵀ (k S + C)⁻¹ e`` with the graph's covariance scaled by ``scale``
     (``k``) and the hypothesis' own ``C``, None before any closure has been accepted (no
-    scale yet).
+    scale yet).  ``w2`` and ``lam`` (``(dof,)``): the same χ² for every scale,
+    ``eᵀ (k S + C)⁻¹ e = Σ w2 / (k lam + 1)`` (:func:`scaled_chi2_terms`).
     """
 
     raw: float
     dof: int
     chi2: float | None
     scale: float | None
+    w2: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
+    lam: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
+
+    def chi2_at(self, k: float) -> float:
+        """``eᵀ (k S + C)⁻¹ e``."""
+        return float(np.sum(self.w2 / (k * self.lam + 1.0)))
+
+
+def _scale_at(w2: FloatArray, lam: FloatArray, target: float) -> float:
+    """The ``k ≥ 1`` at which ``Σ w2 / (k lam + 1)`` (falling in ``k``) equals ``target``.
+
+    1 when the sum at ``k = 1`` is already at most ``target``.
+    """
+
+    def f(k: float) -> float:
+        return float(np.sum(w2 / (k * lam + 1.0)))
+
+    if f(1.0) <= target:
+        return 1.0
+    lo, hi = 1.0, 2.0
+    while f(hi) > target and hi < 1e15:
+        lo, hi = hi, hi * 4.0
+    for _ in range(200):  # bisection in log k, to a relative 1e-10
+        mid = math.sqrt(lo * hi)
+        if f(mid) > target:
+            lo = mid
+        else:
+            hi = mid
+        if hi / lo - 1.0 < 1e-10:
+            break
+    return hi
+
+
+def scaled_chi2_terms(e: FloatArray, S: FloatArray, C: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``(w², λ)`` such that ``eᵀ (k S + C)⁻¹ e = Σ w² / (k λ + 1)`` for every ``k ≥ 0``.
+
+    ``C = L Lᵀ`` (Cholesky), ``L⁻¹ S L⁻ᵀ = U diag(λ) Uᵀ``, ``w = Uᵀ L⁻¹ e``: ``S`` and ``C``
+    diagonalised together.  ``C`` must be positive definite; ``S`` positive semi-definite
+    (a negative ``λ`` from rounding is set to 0).
+    """
+    L = np.linalg.cholesky(C)
+    Li = np.linalg.inv(L)
+    lam, U = np.linalg.eigh(Li @ S @ Li.T)
+    w = U.T @ (Li @ e)
+    return w * w, np.maximum(lam, 0.0)
 
 
 @dataclass
@@ -370,10 +416,10 @@ class LoopCloser:
         self._pending: _Pending | None = None
         self._replaced: _Pending | None = None
         self._every = EveryKeyframes()
-        # the graph's covariance against the closures accepted so far (graph_gate): Σ eᵀS⁻¹e
-        # and Σ dof
-        self._graph_chi2 = 0.0
-        self._graph_dof = 0
+        # the graph's covariance against the closures accepted so far (graph_gate): each
+        # closure's test, and the scale they give (None: not worked out since the last change)
+        self._graph_tests: list[GraphTest] = []
+        self._graph_scale: float | None = None
         self._judge = BatchSolver(
             replace(config.solver, relative_tolerance=config.loop_closure.judge_relative_tolerance)
         )
@@ -635,24 +681,33 @@ class LoopCloser:
         """How many times too small the graph's covariance of a loop is, from its closures.
 
         Each closure accepted so far, and not dropped since (:meth:`reconsider`), measured it:
-        its hypothesis' ``eᵀ S⁻¹ e`` (the graph's relative pose of the two keyframes and its
-        covariance ``S``, before the closure) over its degrees of freedom, the hypothesis' own
-        covariance left out (which makes the scale come out larger).  Returned at its upper
-        confidence bound at ``consistency_probability`` (``Σ eᵀS⁻¹e / χ²_{Σ dof}`` quantile
-        ``1 − p``), at least 1; None before the first closure.
+        its hypothesis ``z`` against the graph's relative pose of the two keyframes, before the
+        closure, ``e`` with covariance ``k S + C`` (``S`` the graph's, ``C`` the hypothesis'
+        own).  ``Σ eᵀ(k S + C)⁻¹e`` over the closures falls as ``k`` grows; the scale is the
+        upper confidence bound of ``k`` at ``consistency_probability``: the ``k`` at which
+        the sum equals χ²'s quantile ``1 − p`` for the summed dof, 1 when the sum at ``k = 1``
+        is already below it (the graph's covariance and the hypotheses' own explain the
+        closures).  None before the first closure.
         """
-        if self._graph_dof == 0:
+        tests = self._graph_tests
+        if not tests:
             return None
-        p = self.config.loop_closure.consistency_probability
-        low = chi2_ppf(1.0 - p, self._graph_dof)
-        return max(self._graph_chi2 / max(low, 1e-12), 1.0)
+        if self._graph_scale is None:
+            p = self.config.loop_closure.consistency_probability
+            low = chi2_ppf(1.0 - p, sum(t.dof for t in tests))
+            w2 = np.concatenate([t.w2 for t in tests])
+            lam = np.concatenate([t.lam for t in tests])
+            self._graph_scale = _scale_at(w2, lam, low)
+        return self._graph_scale
 
     def graph_report(self) -> dict[str, Any]:
         """``summary.json`` ``loop_closure_graph_scale``: what the accepted closures measured."""
-        n = self._graph_dof
+        tests = self._graph_tests
+        n = sum(t.dof for t in tests)
         return {
             "dof": n,
-            "chi2_per_dof": self._graph_chi2 / n if n else None,
+            "chi2_per_dof": sum(t.raw for t in tests) / n if n else None,
+            "chi2_per_dof_with_hypotheses": (sum(t.chi2_at(1.0) for t in tests) / n if n else None),
             "scale": self.graph_scale(),
         }
 
@@ -723,9 +778,11 @@ class LoopCloser:
         try:
             raw, dof = self._mahalanobis(e, S + 1e-12 * np.eye(3), normals)
             chi2 = None if k is None else self._mahalanobis(e, k * S + h.cov, normals)[0]
+            B = self._counted_basis(normals)
+            w2, lam = scaled_chi2_terms(B.T @ e, B.T @ S @ B, B.T @ h.cov @ B + 1e-12 * np.eye(dof))
         except np.linalg.LinAlgError:
             return None
-        return GraphTest(float(raw), int(dof), chi2, k)
+        return GraphTest(float(raw), int(dof), chi2, k, w2, lam)
 
     def hypothesis(
         self,
@@ -776,15 +833,23 @@ class LoopCloser:
 
         The tangents of ``normals`` are left out; the dof is the number of directions counted.
         """
+        B = LoopCloser._counted_basis(normals)
+        eb = B.T @ e
+        Sb = B.T @ cov @ B
+        return float(eb @ np.linalg.solve(Sb, eb)), int(B.shape[1])
+
+    @staticmethod
+    def _counted_basis(normals: list[FloatArray]) -> FloatArray:
+        """Orthonormal basis ``(3, dof)`` of the directions a test counts.
+
+        The tangents of ``normals`` (the directions along a corridor's walls) are left out.
+        """
         P = np.eye(3)
         for n in normals:
             t = np.array([-n[1], n[0], 0.0])
             P = P - np.outer(P @ t, P @ t) / max(float(t @ P @ t), 1e-12)
         w, V = np.linalg.eigh(P)
-        B = V[:, w > 0.5]
-        eb = B.T @ e
-        Sb = B.T @ cov @ B
-        return float(eb @ np.linalg.solve(Sb, eb)), int(B.shape[1])
+        return V[:, w > 0.5]
 
     def chain_chi2(self, h: Hypothesis) -> float:
         """How far the hypothesis is from the front end's own trajectory, in its drift.
@@ -1089,8 +1154,8 @@ class LoopCloser:
             attempt.accepted = True
             attempt.backend_restarted = big
             if graph is not None:  # what this closure says of the graph's covariance
-                self._graph_chi2 += graph.raw
-                self._graph_dof += graph.dof
+                self._graph_tests.append(graph)
+                self._graph_scale = None
             if hypothesis is not None:
                 kept = [r for r in records if not r.undo and not g.landmark_alive[r.drop]]
                 self._accepted.append(
@@ -1100,8 +1165,7 @@ class LoopCloser:
                         kept,
                         int(agree),
                         free_from,
-                        0.0 if graph is None else float(graph.raw),
-                        0 if graph is None else int(graph.dof),
+                        graph,
                     )
                 )
             self.counters["loop_closures"] += 1
@@ -1225,8 +1289,9 @@ class LoopCloser:
             self.audit.vetoed.update((min(r.keep, r.drop), max(r.keep, r.drop)) for r in undone)
             self._accepted.remove(rival)
             # a dropped closure no longer says how far the graph's covariance is off
-            self._graph_chi2 -= rival.graph_raw
-            self._graph_dof -= rival.graph_dof
+            if rival.graph is not None:
+                self._graph_tests = [t for t in self._graph_tests if t is not rival.graph]
+                self._graph_scale = None
             self.counters["loop_closures_dropped"] += 1
             return 1
         book.restore(before)  # the undone merges are merged again
