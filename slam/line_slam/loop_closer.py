@@ -33,8 +33,8 @@ Every ``loop_closure.interval_keyframes`` keyframes (:meth:`LoopCloser.attempt`)
    With ``graph_gate``, when it is about to be judged, it must also agree with the graph's
    own estimate of that relative pose, under the covariance the back end's joint marginal of
    the two keyframes gives it, scaled by what the closures accepted so far measured of that
-   covariance (:meth:`LoopCloser.graph_test`, :meth:`LoopCloser.graph_scale`); one that does
-   not is rejected without the judge's solves.
+   covariance, plus the hypothesis' own (:meth:`LoopCloser.graph_test`,
+   :meth:`LoopCloser.graph_scale`); one that does not is rejected without the judge's solves.
 4. **Judge.**  A large correction is first spread over the loop (:func:`spread_correction`); the
    paired landmarks are merged and a batch solve of the loop
    (:class:`slam.graph.batch.BatchSolver`, at most ``judge_iterations``) outside the back-end
@@ -757,11 +757,11 @@ class LoopCloser:
         J Σ Jᵀ`` the covariance of ``x̂`` from the back end's joint marginal ``Σ`` of the two
         keyframes (right perturbations: ``∂x̂/∂x_old = −Ad(x̂⁻¹)``, ``∂x̂/∂x_k = I``); ``C`` the
         hypothesis' own covariance (its paired lines' and the drift across the local submap);
-        along a corridor the direction along the walls left out.  The graph's covariance of a
-        loop that has not closed is too small (on the real logs by one to two orders of
-        magnitude: it counts every sighting of a wall as an independent measurement, while the
-        sightings of one pass share their error), so ``S`` is scaled by :meth:`graph_scale`.
-        None when the back end gives no covariance or ``h`` has none.
+        along a corridor the direction along the walls left out.  ``S`` is scaled by
+        :meth:`graph_scale`, what the closures accepted so far measured of it (the graph
+        counts every sighting of a wall as an independent measurement, while the sightings of
+        one pass may share their error).  None when the back end gives no covariance or ``h``
+        has none.
         """
         if h.cov is None:
             return None
