@@ -1114,16 +1114,45 @@ def test_a_closures_chi2_at_every_scale_from_its_terms(rng):
     )
 
 
+def test_the_likelihood_bound_of_the_scale(rng):
+    """The one-sided likelihood-ratio upper bound of ``k ≥ 1`` in ``e ~ N(0, k S + C)``: at
+    it the negative log-likelihood has risen from its minimum by the deviance over 2; with
+    many closures drawn from ``k₀ S + C``, just above ``k₀``; a closure whose error its own
+    covariance explains, with ``S`` far smaller than ``C``, says little about ``k``: a bound
+    that lets ``k S`` grow to ``C``'s size; never below 1."""
+    from slam.line_slam.loop_closer import _scale_upper_bound, scaled_chi2_terms
+
+    deviance = 9.55
+    S = np.diag([1e-4, 1e-4, 1e-6])
+
+    def nll(w2, lam, k):
+        return 0.5 * float(np.sum(np.log1p(k * lam) + w2 / (1.0 + k * lam)))
+
+    w2, lam = scaled_chi2_terms(np.sqrt(np.diag(S)) * 10.0, S, 1e-12 * np.eye(3))
+    k = _scale_upper_bound(w2, lam, deviance)  # k̂ = 100 (the mean χ² per dof)
+    assert k > 1000
+    assert nll(w2, lam, k) - nll(w2, lam, 100.0) == pytest.approx(deviance / 2, rel=1e-6)
+    k0, C = 30.0, 10.0 * S
+    L = np.linalg.cholesky(k0 * S + C)
+    terms = [scaled_chi2_terms(L @ rng.normal(size=3), S, C) for _ in range(400)]
+    w2, lam = (np.concatenate(t) for t in zip(*terms, strict=True))
+    assert k0 < _scale_upper_bound(w2, lam, deviance) < 1.4 * k0
+    C = np.diag([0.04, 0.04, 1e-4])  # 20 cm against the graph's 1 cm
+    w2, lam = scaled_chi2_terms(np.array([0.02, 0.0, 0.0]), S, C)
+    assert _scale_upper_bound(w2, lam, deviance) > 400
+    w2, lam = scaled_chi2_terms(np.zeros(3), np.eye(3), np.eye(3))
+    assert _scale_upper_bound(w2, lam, deviance) >= 1.0
+
+
 def test_graph_scale_is_the_upper_confidence_bound_of_what_closures_measured(rng):
-    """The scale ``k`` at which the closures' ``Σ eᵀ(k S + C)⁻¹e`` equals χ²'s quantile
-    ``1 − p`` of their dof: with hypotheses whose own covariance ``C`` is negligible, ``Σ eᵀS⁻¹e``
-    over that quantile (few closures far above their mean χ² per dof, many close to it);
-    where ``C`` explains the closures, 1; with closures drawn from ``k₀ S + C``, an upper bound
-    close to ``k₀`` over many closures; never below 1; None before any."""
+    """The smaller of two upper bounds of the factor ``k`` on the graph's covariance: the
+    closures' ``Σ eᵀS⁻¹e`` over χ²'s quantile ``1 − p`` of their dof (all of their error put
+    on the graph), and the likelihood bound with their own covariance; never below 1; None
+    before any."""
     from scipy.stats import chi2
 
     from slam.line_slam.clock import StageClock
-    from slam.line_slam.loop_closer import LoopCloser
+    from slam.line_slam.loop_closer import LoopCloser, _scale_upper_bound
 
     config = SlamConfig()
     p = config.loop_closure.consistency_probability
@@ -1140,25 +1169,32 @@ def test_graph_scale_is_the_upper_confidence_bound_of_what_closures_measured(rng
         closer._graph_tests, closer._graph_scale = tests, None
         return closer.graph_scale()
 
-    S, tiny = np.diag([1e-4, 1e-4, 1e-6]), 1e-12 * np.eye(3)
+    def likelihood_bound(tests):
+        w2 = np.concatenate([t.w2 for t in tests])
+        lam = np.concatenate([t.lam for t in tests])
+        return _scale_upper_bound(w2, lam, chi2.ppf(2 * p - 1, 1))
+
+    S = np.diag([1e-4, 1e-4, 1e-6])
     e = np.sqrt(np.diag(S)) * 10.0  # 100 per dof under S
-    assert measured([_graph_test_of(e, S, tiny)]) == pytest.approx(300.0 / chi2.ppf(1 - p, 3))
-    k100 = measured([_graph_test_of(e, S, tiny)] * 100)
-    assert k100 == pytest.approx(100.0 * 300 / chi2.ppf(1 - p, 300), rel=1e-6)
-    assert 100 < k100 < 135
-    report = closer.graph_report()
-    assert report["dof"] == 300 and report["chi2_per_dof"] == pytest.approx(100.0)
-    # the same errors, each within a hypothesis covariance of 20 sd: the graph is not faulted
-    C = np.diag(np.diag(S) * 400.0)
-    assert measured([_graph_test_of(e, S, C)] * 100) == 1.0
-    assert closer.graph_report()["chi2_per_dof_with_hypotheses"] == pytest.approx(100 / 401)
-    # closures drawn with the graph's covariance 30 times too small beside C = 10 S
-    k0, C = 30.0, 10.0 * S
-    L = np.linalg.cholesky(k0 * S + C)
-    tests = [_graph_test_of(L @ rng.normal(size=3), S, C) for _ in range(400)]
-    k = measured(tests)
-    assert k0 < k < 1.3 * k0
-    assert sum(t.chi2_at(k) for t in tests) == pytest.approx(chi2.ppf(1 - p, 1200), rel=1e-6)
+    for C in (1e-12 * np.eye(3), np.diag([0.04, 0.04, 1e-4])):
+        for n in (1, 100):
+            tests = [_graph_test_of(e, S, C)] * n
+            alone = 100.0 * 3 * n / chi2.ppf(1 - p, 3 * n)
+            k = measured(tests)
+            assert k == pytest.approx(min(alone, likelihood_bound(tests)), rel=1e-9)
+            report = closer.graph_report()
+            assert report["dof"] == 3 * n and report["chi2_per_dof"] == pytest.approx(100.0)
+    # many closures 100 per dof under S alone: close to 100 either way
+    assert 100 < measured([_graph_test_of(e, S, 1e-12 * np.eye(3))] * 100) < 135
+    # the same errors within hypotheses 20 cm wide: the likelihood bound is the smaller
+    C = np.diag([0.04, 0.04, 1e-4])
+    wide = [_graph_test_of(e, S, C)] * 100
+    assert measured(wide) < 100
+    with_c = float(e @ np.linalg.solve(S + C, e)) / 3
+    assert closer.graph_report()["chi2_per_dof_with_hypotheses"] == pytest.approx(with_c)
+    # closures as the graph's covariance says: a bound of a few; far inside it: 1
+    assert 1.0 < measured([_graph_test_of(0.1 * e, S, 1e-12 * np.eye(3))] * 10) < 3.0
+    assert measured([_graph_test_of(0.01 * e, S, 1e-12 * np.eye(3))] * 10) == 1.0
 
 
 def test_the_graph_gate_on_a_simulated_loop(loop_runs):

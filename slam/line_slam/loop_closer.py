@@ -229,23 +229,42 @@ class GraphTest:
         return float(np.sum(self.w2 / (k * self.lam + 1.0)))
 
 
-def _scale_at(w2: FloatArray, lam: FloatArray, target: float) -> float:
-    """The ``k ≥ 1`` at which ``Σ w2 / (k lam + 1)`` (falling in ``k``) equals ``target``.
+def _scale_upper_bound(w2: FloatArray, lam: FloatArray, deviance: float) -> float:
+    """Upper confidence bound of ``k ≥ 1`` from errors ``e ~ N(0, k S + C)`` (profile likelihood).
 
-    1 when the sum at ``k = 1`` is already at most ``target``.
+    In the terms of :func:`scaled_chi2_terms` the negative log-likelihood is, up to a
+    constant, ``½ Σ [log(1 + k λ) + w² / (1 + k λ)]``.  Its minimum over ``k ≥ 1`` is ``k̂``;
+    the bound is the ``k > k̂`` at which it has risen by ``deviance / 2`` (the likelihood-ratio
+    bound).  Where ``S`` is small against ``C`` the errors say little about ``k``, and the
+    bound is large: as large as makes ``k S`` comparable with ``C``.
     """
 
-    def f(k: float) -> float:
-        return float(np.sum(w2 / (k * lam + 1.0)))
+    def nll(k: float) -> float:
+        d = 1.0 + k * lam
+        return 0.5 * float(np.sum(np.log(d) + w2 / d))
 
-    if f(1.0) <= target:
-        return 1.0
-    lo, hi = 1.0, 2.0
-    while f(hi) > target and hi < 1e15:
-        lo, hi = hi, hi * 4.0
-    for _ in range(200):  # bisection in log k, to a relative 1e-10
+    grid = np.logspace(0.0, 15.0, 151)
+    values = np.array([nll(k) for k in grid])
+    i = int(np.argmin(values))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    for _ in range(100):  # golden section in log k about the grid's minimum
+        a = lo * (hi / lo) ** 0.382
+        b = lo * (hi / lo) ** 0.618
+        if nll(a) < nll(b):
+            hi = b
+        else:
+            lo = a
+        if hi / lo - 1.0 < 1e-9:
+            break
+    k_hat = max(float(np.sqrt(lo * hi)), 1.0)
+    target = nll(k_hat) + 0.5 * deviance
+    above = np.flatnonzero((grid > k_hat) & (values >= target))
+    if above.size == 0:
+        return float(grid[-1])
+    lo, hi = k_hat, float(grid[above[0]])
+    for _ in range(200):  # bisection in log k
         mid = math.sqrt(lo * hi)
-        if f(mid) > target:
+        if nll(mid) < target:
             lo = mid
         else:
             hi = mid
@@ -682,22 +701,30 @@ class LoopCloser:
 
         Each closure accepted so far, and not dropped since (:meth:`reconsider`), measured it:
         its hypothesis ``z`` against the graph's relative pose of the two keyframes, before the
-        closure, ``e`` with covariance ``k S + C`` (``S`` the graph's, ``C`` the hypothesis'
-        own).  ``Σ eᵀ(k S + C)⁻¹e`` over the closures falls as ``k`` grows; the scale is the
-        upper confidence bound of ``k`` at ``consistency_probability``: the ``k`` at which
-        the sum equals χ²'s quantile ``1 − p`` for the summed dof, 1 when the sum at ``k = 1``
-        is already below it (the graph's covariance and the hypotheses' own explain the
-        closures).  None before the first closure.
+        closure, ``e ~ N(0, k S + C)`` (``S`` the graph's covariance, ``C`` the hypothesis'
+        own, ``k`` the scale).  The scale is the smaller of two upper confidence bounds of
+        ``k ≥ 1`` at ``consistency_probability``:
+
+        * all of the error put on the graph (``C`` left out, so ``E[eᵀS⁻¹e] ≥ k dof``):
+          ``Σ eᵀS⁻¹e`` over χ²'s quantile ``1 − p`` for the summed dof;
+        * the likelihood with ``C`` (:func:`_scale_upper_bound`), which can tell ``k`` where
+          ``S`` is not small against ``C``; where it is, the first bound is the tighter.
+
+        None before the first closure.
         """
         tests = self._graph_tests
         if not tests:
             return None
         if self._graph_scale is None:
             p = self.config.loop_closure.consistency_probability
-            low = chi2_ppf(1.0 - p, sum(t.dof for t in tests))
+            # all of the closures' error put on the graph: E[eᵀS⁻¹e] = k dof + tr(S⁻¹C)
+            dof = sum(t.dof for t in tests)
+            alone = max(sum(t.raw for t in tests) / max(chi2_ppf(1.0 - p, dof), 1e-12), 1.0)
+            # with the hypotheses' own covariance (one-sided: χ²₁'s quantile 2p − 1)
             w2 = np.concatenate([t.w2 for t in tests])
             lam = np.concatenate([t.lam for t in tests])
-            self._graph_scale = _scale_at(w2, lam, low)
+            both = _scale_upper_bound(w2, lam, chi2_ppf(2.0 * p - 1.0, 1))
+            self._graph_scale = min(alone, both)
         return self._graph_scale
 
     def graph_report(self) -> dict[str, Any]:
