@@ -1145,16 +1145,18 @@ def test_the_likelihood_bound_of_the_scale(rng):
 
 
 def test_graph_scale_is_the_upper_confidence_bound_of_what_closures_measured(rng):
-    """The smaller of two upper bounds of the factor ``k`` on the graph's covariance: the
-    closures' ``Σ eᵀS⁻¹e`` over χ²'s quantile ``1 − p`` of their dof (all of their error put
-    on the graph), and the likelihood bound with their own covariance; never below 1; None
-    before any."""
+    """An upper bound of the factor ``k`` on the graph's covariance: the closures'
+    ``Σ eᵀS⁻¹e`` over χ²'s quantile ``1 − p`` of their dof (all of their error put on the
+    graph); with ``graph_scale_with_hypotheses`` the smaller of that and the likelihood bound
+    with their own covariance; never below 1; None before any."""
     from scipy.stats import chi2
 
     from slam.line_slam.clock import StageClock
     from slam.line_slam.loop_closer import LoopCloser, _scale_upper_bound
 
-    config = SlamConfig()
+    default = SlamConfig()
+    lcc = replace(default.loop_closure, graph_scale_with_hypotheses=True)
+    config = replace(default, loop_closure=lcc)
     p = config.loop_closure.consistency_probability
     closer = LoopCloser(None, None, None, None, None, config, {}, StageClock())  # type: ignore[arg-type]
     assert closer.graph_scale() is None
@@ -1190,6 +1192,10 @@ def test_graph_scale_is_the_upper_confidence_bound_of_what_closures_measured(rng
     C = np.diag([0.04, 0.04, 1e-4])
     wide = [_graph_test_of(e, S, C)] * 100
     assert measured(wide) < 100
+    closer.config = default  # by default the first bound alone
+    assert measured(wide) == pytest.approx(100.0 * 300 / chi2.ppf(1 - p, 300))
+    closer.config = config
+    measured(wide)
     with_c = float(e @ np.linalg.solve(S + C, e)) / 3
     assert closer.graph_report()["chi2_per_dof_with_hypotheses"] == pytest.approx(with_c)
     # closures as the graph's covariance says: a bound of a few; far inside it: 1

@@ -386,15 +386,22 @@ class LoopClosureConfig:
         Before the judge, the hypothesis is tested against the graph's own estimate of the
         two keyframes' relative pose (:meth:`slam.line_slam.loop_closer.LoopCloser.graph_test`):
         the back end's joint marginal covariance of the two keyframes, scaled by what the
-        closures accepted so far measured of it (the graph's covariance of a loop that has not
-        closed is too small, by one to two orders of magnitude on the real logs; the scale at
-        its upper confidence bound, ``consistency_probability``), plus the hypothesis' own
+        closures accepted so far measured of it (their χ² under it alone is one to two orders
+        of magnitude too large on the real logs; the scale at its upper confidence bound,
+        ``consistency_probability``: :meth:`~slam.line_slam.loop_closer.LoopCloser.graph_scale`),
+        plus the hypothesis' own
         covariance, within the ``consistency_probability`` quantile of χ² (the direction along
         a corridor left out).  One beyond it is turned away (``gated``, "inconsistent with the
         graph"; the log has ``graph_chi2`` and ``graph_scale``) and counts as a rejection
         (``skip_repeated_rejections``, ``reconsider_keyframes``).  Until the first closure is
         accepted there is no scale and no test.  Not for a reconsidered hypothesis (the graph
         still holds the closure it would replace).
+    graph_scale_with_hypotheses : bool
+        Opt-in.  ``graph_gate``'s scale is the smaller of the bound from the closures' χ²
+        under the graph's covariance alone (the default) and the likelihood bound with each
+        closure hypothesis' own covariance counted
+        (:meth:`~slam.line_slam.loop_closer.LoopCloser.graph_scale`), which is tighter where
+        the hypotheses' covariance explains their errors.
     graph_window : bool
         Opt-in.  Once a closure has been accepted (``graph_gate``'s scale exists), the search
         window is at most ``window_sigmas`` standard deviations of the graph's covariance of
@@ -469,6 +476,7 @@ class LoopClosureConfig:
     judge_hopeless_after: int = 5
     judge_from_converged: bool = True
     graph_gate: bool = True
+    graph_scale_with_hypotheses: bool = False
     graph_window: bool = False
     large_correction_m: float = 0.1
     large_correction_rad: float = 0.01

@@ -702,13 +702,14 @@ class LoopCloser:
         Each closure accepted so far, and not dropped since (:meth:`reconsider`), measured it:
         its hypothesis ``z`` against the graph's relative pose of the two keyframes, before the
         closure, ``e ~ N(0, k S + C)`` (``S`` the graph's covariance, ``C`` the hypothesis'
-        own, ``k`` the scale).  The scale is the smaller of two upper confidence bounds of
-        ``k ≥ 1`` at ``consistency_probability``:
+        own, ``k`` the scale).  The scale is an upper confidence bound of ``k ≥ 1`` at
+        ``consistency_probability``:
 
         * all of the error put on the graph (``C`` left out, so ``E[eᵀS⁻¹e] ≥ k dof``):
           ``Σ eᵀS⁻¹e`` over χ²'s quantile ``1 − p`` for the summed dof;
-        * the likelihood with ``C`` (:func:`_scale_upper_bound`), which can tell ``k`` where
-          ``S`` is not small against ``C``; where it is, the first bound is the tighter.
+        * with ``graph_scale_with_hypotheses``, the smaller of that and the likelihood bound
+          with ``C`` (:func:`_scale_upper_bound`), which can tell ``k`` where ``S`` is not
+          small against ``C``; where it is, the first bound is the tighter.
 
         None before the first closure.
         """
@@ -720,11 +721,13 @@ class LoopCloser:
             # all of the closures' error put on the graph: E[eᵀS⁻¹e] = k dof + tr(S⁻¹C)
             dof = sum(t.dof for t in tests)
             alone = max(sum(t.raw for t in tests) / max(chi2_ppf(1.0 - p, dof), 1e-12), 1.0)
-            # with the hypotheses' own covariance (one-sided: χ²₁'s quantile 2p − 1)
-            w2 = np.concatenate([t.w2 for t in tests])
-            lam = np.concatenate([t.lam for t in tests])
-            both = _scale_upper_bound(w2, lam, chi2_ppf(2.0 * p - 1.0, 1))
-            self._graph_scale = min(alone, both)
+            self._graph_scale = alone
+            if self.config.loop_closure.graph_scale_with_hypotheses:
+                # with the hypotheses' own covariance (one-sided: χ²₁'s quantile 2p − 1)
+                w2 = np.concatenate([t.w2 for t in tests])
+                lam = np.concatenate([t.lam for t in tests])
+                both = _scale_upper_bound(w2, lam, chi2_ppf(2.0 * p - 1.0, 1))
+                self._graph_scale = min(alone, both)
         return self._graph_scale
 
     def graph_report(self) -> dict[str, Any]:
