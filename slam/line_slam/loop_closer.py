@@ -806,9 +806,10 @@ class LoopCloser:
         normals = [] if now.normal is None else [now.normal]
         k = self.graph_scale()
         try:
-            raw, dof = self._mahalanobis(e, S + 1e-12 * np.eye(3), normals)
-            chi2 = None if k is None else self._mahalanobis(e, k * S + h.cov, normals)[0]
-            B = self._counted_basis(normals)
+            B = self._counted_basis(normals)  # the directions counted (3, dof)
+            dof = int(B.shape[1])
+            raw = self._mahalanobis_in(e, S + 1e-12 * np.eye(3), B)
+            chi2 = None if k is None else self._mahalanobis_in(e, k * S + h.cov, B)
             w2, lam = scaled_chi2_terms(B.T @ e, B.T @ S @ B, B.T @ h.cov @ B + 1e-12 * np.eye(dof))
         except np.linalg.LinAlgError:
             return None
@@ -864,9 +865,14 @@ class LoopCloser:
         The tangents of ``normals`` are left out; the dof is the number of directions counted.
         """
         B = LoopCloser._counted_basis(normals)
+        return LoopCloser._mahalanobis_in(e, cov, B), int(B.shape[1])
+
+    @staticmethod
+    def _mahalanobis_in(e: FloatArray, cov: FloatArray, B: FloatArray) -> float:
+        """``eᵀ S⁻¹ e`` in the directions of the orthonormal basis ``B`` (3, dof)."""
         eb = B.T @ e
         Sb = B.T @ cov @ B
-        return float(eb @ np.linalg.solve(Sb, eb)), int(B.shape[1])
+        return float(eb @ np.linalg.solve(Sb, eb))
 
     @staticmethod
     def _counted_basis(normals: list[FloatArray]) -> FloatArray:
