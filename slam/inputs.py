@@ -117,6 +117,12 @@ from numpy.typing import NDArray
 from linefit.config import SensorNoiseConfig
 from slam.errors import ConfigError, InputError, LogFormatError
 from slam.frontend.laser_odometry import LaserOdometry, LaserOdometryConfig
+from slam.frontend.odometry_delay import (
+    MAX_DELAY_SCANS,
+    OdometryDelay,
+    estimate_odometry_delay,
+    shift_odometry,
+)
 from slam.frontend.scan_match import ScanMatchConfig, ScanPoints, overlap_at
 from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse
 from slam.types import Scan
@@ -154,6 +160,10 @@ STILL_ODOMETRY_M = 0.5
 ``odometry_source = "auto"`` takes the odometry for absent."""
 STILL_ODOMETRY_RAD = 0.5
 """The same in rotation (rad)."""
+
+DELAY_CHI2_99 = 6.634896601021214
+"""χ²₁'s 99 % point: an estimated odometry delay is applied when its likelihood ratio against
+no delay exceeds it."""
 
 
 class InputWarning(UserWarning):
@@ -211,6 +221,13 @@ class ScannerConfig:
     scan_odometry : LaserOdometryConfig
         The ``[scanner.scan_odometry]`` table: how the laser odometry chains its scan matches
         when the motion comes from the scans.
+    odometry_delay : {"estimated", "off"}
+        ``"estimated"``: how many scans late the log's odometry is against its scans is
+        estimated from the scans' own rotation at the turns, and every scan's odometry pose is
+        read that many scans later (:mod:`slam.frontend.odometry_delay`); ``"off"``: the poses
+        as logged.  Not for motion from the scans.
+    odometry_delay_scans : float, optional
+        A stated delay (scans; negative: the odometry is early) used instead of the estimate.
     """
 
     first_angle_deg: float | None = None
@@ -230,8 +247,22 @@ class ScannerConfig:
     base_frame: str | None = None
     odometry_source: Literal["auto", "log", "scan_matching"] = "auto"
     scan_odometry: LaserOdometryConfig = field(default_factory=LaserOdometryConfig)
+    odometry_delay: Literal["estimated", "off"] = "estimated"
+    odometry_delay_scans: float | None = None
 
     def __post_init__(self) -> None:
+        require(
+            self.odometry_delay in ("estimated", "off"),
+            "odometry_delay must be estimated or off",
+        )
+        require(
+            self.odometry_delay_scans is None
+            or (
+                math.isfinite(self.odometry_delay_scans)
+                and abs(self.odometry_delay_scans) <= MAX_DELAY_SCANS
+            ),
+            f"odometry_delay_scans must be a number of scans within ±{MAX_DELAY_SCANS:g}",
+        )
         for name in ("first_angle_deg", "step_deg", "fov_deg", "min_range_m", "max_range_m"):
             value = getattr(self, name)
             require(value is None or math.isfinite(value), f"{name} must be a finite number")
@@ -601,6 +632,9 @@ class LogInput:
     odometry_source: str = "log"
     noise: SensorNoiseConfig | None = None
     matching: ScanMatchConfig | None = None
+    _delay: float | None = None
+    _delay_source: str = "off"
+    _delay_estimate: OdometryDelay | None = None
 
     def total(self, max_scans: int | None = None) -> int | None:
         """Scans a run over at most ``max_scans`` of them will read (None if unknown)."""
@@ -658,7 +692,44 @@ class LogInput:
 
             stats = CarmenStats()
         scans = self._read(max_scans, need_odometry, stats, strict)
+        if need_odometry:
+            delay = self.odometry_delay_scans()
+            if delay:
+                scans = shift_odometry(scans, delay)
         yield from self._motion(scans) if need_odometry else scans
+
+    def odometry_delay_scans(self) -> float:
+        """The delay (scans) each scan's odometry is read at: stated, estimated once, or 0.
+
+        Estimated (``[scanner] odometry_delay = "estimated"``) from the log's first turns
+        (:func:`slam.frontend.odometry_delay.estimate_odometry_delay`); 0 where the motion
+        comes from the scans, the log has too few turns, or the estimate is not significant
+        (its likelihood ratio against no delay below χ²₁'s 99 % point).
+        """
+        if self._delay is not None:
+            return self._delay
+        scanner = self.scanner
+        delay = 0.0
+        if scanner.odometry_delay_scans is not None:
+            delay = float(scanner.odometry_delay_scans)
+            self._delay_source = "config"
+        elif scanner.odometry_delay == "estimated" and scanner.odometry_source != "scan_matching":
+            stats = None
+            if self.format == "carmen":
+                from slam.io.carmen import CarmenStats
+
+                stats = CarmenStats()  # as scans() reads it (scans without a pose left out)
+            estimate = estimate_odometry_delay(
+                self._read(None, True, stats, False), self.noise, self.matching
+            )
+            self._delay_estimate = estimate
+            self._delay_source = "estimated"
+            if estimate is not None and estimate.chi2 > DELAY_CHI2_99:
+                delay = estimate.scans
+        else:
+            self._delay_source = "off"
+        self._delay = delay
+        return delay
 
     def _read(
         self,
@@ -869,6 +940,14 @@ class LogInput:
         if self._skipped_without_odometry:
             out["scans_without_odometry_left_out"] = self._skipped_without_odometry
         out["odometry_source"] = self.odometry_source
+        if self._delay is not None:
+            out["odometry_delay"] = {
+                "source": self._delay_source,
+                "scans": self._delay,
+                "estimate": None
+                if self._delay_estimate is None
+                else self._delay_estimate.to_dict(),
+            }
         if self._laser_odometry is not None:
             out["laser_odometry_scans"] = {
                 "matched": int(self._laser_odometry.matched),
