@@ -221,11 +221,11 @@ class ScannerConfig:
     scan_odometry : LaserOdometryConfig
         The ``[scanner.scan_odometry]`` table: how the laser odometry chains its scan matches
         when the motion comes from the scans.
-    odometry_delay : {"estimated", "off"}
-        ``"estimated"``: how many scans late the log's odometry is against its scans is
-        estimated from the scans' own rotation at the turns, and every scan's odometry pose is
-        read that many scans later (:mod:`slam.frontend.odometry_delay`); ``"off"``: the poses
-        as logged.  Not for motion from the scans.
+    odometry_delay : {"off", "estimated"}
+        ``"off"`` (default): the poses as logged; ``"estimated"``: how many scans late the
+        log's odometry is against its scans is estimated from the scans' own rotation at the
+        turns, and every scan's odometry pose is read that many scans later
+        (:mod:`slam.frontend.odometry_delay`).  Not for motion from the scans.
     odometry_delay_scans : float, optional
         A stated delay (scans; negative: the odometry is early) used instead of the estimate.
     """
@@ -247,13 +247,13 @@ class ScannerConfig:
     base_frame: str | None = None
     odometry_source: Literal["auto", "log", "scan_matching"] = "auto"
     scan_odometry: LaserOdometryConfig = field(default_factory=LaserOdometryConfig)
-    odometry_delay: Literal["estimated", "off"] = "estimated"
+    odometry_delay: Literal["off", "estimated"] = "off"
     odometry_delay_scans: float | None = None
 
     def __post_init__(self) -> None:
         require(
             self.odometry_delay in ("estimated", "off"),
-            "odometry_delay must be estimated or off",
+            "odometry_delay must be off or estimated",
         )
         require(
             self.odometry_delay_scans is None

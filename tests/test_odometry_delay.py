@@ -150,6 +150,18 @@ def test_odometry_that_never_turns_gives_no_estimate():
 
 
 # -- how a log applies it --------------------------------------------------------------------
+def test_the_odometry_is_read_as_logged_unless_asked():
+    assert ScannerConfig().odometry_delay == "off"
+    raw = _demo_scans()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log = open_log(DEMO_LOG, ScannerConfig())
+        read = list(log.scans())
+    assert log.describe()["odometry_delay"] == {"source": "off", "scans": 0.0, "estimate": None}
+    for a, b in zip(read, raw, strict=True):
+        assert np.array_equal(_laser(a), _laser(b))
+
+
 def test_the_delay_settings_are_validated():
     with pytest.raises(ConfigError, match="odometry_delay"):
         ScannerConfig(odometry_delay="auto")  # type: ignore[arg-type]
@@ -160,11 +172,11 @@ def test_the_delay_settings_are_validated():
 
 
 def test_the_delay_settings_round_trip_through_toml(tmp_path):
-    config = RunConfig(scanner=ScannerConfig(odometry_delay="off", odometry_delay_scans=-0.5))
+    config = RunConfig(scanner=ScannerConfig(odometry_delay="estimated", odometry_delay_scans=-0.5))
     path = tmp_path / "config.toml"
     config.to_toml(path)
     back = RunConfig.from_toml(path)
-    assert back.scanner.odometry_delay == "off"
+    assert back.scanner.odometry_delay == "estimated"
     assert back.scanner.odometry_delay_scans == -0.5
 
 
@@ -173,7 +185,7 @@ def test_a_lagged_log_is_read_in_step_and_says_so(tmp_path):
     raw = _demo_scans()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        log = open_log(path, ScannerConfig())
+        log = open_log(path, ScannerConfig(odometry_delay="estimated"))
         read = list(log.scans())
     info = log.describe()["odometry_delay"]
     assert info["source"] == "estimated"
