@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import math
+import subprocess
+import sys
 import tempfile
 import warnings
 from pathlib import Path
@@ -237,3 +240,21 @@ def test_scans_that_turn_against_the_odometry_give_no_estimate():
         lines.append(line + "\n")
     scans = _demo_scans_of_text("".join(lines))
     assert estimate_odometry_delay(scans) is None
+
+
+def test_the_script_estimates_a_lagged_log_read_with_the_delay_applied_in_its_config(tmp_path):
+    # the log one line late, and a configuration that would already apply a delay: the
+    # script reads the poses as logged, so it finds the whole line
+    path = _lagged_demo(tmp_path, 1)
+    config = tmp_path / "config.toml"
+    RunConfig(scanner=ScannerConfig(odometry_delay="estimated")).to_toml(config)
+    out = tmp_path / "delay.json"
+    done = subprocess.run(
+        [sys.executable, str(REPO_ROOT / "scripts" / "odometry_delay.py"), str(path),
+         "--config", str(config), "--json", str(out)],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    assert "scans late" in done.stdout
+    result = json.loads(out.read_text())
+    assert abs(result["estimate"]["scans"] - 1.0) < 0.1
+    assert result["applied_when_estimated"] is True
