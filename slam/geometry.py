@@ -166,6 +166,20 @@ def pose_retract(pose: FloatArray, xi: FloatArray) -> FloatArray:
     return pose_compose(pose, pose_exp(xi))
 
 
+def pose_interpolate(a: FloatArray, b: FloatArray, fraction: float) -> FloatArray:
+    """The pose ``fraction`` of the way from ``a`` to ``b``, shape ``(3,)``.
+
+    Linear in x and y; the heading along the shorter arc from ``a``'s, wrapped to
+    ``[−π, π]`` (``math.remainder``).  Used to read odometry between two logged poses.
+    """
+    pa = np.asarray(a, dtype=float)
+    pb = np.asarray(b, dtype=float)
+    f = float(fraction)
+    dtheta = math.remainder(float(pb[2] - pa[2]), math.tau)
+    theta = math.remainder(float(pa[2]) + f * dtheta, math.tau)
+    return np.array([pa[0] + f * (pb[0] - pa[0]), pa[1] + f * (pb[1] - pa[1]), theta])
+
+
 def adjoint_pose2(pose: FloatArray) -> FloatArray:
     """SE(2) adjoint of poses ``(..., 3)``: ``(..., 3, 3)``."""
     p = np.asarray(pose, dtype=float)

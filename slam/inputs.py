@@ -125,6 +125,7 @@ from slam.frontend.odometry_delay import (
 )
 from slam.frontend.scan_match import ScanMatchConfig, ScanPoints, overlap_at
 from slam.geometry import adjoint_pose2, pose_between, pose_compose, pose_inverse
+from slam.lines.merge import chi2_ppf
 from slam.types import Scan
 from slam.validate import require
 
@@ -161,7 +162,7 @@ STILL_ODOMETRY_M = 0.5
 STILL_ODOMETRY_RAD = 0.5
 """The same in rotation (rad)."""
 
-DELAY_CHI2_99 = 6.634896601021214
+DELAY_CHI2_99 = chi2_ppf(0.99, 1)
 """χ²₁'s 99 % point: an estimated odometry delay is applied when its likelihood ratio against
 no delay exceeds it."""
 

@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 from linefit.config import SensorNoiseConfig
 from slam.errors import InputError
 from slam.frontend.scan_match import ScanMatchConfig, ScanPoints, match_scans, scan_points
-from slam.geometry import pose_between
+from slam.geometry import pose_between, pose_interpolate
 from slam.types import Scan
 
 __all__ = ["OdometryDelay", "estimate_odometry_delay", "shift_odometry"]
@@ -104,17 +104,9 @@ def _pose_at(poses: FloatArray, at: float) -> FloatArray:
         return poses[n - 1].copy()
     i = math.floor(at)
     f = at - i
-    a, b = poses[i], poses[i + 1]
     if f == 0.0:
-        return a.copy()
-    dth = math.remainder(float(b[2] - a[2]), 2.0 * math.pi)
-    return np.array(
-        [
-            a[0] + f * (b[0] - a[0]),
-            a[1] + f * (b[1] - a[1]),
-            math.remainder(a[2] + f * dth, 2.0 * math.pi),
-        ]
-    )
+        return poses[i].copy()
+    return pose_interpolate(poses[i], poses[i + 1], f)
 
 
 def shift_odometry(scans: Iterable[Scan], delay_scans: float) -> Iterator[Scan]:
@@ -231,11 +223,13 @@ def estimate_odometry_delay(
     ks = np.array([m[0] for m in measured], dtype=float)
     rot = np.array([m[1] for m in measured])
 
+    def turned(lam: float) -> FloatArray:
+        """The odometry's turn from scan ``k − 1 + λ`` to ``k + λ`` of each measured pair."""
+        return np.interp(ks + lam, idx, theta) - np.interp(ks - 1.0 + lam, idx, theta)
+
     def residuals(lam: float) -> FloatArray:
-        a = np.interp(ks - 1.0 + lam, idx, theta)
-        b = np.interp(ks + lam, idx, theta)
         return np.asarray(
-            [math.remainder(float(v), 2.0 * math.pi) for v in rot - (b - a)], dtype=float
+            [math.remainder(float(v), 2.0 * math.pi) for v in rot - turned(lam)], dtype=float
         )
 
     grid = np.arange(-MAX_DELAY_SCANS, MAX_DELAY_SCANS + 1e-9, 0.05)
@@ -251,9 +245,7 @@ def estimate_odometry_delay(
     i = int(np.argmin(costs))
     if i == 0 or i == grid.shape[0] - 1:
         return None  # no delay within ±MAX_DELAY_SCANS fits best
-    a = np.interp(ks - 1.0 + grid[i], idx, theta)
-    turned = np.interp(ks + grid[i], idx, theta) - a
-    if float(np.sum(rot * turned)) <= 0.0:
+    if float(np.sum(rot * turned(float(grid[i])))) <= 0.0:
         return None  # the scans turn against the odometry (a mirrored scanner): no delay fits
     c0, c1, c2 = costs[i - 1], costs[i], costs[i + 1]
     h = grid[1] - grid[0]

@@ -112,6 +112,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slam.errors import ConfigError, LogFormatError
+from slam.geometry import pose_interpolate
 from slam.io._text import iter_text_lines
 from slam.io.anomalies import LogAnomalies
 from slam.io.laser import DEFAULT_MAX_RANGE_M, LaserGeometry, beam_bearings, guess_laser_geometry
@@ -1059,13 +1060,9 @@ def with_odom_poses(
 
 def _between(a: Odometry, b: Odometry, stamp: float) -> FloatArray:
     """The pose at ``stamp`` between two ``ODOM`` messages (clamped to their times)."""
-    pa = np.asarray(a.pose_odom_base, dtype=float)
-    pb = np.asarray(b.pose_odom_base, dtype=float)
     span = b.timestamp - a.timestamp
     f = 0.0 if not span > 0.0 else min(max((stamp - a.timestamp) / span, 0.0), 1.0)
-    dtheta = math.remainder(float(pb[2] - pa[2]), math.tau)
-    theta = math.remainder(float(pa[2]) + f * dtheta, math.tau)
-    return np.array([pa[0] + f * (pb[0] - pa[0]), pa[1] + f * (pb[1] - pa[1]), theta])
+    return pose_interpolate(np.asarray(a.pose_odom_base), np.asarray(b.pose_odom_base), f)
 
 
 def iter_log_scans(
