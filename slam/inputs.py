@@ -121,6 +121,7 @@ from slam.frontend.odometry_delay import (
     MAX_DELAY_SCANS,
     OdometryDelay,
     estimate_odometry_delay,
+    median_interval,
     shift_odometry,
 )
 from slam.frontend.scan_match import ScanMatchConfig, ScanPoints, overlap_at
@@ -165,6 +166,9 @@ STILL_ODOMETRY_RAD = 0.5
 DELAY_CHI2_99 = chi2_ppf(0.99, 1)
 """χ²₁'s 99 % point: an estimated odometry delay is applied when its likelihood ratio against
 no delay exceeds it."""
+
+_INTERVAL_SCANS = 200
+"""Scans read for the usual interval between them where a delay is stated (not estimated)."""
 
 
 class InputWarning(UserWarning):
@@ -636,6 +640,7 @@ class LogInput:
     _delay: float | None = None
     _delay_source: str = "off"
     _delay_estimate: OdometryDelay | None = None
+    _delay_interval_s: float | None = None
 
     def total(self, max_scans: int | None = None) -> int | None:
         """Scans a run over at most ``max_scans`` of them will read (None if unknown)."""
@@ -696,7 +701,7 @@ class LogInput:
         if need_odometry:
             delay = self.odometry_delay_scans()
             if delay:
-                scans = shift_odometry(scans, delay)
+                scans = shift_odometry(scans, delay, self._delay_interval_s)
         yield from self._motion(scans) if need_odometry else scans
 
     def odometry_delay_scans(self) -> float:
@@ -714,6 +719,11 @@ class LogInput:
         if scanner.odometry_delay_scans is not None:
             delay = float(scanner.odometry_delay_scans)
             self._delay_source = "config"
+            # how long a gap counts (slam.frontend.odometry_delay.scan_slots): the scans' usual
+            # interval, from the first of them
+            self._delay_interval_s = median_interval(
+                s.timestamp for s in self._read(_INTERVAL_SCANS, False, None, False)
+            )
         elif scanner.odometry_delay == "estimated" and scanner.odometry_source != "scan_matching":
             stats = None
             if self.format == "carmen":
@@ -727,6 +737,7 @@ class LogInput:
             self._delay_source = "estimated"
             if estimate is not None and estimate.chi2 > DELAY_CHI2_99:
                 delay = estimate.scans
+                self._delay_interval_s = estimate.interval_s
         else:
             self._delay_source = "off"
         self._delay = delay
@@ -945,6 +956,7 @@ class LogInput:
             out["odometry_delay"] = {
                 "source": self._delay_source,
                 "scans": self._delay,
+                "interval_s": self._delay_interval_s,
                 "estimate": None
                 if self._delay_estimate is None
                 else self._delay_estimate.to_dict(),

@@ -8,6 +8,7 @@ import subprocess
 import sys
 import tempfile
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,12 @@ import pytest
 from slam.config import RunConfig
 from slam.errors import ConfigError, InputError
 from slam.experiments.robustness import OdometryLag, rewrite_lines
-from slam.frontend.odometry_delay import estimate_odometry_delay, shift_odometry
+from slam.frontend.odometry_delay import (
+    estimate_odometry_delay,
+    median_interval,
+    scan_slots,
+    shift_odometry,
+)
 from slam.inputs import DELAY_CHI2_99, ScannerConfig, open_log
 from slam.types import Scan
 
@@ -112,6 +118,33 @@ def test_a_shift_and_its_opposite_give_the_poses_back_inside_the_log():
         assert math.isclose(math.remainder(_base(s)[2] - p[2], 2 * math.pi), 0.0, abs_tol=1e-12)
 
 
+def test_a_gap_counts_as_long_as_it_lasted_and_stamps_that_go_back_count_scans():
+    stamps = [0.0, 0.2, 0.4, 2.4, 2.6, 3.0, 3.2]  # a 2 s gap; one scan missing at 2.8 s
+    interval = median_interval(stamps)
+    assert interval is not None and math.isclose(interval, 0.2)
+    assert np.allclose(scan_slots(stamps, interval), [0.0, 1.0, 2.0, 12.0, 13.0, 14.0, 15.0])
+    assert np.array_equal(scan_slots(stamps, None), np.arange(7.0))
+    # a stamp that goes back or stands still: the stamps cannot tell the time between scans
+    assert median_interval([0.0, 0.2, 0.1, 0.3]) is None
+    assert median_interval([0.0, 0.2, 0.2, 0.4]) is None
+    assert median_interval([1.0]) is None
+
+
+def test_a_shift_reads_a_fraction_of_a_scan_not_of_the_gap_after_it():
+    # the robot turns 1 rad over a 2 s gap (ten of the scans' 0.2 s intervals)
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, 0.0, 1.1], [0.0, 0.0, 1.2]])
+    scans = [
+        replace(s, timestamp=t) for s, t in zip(_scans(poses), [0.0, 0.2, 2.2, 2.4], strict=True)
+    ]
+    out = list(shift_odometry(scans, 0.5, interval_s=0.2))
+    assert np.allclose([_base(s)[2] for s in out], [0.05, 0.15, 1.15, 1.2], atol=1e-12)
+    early = list(shift_odometry(scans, -0.5, interval_s=0.2))
+    assert np.allclose([_base(s)[2] for s in early], [0.0, 0.05, 1.05, 1.15], atol=1e-12)
+    # without the interval every scan counts as one, the gap too
+    by_index = list(shift_odometry(scans, 0.5))
+    assert math.isclose(_base(by_index[1])[2], 0.6, abs_tol=1e-12)
+
+
 # -- the estimate ----------------------------------------------------------------------------
 def test_the_demo_odometry_is_in_step_with_its_scans():
     est = estimate_odometry_delay(_demo_scans())
@@ -160,7 +193,12 @@ def test_the_odometry_is_read_as_logged_unless_asked():
         warnings.simplefilter("ignore")
         log = open_log(DEMO_LOG, ScannerConfig())
         read = list(log.scans())
-    assert log.describe()["odometry_delay"] == {"source": "off", "scans": 0.0, "estimate": None}
+    assert log.describe()["odometry_delay"] == {
+        "source": "off",
+        "scans": 0.0,
+        "interval_s": None,
+        "estimate": None,
+    }
     for a, b in zip(read, raw, strict=True):
         assert np.array_equal(_laser(a), _laser(b))
 
@@ -217,6 +255,7 @@ def test_a_stated_delay_is_used_as_it_is_and_off_reads_the_log_as_logged():
     assert stated.describe()["odometry_delay"] == {
         "source": "config",
         "scans": 1.0,
+        "interval_s": float(np.median(np.diff([s.timestamp for s in raw]))),
         "estimate": None,
     }
     for a, b in zip(read[:-1], raw[1:], strict=True):

@@ -22,16 +22,24 @@ fits best, ``ε`` Cauchy-distributed with a scale from the residuals' spread (a 
 does not pull the estimate).  It is found on a grid of ``λ`` and refined by a parabola
 through the best three points; its standard deviation is from the curvature of the robust
 cost there.  Only pairs of scans over which the odometry turned are used (straight driving
-says nothing of the delay), and the robot standing still is left out.  The estimate is in
-scans, not seconds, because it is applied in scans: a scan's pose is read at ``k + λ``
-between the poses the scans carry, so a gap in the log stretches the delay with it, as it does
-the pairing of a logger that is late by whole messages.  ``seconds`` reports ``λ`` times the
-median interval between scans.
+says nothing of the delay), and the robot standing still is left out.
+
+**Scans, and the gaps between them** (:func:`scan_slots`).  ``λ`` counts scans, and ``θ`` is
+read on an axis on which consecutive scans lie one apart, except across a gap in the log: an
+interval between two stamps longer than :data:`GAP_INTERVALS` times the median interval
+``Δt̃`` (``interval_s``; at least two scans missing) counts ``Δt / Δt̃``, as long as it lasted.
+So a delay of a fraction of a scan reads a fraction of a scan's motion at a gap too, not that
+fraction of the whole gap's (ACES turns 1.37 rad over a 3.0 s gap between two laser lines);
+a logger late by whole messages is read the same way except at a gap, where the scan before
+it is off by at most one scan's motion.  Stamps that go back or stand still anywhere in the
+scans read do not measure the time between scans (Intel's go back 631 times; the file order
+is the true order): there the axis is the scans' index throughout, gaps included.
+``seconds`` is ``λ`` times ``Δt̃``.
 
 **The shift** (:func:`shift_odometry`): each scan's odometry pose (``pose_odom_base`` and
-``pose_odom_laser``, each where the scan has one) is replaced by the pose at index ``k + λ``,
-interpolated between the two scans it falls between (heading along the shorter arc); before
-the first scan or after the last the first or last pose is held.
+``pose_odom_laser``, each where the scan has one) is replaced by the pose at ``k + λ`` on the
+same axis, interpolated between the two scans it falls between (heading along the shorter
+arc); before the first scan or after the last the first or last pose is held.
 """
 
 from __future__ import annotations
@@ -51,12 +59,23 @@ from slam.frontend.scan_match import ScanMatchConfig, ScanPoints, match_scans, s
 from slam.geometry import pose_between, pose_interpolate
 from slam.types import Scan
 
-__all__ = ["OdometryDelay", "estimate_odometry_delay", "shift_odometry"]
+__all__ = [
+    "OdometryDelay",
+    "estimate_odometry_delay",
+    "median_interval",
+    "scan_slots",
+    "shift_odometry",
+    "slot_step",
+]
 
 FloatArray = NDArray[np.float64]
 
 MAX_DELAY_SCANS = 3.0
 """The largest delay (scans, either way) the estimate considers."""
+
+GAP_INTERVALS = 3.0
+"""An interval between two scans longer than this many median intervals is a gap in the log
+(at least two scans missing), which the delay's axis counts as long as it lasted."""
 
 
 @dataclass(frozen=True)
@@ -70,12 +89,15 @@ class OdometryDelay:
     sd_scans : float
         Its standard deviation (from the robust cost's curvature).
     seconds : float or None
-        ``λ`` times the median interval between the scans used (None without time stamps).
+        ``λ`` times ``interval_s`` (None without it).
     pairs : int
         Pairs of consecutive scans the estimate used (those over which the odometry turned).
     chi2 : float
         The likelihood-ratio statistic of ``λ`` against no delay (χ² with one degree of
         freedom where there is none).
+    interval_s : float or None
+        The median interval between consecutive scans read (s; None where no two stamps
+        increase): one scan's length on the axis ``λ`` is counted on (:func:`scan_slots`).
     """
 
     scans: float
@@ -83,6 +105,7 @@ class OdometryDelay:
     seconds: float | None
     pairs: int
     chi2: float
+    interval_s: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The estimate for ``summary.json``."""
@@ -92,28 +115,85 @@ class OdometryDelay:
             "seconds": self.seconds,
             "pairs": self.pairs,
             "chi2_against_none": self.chi2,
+            "interval_s": self.interval_s,
         }
 
 
-def _pose_at(poses: FloatArray, at: float) -> FloatArray:
-    """The pose at fractional index ``at`` of ``poses`` (held beyond either end)."""
+def median_interval(timestamps: Iterable[float]) -> float | None:
+    """The median interval between consecutive stamps (s), or None where they cannot tell it.
+
+    None where a stamp goes back, stands still or is not finite (the stamps then do not
+    measure the time between scans; module docstring), or where there are fewer than two.
+    """
+    dt = np.diff(np.asarray(list(timestamps), dtype=float))
+    if dt.size == 0 or not np.all(np.isfinite(dt)) or np.any(dt <= 0.0):
+        return None
+    return float(np.median(dt))
+
+
+def slot_step(dt: float, interval_s: float | None) -> float:
+    """How far apart two consecutive scans ``dt`` seconds apart lie on the delay's axis.
+
+    1, except across a gap (``dt`` beyond :data:`GAP_INTERVALS` times ``interval_s``):
+    ``dt / interval_s`` (module docstring).  1 without an interval.
+    """
+    if interval_s is None or not math.isfinite(dt) or dt <= GAP_INTERVALS * interval_s:
+        return 1.0
+    return dt / interval_s
+
+
+def scan_slots(timestamps: Iterable[float], interval_s: float | None) -> FloatArray:
+    """Each scan's place on the axis the delay is counted on, the first at 0 (module docstring).
+
+    Parameters
+    ----------
+    timestamps : iterable of float
+        The scans' stamps (s), in log order.
+    interval_s : float or None
+        The median interval (:func:`median_interval`); None gives the scans' indices.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    t = np.asarray(list(timestamps), dtype=float)
+    if t.size == 0:
+        return t
+    steps = [slot_step(float(d), interval_s) for d in np.diff(t)]
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def _pose_at(poses: FloatArray, slots: FloatArray, at: float) -> FloatArray:
+    """The pose at ``at`` on the axis ``slots`` (increasing) of ``poses`` (held beyond the ends)."""
     n = poses.shape[0]
-    if at <= 0.0:
+    if at <= slots[0]:
         return poses[0].copy()
-    if at >= n - 1:
+    if at >= slots[n - 1]:
         return poses[n - 1].copy()
-    i = math.floor(at)
-    f = at - i
+    i = int(np.searchsorted(slots, at, side="right")) - 1
+    f = (at - slots[i]) / (slots[i + 1] - slots[i])
     if f == 0.0:
         return poses[i].copy()
     return pose_interpolate(poses[i], poses[i + 1], f)
 
 
-def shift_odometry(scans: Iterable[Scan], delay_scans: float) -> Iterator[Scan]:
+def shift_odometry(
+    scans: Iterable[Scan], delay_scans: float, interval_s: float | None = None
+) -> Iterator[Scan]:
     """``scans`` with each odometry pose read ``delay_scans`` scans later (module docstring).
 
-    A delay of 0 passes the scans unchanged.  The scans are held back as far as the delay
-    reaches ahead (``ceil(delay_scans)`` of them).
+    Parameters
+    ----------
+    scans : iterable of Scan
+        In log order.
+    delay_scans : float
+        ``λ`` (scans; positive: the odometry is late).  0 passes the scans unchanged.
+    interval_s : float, optional
+        The median interval between the scans (s), which sets how long a gap counts
+        (:func:`scan_slots`); None counts every scan as one, gaps included.
+
+    The scans are held back as far as the delay reaches ahead (at most ``ceil(delay_scans)``
+    of them: consecutive scans lie at least one apart).
     """
     if not math.isfinite(delay_scans):
         raise InputError(f"the odometry delay must be a finite number of scans, got {delay_scans}")
@@ -122,7 +202,7 @@ def shift_odometry(scans: Iterable[Scan], delay_scans: float) -> Iterator[Scan]:
         return
     ahead = max(math.ceil(delay_scans), 0)
     behind = max(math.ceil(-delay_scans), 0)
-    window: deque[Scan] = deque()  # scans k − behind .. k + ahead
+    window: deque[tuple[Scan, float]] = deque()  # (scan, slot): scans k − behind .. k + ahead
     first = 0  # the index of window[0]
     k = 0  # the next scan to pass on
     it = iter(scans)
@@ -130,9 +210,15 @@ def shift_odometry(scans: Iterable[Scan], delay_scans: float) -> Iterator[Scan]:
     while True:
         while not done and (not window or first + len(window) - 1 < k + ahead):
             try:
-                window.append(next(it))
+                scan = next(it)
             except StopIteration:
                 done = True
+                break
+            slot = 0.0
+            if window:
+                last, last_slot = window[-1]
+                slot = last_slot + slot_step(scan.timestamp - last.timestamp, interval_s)
+            window.append((scan, slot))
         if k >= first + len(window):
             return
         yield _shifted(window, first, k, delay_scans)
@@ -142,14 +228,15 @@ def shift_odometry(scans: Iterable[Scan], delay_scans: float) -> Iterator[Scan]:
             first += 1
 
 
-def _shifted(window: deque[Scan], first: int, k: int, delay: float) -> Scan:
-    scan = window[k - first]
+def _shifted(window: deque[tuple[Scan, float]], first: int, k: int, delay: float) -> Scan:
+    scan, slot = window[k - first]
+    slots = np.array([sl for _, sl in window])
     changes: dict[str, Any] = {}
     for name in ("pose_odom_base", "pose_odom_laser"):
-        poses = [getattr(s, name) for s in window]
+        poses = [getattr(s, name) for s, _ in window]
         if getattr(scan, name) is None or any(p is None for p in poses):
             continue
-        changes[name] = _pose_at(np.asarray(poses, dtype=float), k - first + delay)
+        changes[name] = _pose_at(np.asarray(poses, dtype=float), slots, slot + delay)
     return replace(scan, **changes) if changes else scan
 
 
@@ -219,13 +306,15 @@ def estimate_odometry_delay(
     if len(measured) < 20:
         return None
     theta = np.unwrap(np.asarray(headings))
-    idx = np.arange(theta.shape[0], dtype=float)
-    ks = np.array([m[0] for m in measured], dtype=float)
+    interval = median_interval(times)
+    slots = scan_slots(times, interval)
+    ks = np.array([m[0] for m in measured], dtype=int)
+    at, before = slots[ks], slots[ks - 1]
     rot = np.array([m[1] for m in measured])
 
     def turned(lam: float) -> FloatArray:
-        """The odometry's turn from scan ``k − 1 + λ`` to ``k + λ`` of each measured pair."""
-        return np.interp(ks + lam, idx, theta) - np.interp(ks - 1.0 + lam, idx, theta)
+        """The odometry's turn from scan ``k − 1`` to scan ``k``, each read ``λ`` later."""
+        return np.interp(at + lam, slots, theta) - np.interp(before + lam, slots, theta)
 
     def residuals(lam: float) -> FloatArray:
         return np.asarray(
@@ -256,7 +345,5 @@ def estimate_odometry_delay(
     # the robust cost is the Cauchy errors' negative log-likelihood (up to a constant)
     sd = math.sqrt(1.0 / curv) if curv > 0.0 else float("inf")
     chi2 = 2.0 * max(cost(0.0) - cost(lam), 0.0)
-    dt = np.diff(np.asarray(times))
-    dt = dt[np.isfinite(dt) & (dt > 0.0)]
-    seconds = float(lam * np.median(dt)) if dt.size else None
-    return OdometryDelay(lam, sd, seconds, len(measured), chi2)
+    seconds = None if interval is None else lam * interval
+    return OdometryDelay(lam, sd, seconds, len(measured), chi2, interval)
