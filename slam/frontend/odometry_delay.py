@@ -96,8 +96,9 @@ class OdometryDelay:
         The likelihood-ratio statistic of ``λ`` against no delay (χ² with one degree of
         freedom where there is none).
     interval_s : float or None
-        The median interval between consecutive scans read (s; None where no two stamps
-        increase): one scan's length on the axis ``λ`` is counted on (:func:`scan_slots`).
+        The median interval between consecutive scans read (s; None where a stamp goes back,
+        stands still or is not finite, :func:`median_interval`): one scan's length on the axis
+        ``λ`` is counted on (:func:`scan_slots`).
     """
 
     scans: float
