@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 from scipy.optimize import lsq_linear
 from scipy.stats import chi2
 
@@ -13,6 +14,8 @@ from slam.line_slam.drift import DriftAccumulator
 from slam.line_slam.front_end import correction_consistency
 from slam.line_slam.odometry_noise import MotionNoiseEstimator, bounded_least_squares
 from slam.models.motion import MotionNoiseConfig
+
+FloatArray = NDArray[np.float64]
 
 
 def test_drift_sums_step_variances_and_a_systematic_part():
@@ -116,6 +119,53 @@ def test_odometry_noise_estimator_recovers_the_model(rng):
     assert m.sigma_xy_per_m == pytest.approx(true.sigma_xy_per_m, rel=0.2)
     assert m.sigma_theta_per_m == pytest.approx(true.sigma_theta_per_m, rel=0.25)
     assert m.sigma_theta_per_rad == pytest.approx(true.sigma_theta_per_rad, rel=0.2)
+
+
+def _span_run(rng, bias: FloatArray | None, n_keyframes: int = 4000) -> MotionNoiseEstimator:
+    """Samples of a run whose odometry errs as ``model`` says (plus ``bias`` on every step);
+    one keyframe in five gives no sample, so the runs of consecutive samples are short."""
+    model = MotionNoiseConfig(
+        sigma_xy_min_m=0.002,
+        sigma_xy_per_m=0.03,
+        sigma_theta_min_rad=0.001,
+        sigma_theta_per_rad=0.05,
+    )
+    # the model is the one fitted: a prior that outweighs the samples keeps it
+    est = MotionNoiseEstimator(model, prior_weight=1e9)
+    P_L = np.diag([0.002**2, 0.002**2, 0.0005**2])
+    for _ in range(n_keyframes):
+        if rng.random() < 0.8:
+            delta = np.array([rng.uniform(0.2, 0.5), 0.0, rng.normal(0.0, 0.2)])
+            nu = rng.multivariate_normal(np.zeros(3), model.covariance(delta) + P_L)
+            if bias is not None:
+                nu = nu + bias
+            est.add_error(delta, nu, P_L)
+        est.keyframe()
+    return est
+
+
+def test_span_consistency_of_independent_errors_is_chi2_at_every_length(rng):
+    """Errors independent from step to step, as the model says: over 1 to 16 consecutive
+    keyframes the mean NEES is 3 within the 99 % band of its mean (fewer spans, wider band)."""
+    report = _span_run(rng, None).span_consistency()
+    assert [r["keyframes"] for r in report] == [1, 2, 4, 8, 16]
+    for r in report:
+        n = int(r["spans"])
+        lo, hi = chi2.ppf([0.005, 0.995], 3 * n) / n
+        assert lo < r["nees"] < hi, r
+
+
+def test_span_consistency_rises_with_a_bias(rng):
+    """A bias of 2 cm sideways on every step (about a step's σ): one step's NEES rises a
+    little, eight steps' far more, beyond the 99 % band of a mean of χ²₃, as the bias adds up
+    along the span and the noise only as its square root."""
+    report = _span_run(rng, np.array([0.0, 0.02, 0.0])).span_consistency()
+    by_length = {int(r["keyframes"]): r for r in report}
+    one, eight = by_length[1], by_length[8]
+    assert one["nees"] < 5.0
+    assert eight["nees"] > 1.5 * one["nees"]
+    n = int(eight["spans"])
+    assert eight["nees"] > chi2.ppf(0.995, 3 * n) / n
 
 
 def test_odometry_noise_estimator_ignores_weakly_constrained_registrations():

@@ -16,6 +16,15 @@ the weights of a χ² variable (``Var(σ² z²) = 2σ⁴``), gross outliers (bey
 current fit: wheel slip, a wrong pairing) left out, and the prior counted as ``prior_weight``
 samples.  The estimate is refreshed every ``update_every`` keyframes once
 ``min_samples`` are in; later predictions and odometry factors use it.
+
+The model describes errors that are independent from step to step.  Whether they are, over
+the stretches the registrations measure, :meth:`MotionNoiseEstimator.span_consistency` tells:
+over runs of consecutive measured keyframes, the composed error of ``n`` steps (each step's
+``ν`` applied after its motion, ``Log((∏ δᵢ)⁻¹ ∏ δᵢ Exp(νᵢ))``) against the model's covariance
+of the composed motion (``Σ Jᵢ Q(δᵢ) Jᵢᵀ``, each step's error carried to the end with its
+heading's lever arm, plus the last registration's ``P_L`` as for one step): a mean NEES near 3
+for every ``n`` says the errors add up as the model says; rising with ``n``, they are
+correlated (a bias), falling, anti-correlated.
 """
 
 from __future__ import annotations
@@ -26,9 +35,20 @@ from itertools import product
 import numpy as np
 from numpy.typing import NDArray
 
+from slam.geometry import (
+    adjoint_pose2,
+    pose_between,
+    pose_compose,
+    pose_exp,
+    pose_inverse,
+    pose_log,
+)
 from slam.models.motion import MotionNoiseConfig
 
-__all__ = ["MotionNoiseEstimator", "odometry_error"]
+__all__ = ["SPAN_KEYFRAMES", "MotionNoiseEstimator", "odometry_error"]
+
+#: Run lengths (keyframes) that :meth:`MotionNoiseEstimator.span_consistency` reports.
+SPAN_KEYFRAMES = (1, 2, 4, 8, 16)
 
 FloatArray = NDArray[np.float64]
 
@@ -165,6 +185,12 @@ class MotionNoiseEstimator:
         self._y_th: list[float] = []
         self._since = 0
         self.fits = 0
+        # every sample with its keyframe's number, for span_consistency
+        self._keyframes = 0
+        self._sample_keyframe: list[int] = []
+        self._sample_delta: list[FloatArray] = []
+        self._sample_nu: list[FloatArray] = []
+        self._sample_P_L: list[FloatArray] = []
 
     @property
     def n_samples(self) -> int:
@@ -199,6 +225,10 @@ class MotionNoiseEstimator:
         """One sample already measured by :func:`odometry_error`: ``nu`` and ``P_L``."""
         d = float(np.hypot(delta[0], delta[1]))
         turn = abs(float(delta[2]))
+        self._sample_keyframe.append(self._keyframes)
+        self._sample_delta.append(np.array(delta, dtype=float))
+        self._sample_nu.append(np.array(nu, dtype=float))
+        self._sample_P_L.append(np.array(P_L, dtype=float))
         self._features.append((1.0, d, turn))
         self._y_xy.append(0.5 * (nu[0] ** 2 + nu[1] ** 2) - 0.5 * (P_L[0, 0] + P_L[1, 1]))
         self._y_th.append(float(nu[2] ** 2 - P_L[2, 2]))
@@ -206,6 +236,7 @@ class MotionNoiseEstimator:
     def keyframe(self) -> bool:
         """Count a keyframe; refit when due.  Returns whether the model changed."""
         self._since += 1
+        self._keyframes += 1
         if self.n_samples < self.min_samples or self._since < self.update_every:
             return False
         self._since = 0
@@ -225,7 +256,71 @@ class MotionNoiseEstimator:
         self.fits += 1
         return True
 
-    def summary(self) -> dict[str, float | int]:
+    def span_consistency(
+        self, spans: tuple[int, ...] = SPAN_KEYFRAMES
+    ) -> list[dict[str, float | int]]:
+        """The samples' NEES over runs of consecutive keyframes, under the current model.
+
+        Each run of consecutive keyframes that all gave a sample is cut into spans of ``n``
+        keyframes (from its start, the remainder left out); each span's composed error is
+        compared with the model's covariance of its composed motion (module docstring).
+
+        Parameters
+        ----------
+        spans : tuple of int
+            The span lengths ``n`` (keyframes).
+
+        Returns
+        -------
+        list of dict
+            Per ``n`` with at least one span: ``keyframes`` (``n``), ``spans``, ``path_m``
+            (their mean path length) and ``nees`` (their mean NEES, 3 dof).
+        """
+        keyframes = np.asarray(self._sample_keyframe, dtype=int)
+        if keyframes.size == 0:
+            return []
+        delta = np.asarray(self._sample_delta)
+        Q = self.model.covariance(delta)
+        runs = np.split(np.arange(keyframes.size), np.flatnonzero(np.diff(keyframes) != 1) + 1)
+        out: list[dict[str, float | int]] = []
+        for n in spans:
+            nees: list[float] = []
+            path: list[float] = []
+            for run in runs:
+                for start in range(0, run.size - n + 1, n):
+                    steps = run[start : start + n]
+                    odometry = np.zeros(3)
+                    measured = np.zeros(3)
+                    for i in steps:
+                        odometry = pose_compose(odometry, delta[i])
+                        measured = pose_compose(
+                            pose_compose(measured, delta[i]), pose_exp(self._sample_nu[i])
+                        )
+                    e = pose_log(pose_between(odometry, measured))
+                    # each step's error, about its end, carried to the span's end
+                    C = self._sample_P_L[steps[-1]].copy()
+                    rest = np.zeros(3)
+                    for i in steps[::-1]:
+                        J = adjoint_pose2(pose_inverse(rest))
+                        C += J @ Q[i] @ J.T
+                        rest = pose_compose(delta[i], rest)
+                    try:
+                        nees.append(float(e @ np.linalg.solve(C, e)))
+                    except np.linalg.LinAlgError:
+                        continue
+                    path.append(float(np.hypot(delta[steps, 0], delta[steps, 1]).sum()))
+            if nees:
+                out.append(
+                    {
+                        "keyframes": n,
+                        "spans": len(nees),
+                        "path_m": float(np.mean(path)),
+                        "nees": float(np.mean(nees)),
+                    }
+                )
+        return out
+
+    def summary(self) -> dict[str, object]:
         """The current model and how it was obtained (for ``summary.json``)."""
         m = self.model
         return {
@@ -237,4 +332,5 @@ class MotionNoiseEstimator:
             "sigma_theta_min_rad": m.sigma_theta_min_rad,
             "sigma_theta_per_m": m.sigma_theta_per_m,
             "sigma_theta_per_rad": m.sigma_theta_per_rad,
+            "span_nees": self.span_consistency(),
         }
