@@ -35,14 +35,7 @@ from itertools import product
 import numpy as np
 from numpy.typing import NDArray
 
-from slam.geometry import (
-    adjoint_pose2,
-    pose_between,
-    pose_compose,
-    pose_exp,
-    pose_inverse,
-    pose_log,
-)
+from slam.geometry import compose_covariance, pose_between, pose_compose, pose_exp, pose_log
 from slam.models.motion import MotionNoiseConfig
 
 __all__ = ["SPAN_KEYFRAMES", "MotionNoiseEstimator", "odometry_error"]
@@ -291,19 +284,15 @@ class MotionNoiseEstimator:
                     steps = run[start : start + n]
                     odometry = np.zeros(3)
                     measured = np.zeros(3)
+                    C = np.zeros((3, 3))  # the composed motion's, each step's error at its end
                     for i in steps:
                         odometry = pose_compose(odometry, delta[i])
                         measured = pose_compose(
                             pose_compose(measured, delta[i]), pose_exp(self._sample_nu[i])
                         )
+                        C = compose_covariance(C, delta[i], Q[i])
                     e = pose_log(pose_between(odometry, measured))
-                    # each step's error, about its end, carried to the span's end
-                    C = self._sample_P_L[steps[-1]].copy()
-                    rest = np.zeros(3)
-                    for i in steps[::-1]:
-                        J = adjoint_pose2(pose_inverse(rest))
-                        C += J @ Q[i] @ J.T
-                        rest = pose_compose(delta[i], rest)
+                    C = C + self._sample_P_L[steps[-1]]
                     try:
                         nees.append(float(e @ np.linalg.solve(C, e)))
                     except np.linalg.LinAlgError:
