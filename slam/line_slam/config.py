@@ -164,8 +164,9 @@ class SlamConfig:
     odometry_calibration : {"off", "estimated", "mounting"}
         ``"estimated"``: the odometry's persistent error (translation scale, turn gain, heading
         drift per metre) is estimated during the run from the registrations that pin a
-        keyframe down, and taken out of every later step of the log's odometry before the
-        front end and the graph use it (:mod:`slam.line_slam.odometry_calibration`;
+        keyframe down, the laser's unstated mounting as with ``"mounting"``, and both are
+        taken out of every later step of the log's odometry before the front end and the graph
+        use it (:class:`slam.line_slam.odometry_calibration.OdometryAndMountingCalibrator`;
         ``summary.json`` ``odometry_calibration``).  ``"mounting"`` (default): where the laser
         sits in the frame whose motion the odometry reports (a lever arm the log does not
         state, on top of any mounting it does or the catalogue records: every turn moves such

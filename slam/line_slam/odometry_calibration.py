@@ -28,6 +28,8 @@ estimate of every keyframe step (``[slam] odometry_calibration = "mounting"``, t
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.special import gammaincinv
@@ -36,7 +38,12 @@ from slam.geometry import pose_between, pose_log
 from slam.graph.problem import GrowableArray
 from slam.models.motion import OdometryCalibration, mounting_jacobian
 
-__all__ = ["SIGNIFICANCE", "MountingEstimator", "OdometryCalibrator"]
+__all__ = [
+    "SIGNIFICANCE",
+    "MountingEstimator",
+    "OdometryAndMountingCalibrator",
+    "OdometryCalibrator",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -84,15 +91,10 @@ class OdometryCalibrator:
 
     def add(self, raw_delta: FloatArray, nu: FloatArray, cov: FloatArray) -> None:
         """One sample: the error ``nu`` of the calibrated step, covariance ``cov`` (Q + P_L)."""
-        A = self.calibration.jacobian(raw_delta)[:, :3]
-        theta = np.array(
-            [
-                self.calibration.scale,
-                self.calibration.turn_gain,
-                self.calibration.heading_drift_rad_per_m,
-            ]
-        )
-        nu_raw = np.asarray(nu, dtype=float) + A @ theta
+        A = self.calibration.jacobian(raw_delta)
+        applied = np.array(list(self.calibration.as_dict().values()))
+        # the error of the raw step, less the mounting (if any) as now estimated
+        nu_raw = np.asarray(nu, dtype=float) + A @ applied
         W = np.linalg.inv(0.5 * (cov + cov.T))
         self._samples.append((A, np.asarray(W, np.float64), np.asarray(nu_raw, np.float64)))
         self.n_samples += 1
@@ -105,17 +107,31 @@ class OdometryCalibrator:
         self._since = 0
         theta, info = self._fit(np.ones(len(self._samples), bool))
         # gross outliers (slips) under the first fit left out of the second
-        keep = np.array(
-            [
-                float((nu - A @ theta) @ W @ (nu - A @ theta)) <= _OUTLIER_CHI2
-                for A, W, nu in self._samples
-            ]
-        )
+        residuals = [(self._target(A, nu) - A[:, :3] @ theta, W) for A, W, nu in self._samples]
+        keep = np.array([float(r @ W @ r) <= _OUTLIER_CHI2 for r, W in residuals])
         theta, info = self._fit(keep)
         self._info = info
-        self.calibration = OdometryCalibration(float(theta[0]), float(theta[1]), float(theta[2]))
+        self.calibration = replace(
+            self.calibration,
+            scale=float(theta[0]),
+            turn_gain=float(theta[1]),
+            heading_drift_rad_per_m=float(theta[2]),
+        )
         self.fits += 1
         return True
+
+    def set_mounting(self, mount_x_m: float, mount_y_m: float) -> None:
+        """The laser's mounting, estimated elsewhere: applied with the three biases.
+
+        The samples' errors are referred to the steps seen from this mounting from the next fit
+        on (:class:`OdometryAndMountingCalibrator`).
+        """
+        self.calibration = replace(self.calibration, mount_x_m=mount_x_m, mount_y_m=mount_y_m)
+
+    def _target(self, A: FloatArray, nu_raw: FloatArray) -> FloatArray:
+        """A sample's error of the raw step seen from the current mounting."""
+        c = self.calibration
+        return nu_raw - A[:, 3:] @ np.array([c.mount_x_m, c.mount_y_m])
 
     def _fit(self, keep: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
         """Weighted least squares with the prior over the samples ``keep``: (θ, information)."""
@@ -123,8 +139,9 @@ class OdometryCalibrator:
         vec = np.zeros(3)
         for (A, W, nu), k in zip(self._samples, keep, strict=True):
             if k:
-                info += A.T @ W @ A
-                vec += A.T @ W @ nu
+                A3 = A[:, :3]
+                info += A3.T @ W @ A3
+                vec += A3.T @ W @ self._target(A, nu)
         return np.asarray(np.linalg.solve(info, vec), dtype=np.float64), info
 
     def summary(self) -> dict[str, float | int]:
@@ -314,4 +331,77 @@ class MountingEstimator:
         }
         out.update(self.calibration.as_dict())
         out.update(_fit_report(self.estimate, self._info))
+        return out
+
+
+class OdometryAndMountingCalibrator:
+    """The odometry's persistent error and the laser's unstated mounting, estimated together.
+
+    The three biases (scale, turn gain, heading drift) from the registrations' samples
+    (:class:`OdometryCalibrator`) and the mounting from the graph's estimate of every keyframe
+    step (:class:`MountingEstimator`), each as its own estimator does, applied together
+    (``[slam] odometry_calibration = "estimated"``).  The registrations' samples are referred to
+    the steps seen from the mounting as currently estimated, so the biases are fitted to what
+    the mounting leaves; the graph's steps are compared with the steps as given, the biases of
+    their time taken out, so the mounting is fitted to what the biases leave.  The two act on
+    different parts of a step (the mounting only moves a turning step's translation across
+    ``(R(θ) − I) m``; the biases scale its length, its turn, and add heading per metre).
+    """
+
+    parameters = "scale, turn gain, heading drift and mounting"
+
+    def __init__(self) -> None:
+        self.bias = OdometryCalibrator()
+        self.mounting = MountingEstimator()
+
+    @property
+    def calibration(self) -> OdometryCalibration:
+        """The five parameters as applied now."""
+        return self.bias.calibration
+
+    def apply(self, delta: FloatArray) -> FloatArray:
+        """The step calibrated with the current estimate."""
+        return self.bias.apply(delta)
+
+    def add(self, raw_delta: FloatArray, nu: FloatArray, cov: FloatArray) -> None:
+        """A registration's sample (:meth:`OdometryCalibrator.add`)."""
+        self.bias.add(raw_delta, nu, cov)
+
+    def add_step(self, first: int, second: int, used_delta: FloatArray, Q: FloatArray) -> None:
+        """A keyframe step's odometry factor (:meth:`MountingEstimator.add_step`)."""
+        self.mounting.add_step(first, second, used_delta, Q)
+
+    def keyframe(self, poses: FloatArray) -> bool:
+        """Count a keyframe; refit either part when due.  Returns whether anything changed."""
+        changed = self.bias.keyframe()
+        if self.mounting.keyframe(poses):
+            c = self.mounting.calibration
+            self.bias.set_mounting(c.mount_x_m, c.mount_y_m)
+            changed = True
+        return changed
+
+    def check(self, poses: FloatArray) -> dict[str, float | int | bool] | None:
+        """The mounting's fit to ``poses``, not applied (:meth:`MountingEstimator.check`)."""
+        return self.mounting.check(poses)
+
+    def summary(self) -> dict[str, float | int | str | bool]:
+        """``summary.json`` ``odometry_calibration``: both parts.
+
+        The five parameters as applied, the biases' standard deviations and samples
+        (``samples``, ``fits``), and the mounting's last fit (``significant``,
+        ``fit_mount_*``, ``sd_mount_*``, ``steps``, ``turning_samples``, ``mounting_fits``).
+        """
+        mounting = self.mounting.summary()
+        out: dict[str, float | int | str | bool] = {"parameters": self.parameters}
+        out.update(self.bias.summary())
+        out.update(
+            {
+                "steps": mounting["samples"],
+                "turning_samples": mounting["turning_samples"],
+                "mounting_fits": mounting["fits"],
+                "significant": mounting["significant"],
+            }
+        )
+        out.update({k: v for k, v in mounting.items() if k.startswith(("fit_", "sd_"))})
+        out.update(self.calibration.as_dict())
         return out

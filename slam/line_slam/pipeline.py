@@ -91,7 +91,10 @@ from slam.line_slam.line_noise import LineModelErrorEstimator, LineReweighting
 from slam.line_slam.local_map import LocalMap, build_local_map
 from slam.line_slam.loop_closer import LoopCloser
 from slam.line_slam.observations import usable_lines
-from slam.line_slam.odometry_calibration import MountingEstimator, OdometryCalibrator
+from slam.line_slam.odometry_calibration import (
+    MountingEstimator,
+    OdometryAndMountingCalibrator,
+)
 from slam.line_slam.odometry_noise import MotionNoiseEstimator, odometry_error
 from slam.line_slam.passes import (
     PassError,
@@ -191,18 +194,17 @@ class LineSlam:
         self.track = KeyframeTrack(cfg.keyframes)
         self.drift = DriftAccumulator(cfg.frontend.drift_xy_per_m, cfg.frontend.drift_theta_per_m)
         self.odometry_noise = MotionNoiseEstimator(cfg.motion)
-        # used with odometry_calibration other than "off": the three biases from the
-        # registrations, or the laser's mounting from the graph's estimate of the steps
-        self.odometry_calibrator: OdometryCalibrator | MountingEstimator = (
-            MountingEstimator() if cfg.odometry_calibration == "mounting" else OdometryCalibrator()
-        )
-        # the keyframe steps, for the mounting they imply at the end (never applied unless
-        # it is the calibrator above)
-        self.mounting_steps = (
-            self.odometry_calibrator
-            if isinstance(self.odometry_calibrator, MountingEstimator)
+        # used with odometry_calibration other than "off": the laser's mounting from the
+        # graph's estimate of the steps, and with "estimated" the three biases from the
+        # registrations as well
+        self.odometry_calibrator: OdometryAndMountingCalibrator | MountingEstimator = (
+            OdometryAndMountingCalibrator()
+            if cfg.odometry_calibration == "estimated"
             else MountingEstimator()
         )
+        # the keyframe steps, for the mounting they imply at the end (never applied with
+        # odometry_calibration = "off")
+        self.mounting_steps = self.odometry_calibrator
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
         # the latest scans matched since that keyframe
         self._stretch: deque[_StretchScan] = deque(maxlen=MAX_STRETCH_SCANS)
@@ -317,12 +319,8 @@ class LineSlam:
         slipped, the scans not yet searched are (:meth:`_research_stretch`).
         """
         smc = self.config.frontend.scan_matching
-        if (
-            isinstance(self.odometry_calibrator, MountingEstimator)
-            and not step.first
-            and step.cov is None
-        ):
-            # the laser's mounting, as estimated so far (as for a keyframe's step)
+        if self.config.odometry_calibration != "off" and not step.first and step.cov is None:
+            # the odometry's calibration, as estimated so far (as for a keyframe's step)
             step = replace(step, delta=self.odometry_calibrator.apply(step.delta))
         if not (smc.enabled and smc.between_keyframes) or self._points is None:
             return step.delta, None
@@ -526,13 +524,13 @@ class LineSlam:
             if measured is not None:
                 nu, P_L = measured
                 self.odometry_noise.add_error(step.delta, nu, P_L)
-                if calibrate and isinstance(self.odometry_calibrator, OdometryCalibrator):
+                if calibrate and isinstance(
+                    self.odometry_calibrator, OdometryAndMountingCalibrator
+                ):
                     self.odometry_calibrator.add(raw_delta, nu, Q + P_L)
         self.odometry_noise.keyframe()
-        if isinstance(self.odometry_calibrator, MountingEstimator):
+        if cfg.odometry_calibration != "off":
             self.odometry_calibrator.keyframe(g.poses)
-        elif cfg.odometry_calibration != "off":
-            self.odometry_calibrator.keyframe()
         with self.clock("associate"):
             # 5. the pose and its odometry
             i = g.add_pose(reg.pose_world_laser)
