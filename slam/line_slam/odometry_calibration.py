@@ -78,8 +78,11 @@ class OdometryCalibrator:
         self.calibration = OdometryCalibration()
         self._info = np.diag(1.0 / np.square(np.asarray(prior_sigmas, dtype=float)))
         self._prior_info = self._info.copy()
-        self._samples: list[tuple[FloatArray, FloatArray, FloatArray]] = []
-        self.n_samples = 0
+        # per sample: the calibration's Jacobian at the raw step (3×5), the weight (Q + P_L)⁻¹
+        # and the error of the raw step
+        self._A = GrowableArray((3, 5))
+        self._W = GrowableArray((3, 3))
+        self._nu = GrowableArray((3,))
         self.min_samples = min_samples
         self.update_every = update_every
         self._since = 0
@@ -95,9 +98,14 @@ class OdometryCalibrator:
         applied = np.array(list(self.calibration.as_dict().values()))
         # the error of the raw step, less the mounting (if any) as now estimated
         nu_raw = np.asarray(nu, dtype=float) + A @ applied
-        W = np.linalg.inv(0.5 * (cov + cov.T))
-        self._samples.append((A, np.asarray(W, np.float64), np.asarray(nu_raw, np.float64)))
-        self.n_samples += 1
+        self._A.append(A[None])
+        self._W.append(np.linalg.inv(0.5 * (cov + cov.T))[None])
+        self._nu.append(nu_raw[None])
+
+    @property
+    def n_samples(self) -> int:
+        """Registrations' samples kept."""
+        return len(self._nu)
 
     def keyframe(self) -> bool:
         """Count a keyframe; refit when due.  Returns whether the calibration changed."""
@@ -105,11 +113,12 @@ class OdometryCalibrator:
         if self.n_samples < self.min_samples or self._since < self.update_every:
             return False
         self._since = 0
-        theta, info = self._fit(np.ones(len(self._samples), bool))
+        A, W, target = self._A.data[:, :, :3], self._W.data, self._target()
+        theta, info = self._fit(A, W, target)
         # gross outliers (slips) under the first fit left out of the second
-        residuals = [(self._target(A, nu) - A[:, :3] @ theta, W) for A, W, nu in self._samples]
-        keep = np.array([float(r @ W @ r) <= _OUTLIER_CHI2 for r, W in residuals])
-        theta, info = self._fit(keep)
+        r = target - A @ theta
+        keep = np.einsum("ni,nij,nj->n", r, W, r) <= _OUTLIER_CHI2
+        theta, info = self._fit(A[keep], W[keep], target[keep])
         self._info = info
         self.calibration = replace(
             self.calibration,
@@ -128,20 +137,20 @@ class OdometryCalibrator:
         """
         self.calibration = replace(self.calibration, mount_x_m=mount_x_m, mount_y_m=mount_y_m)
 
-    def _target(self, A: FloatArray, nu_raw: FloatArray) -> FloatArray:
-        """A sample's error of the raw step seen from the current mounting."""
+    def _target(self) -> FloatArray:
+        """The samples' errors of the raw steps seen from the current mounting, ``(n, 3)``."""
         c = self.calibration
-        return nu_raw - A[:, 3:] @ np.array([c.mount_x_m, c.mount_y_m])
+        mount = np.array([c.mount_x_m, c.mount_y_m])
+        return np.asarray(self._nu.data - self._A.data[:, :, 3:] @ mount, dtype=np.float64)
 
-    def _fit(self, keep: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
-        """Weighted least squares with the prior over the samples ``keep``: (θ, information)."""
-        info = self._prior_info.copy()
-        vec = np.zeros(3)
-        for (A, W, nu), k in zip(self._samples, keep, strict=True):
-            if k:
-                A3 = A[:, :3]
-                info += A3.T @ W @ A3
-                vec += A3.T @ W @ self._target(A, nu)
+    def _fit(self, A: FloatArray, W: FloatArray, nu: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Weighted least squares with the prior: (θ, information).
+
+        ``A`` the samples' Jacobians ``(n, 3, 3)``, ``W`` their weights, ``nu`` their errors.
+        """
+        WA = W @ A
+        info = self._prior_info + np.einsum("nik,nil->kl", A, WA)
+        vec = np.einsum("nik,ni->k", WA, nu)
         return np.asarray(np.linalg.solve(info, vec), dtype=np.float64), info
 
     def summary(self) -> dict[str, float | int]:
