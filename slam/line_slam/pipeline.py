@@ -511,7 +511,6 @@ class LineSlam:
                     self._points, points, step.delta, Q, cfg.frontend.scan_matching, catch_up
                 )
                 self.counters["scan_matches"] += 1
-                self.counters["scan_match_catch_ups"] += int(match.caught_up)
                 self._check_turn(step.delta[2], Q, match)
                 if match.accepted:
                     x_pred = pose_compose(g.poses[prev], match.delta)

@@ -50,7 +50,6 @@ COUNTERS = (
     "scan_matches_rejected",
     "scan_match_slips",
     "scan_match_contradictions",
-    "scan_match_catch_ups",
     "scan_match_turns",
     "scan_match_turns_against",
     "scan_matches_between",
