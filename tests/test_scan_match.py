@@ -370,36 +370,6 @@ def test_a_corridor_seen_both_ways_is_ambiguous_over_every_heading():
     assert probability < 0.9
 
 
-@pytest.mark.parametrize("error", [[0.15, -0.15, -0.6], [0.2, 0.0, 0.6]])
-def test_a_stale_odometry_reading_caught_up_along_a_corridor(error):
-    """The odometry's step wrong in heading and in translation (a stale reading caught up:
-    the previous step's error undone).  Along a corridor the points cannot tell the
-    translation, so the slip mixture leaves the odometry's error there; the catch-up
-    prediction (the previous step's error undone) is the match's prior where it explains the
-    points best, flagged as a slip caught up, the translation along the corridor its own."""
-    truth = TRUE_DELTA
-    cfg = ScanMatchConfig()
-    ref, cur = _pair(CORRIDOR, HALF, cfg)
-    delta0 = pose_compose(truth, np.array(error))
-    Q = _odometry_cov(delta0)
-    c = truth + np.array([0.03, -0.02, 0.04])  # within its covariance 2Q
-    plain = match_scans(ref, cur, delta0, Q, cfg)
-    # the heading slip found (used, or too little overlap to be), the translation not
-    assert (plain.slip or plain.contradicted) and not plain.caught_up
-    assert _pose_error(plain, truth)[0] > 0.15
-    m = match_scans(ref, cur, delta0, Q, cfg, (c, 2.0 * Q))
-    err_m, err_rad = _pose_error(m, truth)
-    assert m.accepted and m.slip and m.caught_up
-    assert err_m < np.hypot(0.03, 0.02) + 0.005 and err_rad < 2e-3
-    # an odometry step that is right: a catch-up elsewhere changes nothing
-    delta1 = truth + np.array([0.01, -0.01, np.deg2rad(1.0)])
-    Q1 = _odometry_cov(delta1)
-    far = (truth + np.array([0.3, 0.0, 0.5]), 2.0 * Q1)
-    m1, m0 = match_scans(ref, cur, delta1, Q1, cfg, far), match_scans(ref, cur, delta1, Q1, cfg)
-    assert not m1.slip and not m1.caught_up and not m0.slip
-    np.testing.assert_allclose(m1.delta, m0.delta, atol=1e-9)
-
-
 @pytest.mark.parametrize("slip_deg", [-25.0, 28.0])
 def test_slip_mixture_flags_a_slip_and_widens_the_odometry_rotation(slip_deg):
     """With ``slip_probability`` the odometry's rotation is a mixture of its Gaussian and a

@@ -40,7 +40,6 @@ information along a corridor's axis, so the covariance there is too small;
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -598,10 +597,6 @@ class ScanMatch:
         measurement.  The pipeline then centres the step on ``delta`` with
         :func:`contradicted_covariance`: spread along the slip as far as the odometry's
         heading (or, with ``contradicted_spread = "slip"``, the slip component's covariance).
-    caught_up : bool
-        ``slip`` or ``contradicted`` by the catch-up component (:func:`match_scans`
-        ``catch_up``): the previous step's odometry error undone, the odometry right again
-        from this scan on.
     """
 
     delta: FloatArray
@@ -612,7 +607,6 @@ class ScanMatch:
     accepted: bool
     slip: bool = False
     contradicted: bool = False
-    caught_up: bool = False
 
 
 jit = njit(cache=True, error_model="numpy", nogil=True)
@@ -1092,19 +1086,10 @@ class _OdometryPrior:
 
     ``N(x0, Q)`` with probability ``1 − ε`` and ``N(x0, Q + σ_slip² v vᵀ)`` with probability
     ``ε`` (``slip_probability``, ``slip_sigma_rad``; ``v`` the slip's direction,
-    :func:`slip_covariance`); ``ε = 0``: the Gaussian.  With a ``catch_up`` prediction
-    ``N(c, C)`` (the previous step's odometry error undone by this one, :func:`match_scans`)
-    it is a third component, of half the Gaussian's weight taken from it: a reading found
-    wrong is as likely caught up on the next step as not.
+    :func:`slip_covariance`); ``ε = 0``: the Gaussian.
     """
 
-    def __init__(
-        self,
-        x0: FloatArray,
-        Q: FloatArray,
-        config: ScanMatchConfig,
-        catch_up: tuple[FloatArray, FloatArray] | None = None,
-    ) -> None:
+    def __init__(self, x0: FloatArray, Q: FloatArray, config: ScanMatchConfig) -> None:
         self.x0 = x0
         self.slip_probability = eps = config.slip_probability
         self.cov = Q
@@ -1112,54 +1097,33 @@ class _OdometryPrior:
         self.info = _symmetric_inverse(Q)
         self.info_slip = _symmetric_inverse(self.cov_slip)
         self.info_search = self.info_slip if eps > 0.0 else self.info
-        log_w0 = math.log1p(-eps) + (0.0 if catch_up is None else math.log(0.5))
-        # per component: log weight (mixture weight / √det), centre, covariance, information
-        self._components_of: list[tuple[float, FloatArray, FloatArray, FloatArray]] = [
-            (log_w0 - 0.5 * math.log(np.linalg.det(Q)), x0, Q, self.info),
-            (
-                (math.log(eps) if eps > 0.0 else -math.inf)
-                - 0.5 * math.log(np.linalg.det(self.cov_slip)),
-                x0,
-                self.cov_slip,
-                self.info_slip,
-            ),
-        ]
-        if catch_up is not None:
-            c, C = (np.asarray(a, dtype=float) for a in catch_up)
-            self._components_of.append(
-                (log_w0 - 0.5 * math.log(np.linalg.det(C)), c, C, _symmetric_inverse(C))
-            )
-        self._log_w0 = math.log1p(-eps) - 0.5 * math.log(np.linalg.det(Q))
+        # log weights (mixture weight / √det) of the two components
+        self._log_w = (
+            math.log1p(-eps) - 0.5 * math.log(np.linalg.det(Q)),
+            (math.log(eps) if eps > 0.0 else -math.inf)
+            - 0.5 * math.log(np.linalg.det(self.cov_slip)),
+        )
 
-    def _components(self, x: FloatArray) -> list[float]:
+    def _components(self, x: FloatArray) -> tuple[float, float]:
         """Log density (up to a shared constant) of each component at ``x``."""
-        out = []
-        for log_w, centre, _, info in self._components_of:
-            r = np.asarray(x, dtype=float) - centre
-            r[2] = math.remainder(float(r[2]), 2.0 * math.pi)
-            out.append(log_w - 0.5 * float(r @ info @ r))
-        return out
+        r = np.asarray(x, dtype=float) - self.x0
+        r[2] = math.remainder(float(r[2]), 2.0 * math.pi)
+        return (
+            self._log_w[0] - 0.5 * float(r @ self.info @ r),
+            self._log_w[1] - 0.5 * float(r @ self.info_slip @ r),
+        )
 
     def cost(self, x: FloatArray) -> float:
         """Negative log prior at ``x``, zero at ``x0`` without slips (``½ χ²`` of the Gaussian)."""
-        logs = self._components(x)
-        top = max(logs)
-        log_p = top + math.log(sum(math.exp(v - top) for v in logs))
-        return self._log_w0 - log_p
-
-    def component(self, x: FloatArray) -> int:
-        """The most probable component at ``x``: 0 the Gaussian, 1 the slip, 2 the catch-up."""
-        logs = self._components(x)
-        return int(np.argmax(logs))
+        l0, l1 = self._components(x)
+        top = max(l0, l1)
+        log_p = top + math.log(math.exp(l0 - top) + math.exp(l1 - top))
+        return self._log_w[0] - log_p
 
     def is_slip(self, x: FloatArray) -> bool:
-        """Whether a component other than the odometry's Gaussian is the more probable at ``x``."""
-        return self.component(x) != 0
-
-    def prior_of(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """``(covariance, information)`` of the most probable component at ``x``."""
-        _, _, cov, info = self._components_of[self.component(x)]
-        return cov, info
+        """Whether the slip component is the more probable at ``x``."""
+        l0, l1 = self._components(x)
+        return l1 > l0
 
 
 def slip_covariance(
@@ -1329,7 +1293,6 @@ def match_scans(
     delta0: FloatArray,
     prior_cov: FloatArray,
     config: ScanMatchConfig,
-    catch_up: tuple[FloatArray, FloatArray] | None = None,
 ) -> ScanMatch:
     """Register ``current`` against ``reference``, with the odometry as the prior.
 
@@ -1348,12 +1311,6 @@ def match_scans(
     prior_cov : ndarray, shape (3, 3)
         Its covariance (the motion noise), positive definite.
     config : ScanMatchConfig
-    catch_up : tuple of ndarray, optional
-        ``(c, C)``: where the step would be if the odometry's error that the points found on the
-        previous step is undone by this one (a stale reading caught up: the odometry over the
-        two steps right, its split between them wrong), and its covariance.  A third component
-        of the prior (:class:`_OdometryPrior`), its rotation searched as well; a match it
-        explains best counts as a slip (the odometry's step not used).
 
     Returns
     -------
@@ -1362,7 +1319,7 @@ def match_scans(
     """
     cfg = config
     x0 = np.asarray(delta0, dtype=float)
-    prior = _OdometryPrior(x0, np.asarray(prior_cov, dtype=float), cfg, catch_up)
+    prior = _OdometryPrior(x0, np.asarray(prior_cov, dtype=float), cfg)
     # the search and the choice between starts under the mixture (with its wide component's
     # Gauss-Newton prior); the refinement under the component more probable at the match
     matcher = _Matcher(reference, current, cfg, x0, prior.info_search, prior.cost)
@@ -1374,14 +1331,6 @@ def match_scans(
     coarse = _coarse_starts(matcher, x0, offsets, cfg)
     candidates = [coarse[0]] + sorted(coarse[1:], key=lambda c: -c[0])[:2]
     refined = [(off, _refine(matcher, x, cfg)) for _, off, x in candidates]
-    if catch_up is not None:
-        # the catch-up's own start, its iterations under its own Gaussian
-        c, C = (np.asarray(a, dtype=float) for a in catch_up)
-        at_c = copy.copy(matcher)
-        at_c.x_prior, at_c.info_prior = c, _symmetric_inverse(C)
-        (_, off, x), *_ = _coarse_starts(at_c, c, [0.0], cfg)
-        offset_c = math.remainder(float(c[2] - x0[2]), 2.0 * math.pi)
-        refined.append((offset_c, _refine(at_c, x, cfg)))
     # the points' evidence as a log-likelihood ratio: their summed cost over-counts it by κ
     # (measured at the odometry's own start)
     kappa = matcher.overconfidence(refined[0][1])
@@ -1393,7 +1342,7 @@ def match_scans(
     assert best is not None
     _, offset, x = best
     slip = prior.is_slip(x)
-    used_cov, info_prior = prior.prior_of(x)
+    used_cov, info_prior = (prior.cov_slip, prior.info_slip) if slip else (prior.cov, prior.info)
     if not slip and prior.slip_probability > 0.0:
         matcher.info_prior = info_prior
         x = matcher.solve(x, cfg.max_iterations, cfg.inlier_m)
@@ -1401,15 +1350,7 @@ def match_scans(
     cov, overlap, inl, accepted = _posterior(matcher, reference, current, x, used_cov, info_prior)
     contradicted = slip and not accepted
     return ScanMatch(
-        x,
-        cov,
-        float(overlap),
-        inl,
-        float(offset),
-        accepted,
-        slip and accepted,
-        contradicted,
-        caught_up=prior.component(x) == 2,
+        x, cov, float(overlap), inl, float(offset), accepted, slip and accepted, contradicted
     )
 
 

@@ -73,14 +73,7 @@ from slam.frontend.scan_match import (
     scan_points,
     scan_view,
 )
-from slam.geometry import (
-    adjoint_pose2,
-    compose_covariance,
-    pose_between,
-    pose_compose,
-    pose_inverse,
-    pose_log,
-)
+from slam.geometry import pose_between, pose_compose, pose_log
 from slam.graph.backend import BatchBackend, Isam2Backend, make_backend
 from slam.graph.problem import LineGraph
 from slam.inputs import InputPolicy
@@ -213,9 +206,6 @@ class LineSlam:
         # odometry_calibration = "off")
         self.mounting_steps = self.odometry_calibrator
         self._points: ScanPoints | None = None  # the previous keyframe's, for scan matching
-        # where the points put the previous keyframe's step in place of its odometry: the
-        # odometry's end seen from the match's, and its covariance (for the catch-up)
-        self._odometry_excess: tuple[FloatArray, FloatArray] | None = None
         # the latest scans matched since that keyframe
         self._stretch: deque[_StretchScan] = deque(maxlen=MAX_STRETCH_SCANS)
         self.range_noise = RangeNoiseCheck(self.linefit_config.noise.sigma_range_m)
@@ -383,22 +373,6 @@ class LineSlam:
             self.track.scan_offset[s.scan_no] = np.asarray(match.delta, dtype=float)
             self.track.scan_offset_cov[s.scan_no] = self._between_covariance(match.cov, s.Q)
 
-    @staticmethod
-    def _excess(
-        step: OdometryStep, Q: FloatArray, match: ScanMatch
-    ) -> tuple[FloatArray, FloatArray] | None:
-        """The odometry's step seen from where the points put it, ``m⁻¹ ∘ o``, and its covariance.
-
-        For the next keyframe's catch-up prediction (:func:`match_scans` ``catch_up``); None
-        for a step whose covariance the log states (laser odometry), and where this step's
-        match is the previous error caught up (the odometry right again).
-        """
-        if step.cov is not None or match.caught_up:
-            return None
-        e = pose_between(match.delta, step.delta)
-        Ad = adjoint_pose2(pose_inverse(e))
-        return e, np.asarray(Q + Ad @ match.cov @ Ad.T, dtype=np.float64)
-
     def _step_covariance(self, step: OdometryStep) -> FloatArray:
         """The covariance of the odometry's motion since the last keyframe.
 
@@ -498,18 +472,8 @@ class LineSlam:
         # it enters the graph only where it finds a slip, as that step's odometry factor (5.);
         # a match not used that finds a slip centres the step, spread as far as the odometry
         with self.clock("frontend"):
-            excess, self._odometry_excess = self._odometry_excess, None
             if points is not None and self._points is not None and not step.first:
-                catch_up = None
-                if excess is not None and step.cov is None:
-                    # the odometry's error on the previous step undone by this one
-                    catch_up = (
-                        pose_compose(excess[0], step.delta),
-                        compose_covariance(excess[1], step.delta, Q),
-                    )
-                match = match_scans(
-                    self._points, points, step.delta, Q, cfg.frontend.scan_matching, catch_up
-                )
+                match = match_scans(self._points, points, step.delta, Q, cfg.frontend.scan_matching)
                 self.counters["scan_matches"] += 1
                 self._check_turn(step.delta[2], Q, match)
                 if match.accepted:
@@ -518,11 +482,9 @@ class LineSlam:
                         slip = match
                         self.counters["scan_match_slips"] += 1
                         self._research_stretch()
-                        self._odometry_excess = self._excess(step, Q, match)
                 else:
                     self.counters["scan_matches_rejected"] += 1
                     if match.contradicted:
-                        self._odometry_excess = self._excess(step, Q, match)
                         # the points say the odometry's heading slipped, with too little
                         # overlap to be trusted as a measurement: the step is centred where
                         # they put it, spread along the slip as far as the odometry's heading
