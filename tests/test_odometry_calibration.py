@@ -247,9 +247,7 @@ def test_estimated_calibration_recovers_bias_and_mounting_together(biased_mounte
     )
     assert 0.5 * BIAS_AND_MOUNT.mount_x_m < got["mount_x_m"] <= 1.1 * BIAS_AND_MOUNT.mount_x_m
     assert abs(got["mount_y_m"]) < 0.1 * BIAS_AND_MOUNT.mount_x_m
-    mounting, estimated = (
-        relations_error(out[m].poses_world_laser, path, 10).mean() for m in out
-    )
+    mounting, estimated = (relations_error(out[m].poses_world_laser, path, 10).mean() for m in out)
     assert estimated < 0.8 * mounting
 
 
