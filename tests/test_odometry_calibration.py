@@ -120,15 +120,21 @@ def _slam(run, motion, mode):
     return slam.result()
 
 
-@pytest.fixture(scope="module")
-def biased_loop():
+def _loop_runs(laps, bias, modes):
+    """The corridor loop driven ``laps`` times with an odometry erring by ``bias``: the path
+    and the run's result with each ``odometry_calibration`` of ``modes``."""
     motion = MotionNoiseConfig(
         sigma_xy_per_m=0.01, sigma_theta_per_m=0.01, sigma_theta_per_rad=0.01
     )
     world = corridor_loop(piece=3.0, door=1.0)
-    path = loop_path(16, 8, 0.4, laps=1.25)
-    run = simulate_run(world, path, seed=3, motion=motion, bias=BIAS)
-    return path, {mode: _slam(run, motion, mode) for mode in ("off", "estimated")}
+    path = loop_path(16, 8, 0.4, laps=laps)
+    run = simulate_run(world, path, seed=3, motion=motion, bias=bias)
+    return path, {mode: _slam(run, motion, mode) for mode in modes}
+
+
+@pytest.fixture(scope="module")
+def biased_loop():
+    return _loop_runs(1.25, BIAS, ("off", "estimated"))
 
 
 def test_a_run_estimates_the_bias_of_a_simulated_odometry(biased_loop):
@@ -223,13 +229,7 @@ BIAS_AND_MOUNT = OdometryCalibration(
 def biased_mounted_loop():
     """Four laps of the corridor loop with a biased odometry and the laser 30 cm ahead of the
     point it reports, run with each calibration."""
-    motion = MotionNoiseConfig(
-        sigma_xy_per_m=0.01, sigma_theta_per_m=0.01, sigma_theta_per_rad=0.01
-    )
-    world = corridor_loop(piece=3.0, door=1.0)
-    path = loop_path(16, 8, 0.4, laps=4)
-    run = simulate_run(world, path, seed=3, motion=motion, bias=BIAS_AND_MOUNT)
-    return path, {mode: _slam(run, motion, mode) for mode in ("mounting", "estimated")}
+    return _loop_runs(4, BIAS_AND_MOUNT, ("mounting", "estimated"))
 
 
 def test_estimated_calibration_recovers_bias_and_mounting_together(biased_mounted_loop):

@@ -412,5 +412,4 @@ class OdometryAndMountingCalibrator:
             }
         )
         out.update({k: v for k, v in mounting.items() if k.startswith(("fit_", "sd_"))})
-        out.update(self.calibration.as_dict())
         return out
